@@ -1,0 +1,1 @@
+//! TODO: codec layer (being built).

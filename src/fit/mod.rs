@@ -1,0 +1,1 @@
+//! TODO: fit layer (being built).

@@ -1,0 +1,1 @@
+//! TODO: io layer (being built).

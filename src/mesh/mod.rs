@@ -1,0 +1,275 @@
+//! Polygon mesh with CAD-face groups, sharp edges and corner vertices.
+//!
+//! [`ControlMesh`] is the contract between the encoder and the decoder (see
+//! `../shared/design.md`): everything the decoder needs to rebuild the surface and nothing
+//! else. The same type also carries input tessellations (raw mode stores the input mesh
+//! itself as the control mesh), so readers, the codec, subdivision and fitting all speak it.
+
+use std::collections::BTreeSet;
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+
+/// An axis in space: a point on it and a unit direction. For cones the origin is the apex.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Axis {
+    pub origin: DVec3,
+    pub direction: DVec3,
+}
+
+/// The analytic surface under a boundary patch. Only these three are ruled surfaces whose
+/// shape is fixed by their boundary curves (plus the axis), which is why they need no
+/// interior control vertices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BoundarySurface {
+    Plane,
+    /// `axis.origin` is any point on the axis.
+    Cylinder { axis: Axis },
+    /// `axis.origin` is the apex.
+    Cone { axis: Axis },
+}
+
+/// How the decoder refines one CAD face (one group).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum PatchKind {
+    /// Loop surface with Hoppe's crease rules over the group's faces (freeform, sphere,
+    /// torus, and any group of a raw-mode mesh).
+    #[default]
+    Closed,
+    /// Only boundary curves are subdivided; the interior is spanned by belts (S-CODE §4.2).
+    Boundary(BoundarySurface),
+}
+
+/// One CAD face. Groups are stored once and faces point at them by index, because a CAD
+/// model has tens to hundreds of faces but thousands of triangles.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Group {
+    /// Name from the input (`g face_12` in OBJ); may be empty.
+    pub name: String,
+    pub patch: PatchKind,
+}
+
+/// A polygon mesh whose faces are grouped by CAD face, with sharp edges and corner tags.
+///
+/// Faces are stored as one flat index array plus offsets (CSR) rather than `Vec<Vec<u32>>`:
+/// meshes hold any mix of triangles, quads and n-gons, and a flat array keeps 100k-face
+/// inputs to two allocations. Sharp edges and corners are sparse, ordered sets so that
+/// iteration order (and thus every encoder decision) is deterministic.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ControlMesh {
+    /// Vertex positions in model units.
+    pub positions: Vec<DVec3>,
+    /// `face_offsets[f]..face_offsets[f + 1]` indexes `face_vertices` for face `f`;
+    /// always has `face_count() + 1` entries, starting with 0.
+    pub face_offsets: Vec<u32>,
+    /// Vertex indices of all faces, counter-clockwise seen from outside.
+    pub face_vertices: Vec<u32>,
+    /// Group index (into `groups`) of each face.
+    pub face_groups: Vec<u32>,
+    /// CAD faces.
+    pub groups: Vec<Group>,
+    /// Sharp (crease) edges as `(min, max)` vertex pairs. Mesh-boundary edges are creases
+    /// implicitly and need not be listed.
+    pub sharp_edges: BTreeSet<(u32, u32)>,
+    /// Corner vertices (B-rep vertices): fixed under subdivision.
+    pub corners: BTreeSet<u32>,
+}
+
+/// Normalised key of an undirected edge.
+#[inline]
+pub fn edge_key(a: u32, b: u32) -> (u32, u32) {
+    if a < b {
+        (a, b)
+    } else {
+        (b, a)
+    }
+}
+
+impl ControlMesh {
+    /// An empty mesh (no vertices, no faces, no groups).
+    pub fn new() -> Self {
+        ControlMesh {
+            face_offsets: vec![0],
+            ..Default::default()
+        }
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn face_count(&self) -> usize {
+        self.face_offsets.len().saturating_sub(1)
+    }
+
+    /// Vertex indices of face `f`.
+    #[inline]
+    pub fn face(&self, f: usize) -> &[u32] {
+        &self.face_vertices[self.face_offsets[f] as usize..self.face_offsets[f + 1] as usize]
+    }
+
+    /// Iterates over all faces as vertex-index slices.
+    pub fn faces(&self) -> impl Iterator<Item = &[u32]> + '_ {
+        (0..self.face_count()).map(move |f| self.face(f))
+    }
+
+    /// Appends a vertex and returns its index.
+    pub fn push_vertex(&mut self, p: DVec3) -> u32 {
+        self.positions.push(p);
+        (self.positions.len() - 1) as u32
+    }
+
+    /// Appends a face in group `group` and returns its index.
+    pub fn push_face(&mut self, vertices: &[u32], group: u32) -> usize {
+        if self.face_offsets.is_empty() {
+            self.face_offsets.push(0);
+        }
+        self.face_vertices.extend_from_slice(vertices);
+        self.face_offsets.push(self.face_vertices.len() as u32);
+        self.face_groups.push(group);
+        self.face_count() - 1
+    }
+
+    /// Appends a group and returns its index.
+    pub fn push_group(&mut self, name: impl Into<String>, patch: PatchKind) -> u32 {
+        self.groups.push(Group {
+            name: name.into(),
+            patch,
+        });
+        (self.groups.len() - 1) as u32
+    }
+
+    /// Marks the edge `a`-`b` sharp.
+    pub fn set_sharp(&mut self, a: u32, b: u32) {
+        self.sharp_edges.insert(edge_key(a, b));
+    }
+
+    pub fn is_sharp(&self, a: u32, b: u32) -> bool {
+        self.sharp_edges.contains(&edge_key(a, b))
+    }
+
+    /// True when every face is a triangle.
+    pub fn is_triangle_mesh(&self) -> bool {
+        self.faces().all(|f| f.len() == 3)
+    }
+
+    /// Axis-aligned bounding box `(min, max)` of the vertices; `None` when empty.
+    pub fn bounding_box(&self) -> Option<(DVec3, DVec3)> {
+        let first = *self.positions.first()?;
+        Some(
+            self.positions
+                .iter()
+                .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))),
+        )
+    }
+
+    /// Length of the bounding-box diagonal (0 for an empty mesh).
+    pub fn diagonal(&self) -> f64 {
+        self.bounding_box()
+            .map(|(lo, hi)| (hi - lo).length())
+            .unwrap_or(0.0)
+    }
+
+    /// Checks the structural invariants every consumer relies on: offsets consistent, all
+    /// indices in range, faces of degree >= 3 without repeated vertices, finite positions,
+    /// sharp edges and corners referencing existing vertices. Does not check manifoldness
+    /// (see the topology queries for that).
+    pub fn validate(&self) -> Result<()> {
+        let nv = self.positions.len();
+        if self.face_offsets.first() != Some(&0) {
+            return Err(Error::Mesh("face_offsets must start with 0".into()));
+        }
+        if self.face_groups.len() != self.face_count() {
+            return Err(Error::Mesh(format!(
+                "{} faces but {} face groups",
+                self.face_count(),
+                self.face_groups.len()
+            )));
+        }
+        if *self.face_offsets.last().unwrap() as usize != self.face_vertices.len() {
+            return Err(Error::Mesh("face_offsets do not cover face_vertices".into()));
+        }
+        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(Error::Mesh(format!("vertex {i} has a non-finite coordinate")));
+        }
+        for f in 0..self.face_count() {
+            let (s, e) = (self.face_offsets[f], self.face_offsets[f + 1]);
+            if e < s || (e - s) < 3 {
+                return Err(Error::Mesh(format!("face {f} has fewer than 3 vertices")));
+            }
+            let face = self.face(f);
+            for (i, &v) in face.iter().enumerate() {
+                if v as usize >= nv {
+                    return Err(Error::Mesh(format!(
+                        "face {f} references vertex {v}, but there are only {nv} vertices"
+                    )));
+                }
+                if face[..i].contains(&v) {
+                    return Err(Error::Mesh(format!("face {f} repeats vertex {v}")));
+                }
+            }
+            if self.face_groups[f] as usize >= self.groups.len() {
+                return Err(Error::Mesh(format!(
+                    "face {f} is in group {}, but there are only {} groups",
+                    self.face_groups[f],
+                    self.groups.len()
+                )));
+            }
+        }
+        if let Some(&(a, b)) = self.sharp_edges.iter().find(|&&(a, b)| b as usize >= nv || a >= b) {
+            return Err(Error::Mesh(format!("sharp edge ({a}, {b}) is invalid")));
+        }
+        if let Some(&c) = self.corners.iter().find(|&&c| c as usize >= nv) {
+            return Err(Error::Mesh(format!("corner vertex {c} does not exist")));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> ControlMesh {
+        let mut m = ControlMesh::new();
+        for p in [[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]] {
+            m.push_vertex(DVec3::from(p));
+        }
+        let g = m.push_group("face_1", PatchKind::Boundary(BoundarySurface::Plane));
+        m.push_face(&[0, 1, 2, 3], g);
+        m
+    }
+
+    #[test]
+    fn builds_and_validates() {
+        let mut m = quad();
+        m.set_sharp(2, 1);
+        m.corners.insert(0);
+        assert_eq!(m.face_count(), 1);
+        assert_eq!(m.face(0), &[0, 1, 2, 3]);
+        assert!(m.is_sharp(1, 2));
+        assert!(!m.is_triangle_mesh());
+        assert!((m.diagonal() - 2f64.sqrt()).abs() < 1e-12);
+        m.validate().unwrap();
+    }
+
+    #[test]
+    fn validate_rejects_bad_meshes() {
+        let mut m = quad();
+        m.face_vertices[3] = 9;
+        assert!(m.validate().is_err());
+        let mut m = quad();
+        m.positions[0].x = f64::NAN;
+        assert!(m.validate().is_err());
+        let mut m = quad();
+        m.face_vertices[3] = 0;
+        assert!(m.validate().is_err());
+        let mut m = quad();
+        m.face_groups[0] = 3;
+        assert!(m.validate().is_err());
+        let mut m = quad();
+        m.corners.insert(4);
+        assert!(m.validate().is_err());
+    }
+}

@@ -1,0 +1,1 @@
+//! TODO: metrics layer (being built).

@@ -1,0 +1,1 @@
+//! TODO: subdiv layer (being built).
