@@ -1,9 +1,19 @@
-//! The `scode` command-line tool; all logic lives in the library (`src/cli`).
-fn main() {
-    std::process::exit(scode_cli_main());
-}
+//! The `scode` command-line tool. Thin on purpose: it parses arguments, calls the library and
+//! prints; every algorithm lives in the `scode` library crate.
 
-fn scode_cli_main() -> i32 {
-    eprintln!("scode: CLI not built yet");
-    1
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    match cli::run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("scode: error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
