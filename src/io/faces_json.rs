@@ -55,7 +55,9 @@ impl SurfaceType {
             "surface of revolution" | "revolution" | "surfaceofrevolution" => {
                 SurfaceType::SurfaceOfRevolution
             }
-            "surface of extrusion" | "surface of linear extrusion" | "extrusion"
+            "surface of extrusion"
+            | "surface of linear extrusion"
+            | "extrusion"
             | "surfaceofextrusion" => SurfaceType::SurfaceOfExtrusion,
             "offset surface" | "offset" | "offsetsurface" => SurfaceType::OffsetSurface,
             "unknown" | "" => SurfaceType::Unknown,
@@ -222,7 +224,13 @@ pub fn parse_faces_json(bytes: &[u8], path: &Path) -> Result<Vec<FaceInfo>> {
         let axis = unit(vec(f.z_axis, "z_axis")?, "z_axis")?;
         let x_axis = unit(vec(f.x_axis, "x_axis")?, "x_axis")?;
         let has_params = location.is_some() || axis.is_some() || f.radius.is_some();
-        let apex = match (surface == SurfaceType::Cone, location, axis, f.radius, f.angle) {
+        let apex = match (
+            surface == SurfaceType::Cone,
+            location,
+            axis,
+            f.radius,
+            f.angle,
+        ) {
             (true, Some(loc), Some(dir), Some(r), Some(angle)) if angle.tan().abs() > 1e-12 => {
                 Some(loc - dir * (r / angle.tan()))
             }
@@ -284,7 +292,10 @@ mod tests {
 
     #[test]
     fn type_names() {
-        assert_eq!(SurfaceType::from_name("BSpline surface"), SurfaceType::BSplineSurface);
+        assert_eq!(
+            SurfaceType::from_name("BSpline surface"),
+            SurfaceType::BSplineSurface
+        );
         assert_eq!(
             SurfaceType::from_name("Surface of Extrusion"),
             SurfaceType::SurfaceOfExtrusion
@@ -320,8 +331,11 @@ mod tests {
         }
         assert_eq!(faces[3].surface, SurfaceType::Unknown);
         assert!(parse_faces_json(b"{}", Path::new("x")).is_err());
-        assert!(parse_faces_json(b"{\"faces\":[{\"tag\":1,\"z_axis\":[0,0,0]}]}", Path::new("x"))
-            .is_err());
+        assert!(parse_faces_json(
+            b"{\"faces\":[{\"tag\":1,\"z_axis\":[0,0,0]}]}",
+            Path::new("x")
+        )
+        .is_err());
     }
 
     #[test]
@@ -329,11 +343,26 @@ mod tests {
         let Some(dir) = corpus_dir() else { return };
         // (mesh, expected histogram entries) from MANIFEST.md; OCC types where gmsh says Unknown.
         let cases: &[(&str, &[(&str, usize)])] = &[
-            ("tess/screw_coarse.obj", &[("Plane", 4), ("Torus", 3), ("Cone", 2), ("Cylinder", 1)]),
-            ("tess/Ventilator_fine.obj", &[("BSpline surface", 189), ("Surface of Extrusion", 26)]),
-            ("tess/abc_00000050_coarse.obj", &[("Cylinder", 23), ("Plane", 20)]),
-            ("tess/nist_ftc_08_asme1_ap242-2_cadexport.obj", &[("Cylinder", 159), ("Plane", 81)]),
-            ("abc/abc_00000006.obj", &[("Plane", 8), ("Cone", 6), ("Cylinder", 1)]),
+            (
+                "tess/screw_coarse.obj",
+                &[("Plane", 4), ("Torus", 3), ("Cone", 2), ("Cylinder", 1)],
+            ),
+            (
+                "tess/Ventilator_fine.obj",
+                &[("BSpline surface", 189), ("Surface of Extrusion", 26)],
+            ),
+            (
+                "tess/abc_00000050_coarse.obj",
+                &[("Cylinder", 23), ("Plane", 20)],
+            ),
+            (
+                "tess/nist_ftc_08_asme1_ap242-2_cadexport.obj",
+                &[("Cylinder", 159), ("Plane", 81)],
+            ),
+            (
+                "abc/abc_00000006.obj",
+                &[("Plane", 8), ("Cone", 6), ("Cylinder", 1)],
+            ),
             ("abc/abc_00007974_5.obj", &[("Plane", 14), ("Cylinder", 10)]),
         ];
         for &(mesh_file, histogram) in cases {
@@ -346,7 +375,10 @@ mod tests {
             }
             let (mesh, _) = read_mesh(&mesh_path).unwrap();
             let matched = face_info_for_groups(&mesh, &faces);
-            assert!(matched.iter().all(Option::is_some), "{mesh_file}: unmatched group");
+            assert!(
+                matched.iter().all(Option::is_some),
+                "{mesh_file}: unmatched group"
+            );
             assert_eq!(mesh.groups.len(), faces.len(), "{mesh_file}");
             if mesh_file.starts_with("abc/") {
                 for f in &faces {

@@ -45,8 +45,8 @@ const MAX_INSTANCES: usize = 100_000;
 /// relative buffer URIs.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     let input_err = |detail: String| Error::input(path, detail);
-    let gltf = gltf::Gltf::from_slice(bytes)
-        .map_err(|e| input_err(format!("invalid glTF: {e}")))?;
+    let gltf =
+        gltf::Gltf::from_slice(bytes).map_err(|e| input_err(format!("invalid glTF: {e}")))?;
     for ext in gltf.extensions_required() {
         if matches!(
             ext,
@@ -109,14 +109,20 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         for (k, prim) in mesh.primitives().enumerate() {
             let what = format!("mesh {} primitive {k}", mesh.index());
             let mode = prim.mode();
-            if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
                 skipped_modes += 1;
                 continue;
             }
             let positions = prim
                 .get(&gltf::Semantic::Positions)
                 .ok_or_else(|| input_err(format!("{what} has no POSITION attribute")))?;
-            let key = (positions.index(), transform.to_cols_array().map(f64::to_bits));
+            let key = (
+                positions.index(),
+                transform.to_cols_array().map(f64::to_bits),
+            );
             let (base, count) = match vertex_base.get(&key) {
                 Some(&b) => b,
                 None => {
@@ -331,7 +337,9 @@ fn accessor_bytes<'b>(
     let view_bytes = &buffer[view.offset()..view_end];
     let stride = view.stride().unwrap_or(elem_size);
     if stride < elem_size {
-        return Err(err(format!("byteStride {stride} is smaller than the element")));
+        return Err(err(format!(
+            "byteStride {stride} is smaller than the element"
+        )));
     }
     let count = accessor.count();
     if count == 0 {
@@ -389,7 +397,10 @@ fn read_indices(
         }
     };
     if accessor.dimensions() != Dimensions::Scalar {
-        return Err(Error::input(path, format!("{what}: indices must be SCALAR")));
+        return Err(Error::input(
+            path,
+            format!("{what}: indices must be SCALAR"),
+        ));
     }
     let (bytes, stride) = accessor_bytes(accessor, buffers, size, what, path)?;
     Ok((0..accessor.count())
@@ -586,7 +597,12 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         // Buffer 0 (external, name with a space): 4 positions with 4 bytes of padding each.
         let mut external = Vec::new();
-        for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]] {
+        for p in [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ] {
             for c in p {
                 external.extend_from_slice(&c.to_le_bytes());
             }
@@ -594,7 +610,10 @@ mod tests {
         }
         std::fs::write(dir.join("my data.bin"), &external).unwrap();
         // Buffer 1 (data: URI): u16 strip indices 0 1 2 3.
-        let idx: Vec<u8> = [0u16, 1, 2, 3].iter().flat_map(|i| i.to_le_bytes()).collect();
+        let idx: Vec<u8> = [0u16, 1, 2, 3]
+            .iter()
+            .flat_map(|i| i.to_le_bytes())
+            .collect();
         let b64 = base64_encode(&idx);
         let json = format!(
             r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
@@ -628,7 +647,11 @@ mod tests {
         const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
         let mut s = String::new();
         for chunk in bytes.chunks(3) {
-            let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
+            let b = [
+                chunk[0],
+                *chunk.get(1).unwrap_or(&0),
+                *chunk.get(2).unwrap_or(&0),
+            ];
             let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
             for i in 0..=chunk.len() {
                 s.push(A[(n >> (18 - 6 * i) & 63) as usize] as char);
@@ -662,7 +685,10 @@ mod tests {
         let n = bad.len();
         bad[n - 4..].copy_from_slice(&99u32.to_le_bytes()); // last index
         let msg = read(&bad, MeshFormat::Glb).unwrap_err().to_string();
-        assert!(msg.contains("out of range") && msg.contains("t.glb"), "{msg}");
+        assert!(
+            msg.contains("out of range") && msg.contains("t.glb"),
+            "{msg}"
+        );
         // NaN position.
         let mut nan = bytes.clone();
         let json_len = u32::from_le_bytes(nan[12..16].try_into().unwrap()) as usize;

@@ -193,7 +193,10 @@ impl fmt::Display for ReadReport {
         )?;
         let counts = [
             (self.welded_vertices, "duplicate vertices welded"),
-            (self.coincident_vertices_kept, "coincident vertices kept apart (closed surfaces)"),
+            (
+                self.coincident_vertices_kept,
+                "coincident vertices kept apart (closed surfaces)",
+            ),
             (self.unreferenced_vertices, "unreferenced vertices removed"),
             (self.dropped_degenerate_faces, "degenerate faces dropped"),
             (self.repaired_faces, "faces with repeated vertices repaired"),
@@ -299,7 +302,9 @@ pub(crate) mod test_support {
             PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus"),
             PathBuf::from("/work/shared/corpus"),
         ];
-        let found = candidates.into_iter().find(|p| p.join("MANIFEST.md").is_file());
+        let found = candidates
+            .into_iter()
+            .find(|p| p.join("MANIFEST.md").is_file());
         if found.is_none() {
             eprintln!("corpus not found; skipping corpus test");
         }
@@ -313,10 +318,21 @@ mod tests {
 
     #[test]
     fn format_from_extension() {
-        assert_eq!(MeshFormat::from_path(Path::new("a/b.OBJ")).unwrap(), MeshFormat::Obj);
-        assert_eq!(MeshFormat::from_path(Path::new("x.Glb")).unwrap(), MeshFormat::Glb);
-        assert_eq!(MeshFormat::from_path(Path::new("x.off")).unwrap(), MeshFormat::Off);
-        let err = MeshFormat::from_path(Path::new("x.step")).unwrap_err().to_string();
+        assert_eq!(
+            MeshFormat::from_path(Path::new("a/b.OBJ")).unwrap(),
+            MeshFormat::Obj
+        );
+        assert_eq!(
+            MeshFormat::from_path(Path::new("x.Glb")).unwrap(),
+            MeshFormat::Glb
+        );
+        assert_eq!(
+            MeshFormat::from_path(Path::new("x.off")).unwrap(),
+            MeshFormat::Off
+        );
+        let err = MeshFormat::from_path(Path::new("x.step"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains(".step") && err.contains(".obj"), "{err}");
         assert!(MeshFormat::from_path(Path::new("noext")).is_err());
     }

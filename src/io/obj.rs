@@ -73,9 +73,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
             b"v" => {
                 let mut xyz = [0.0f64; 3];
                 for (axis, c) in xyz.iter_mut().enumerate() {
-                    let token = tokens.next().ok_or_else(|| {
-                        err(line_no, "vertex needs 3 coordinates".to_string())
-                    })?;
+                    let token = tokens
+                        .next()
+                        .ok_or_else(|| err(line_no, "vertex needs 3 coordinates".to_string()))?;
                     *c = parse_f64(token).ok_or_else(|| {
                         err(
                             line_no,
@@ -196,7 +196,13 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     for (line, verts, is_line) in &line_elements {
         let verts = verts
             .iter()
-            .map(|&i| check(i, *line as i64, if *is_line == 1 { "line" } else { "point" }))
+            .map(|&i| {
+                check(
+                    i,
+                    *line as i64,
+                    if *is_line == 1 { "line" } else { "point" },
+                )
+            })
             .collect::<Result<Vec<u32>>>()?;
         if *is_line == 1 {
             if verts.len() < 2 {
@@ -209,8 +215,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         }
     }
     if short_lines > 0 {
-        raw.notes
-            .push(format!("{short_lines} `l` elements with fewer than 2 vertices ignored"));
+        raw.notes.push(format!(
+            "{short_lines} `l` elements with fewer than 2 vertices ignored"
+        ));
     }
     for (name, count) in ignored {
         raw.notes
@@ -421,7 +428,10 @@ mod tests {
             let err = read(text).unwrap_err();
             let msg = err.to_string();
             assert!(matches!(err, Error::Input { .. }), "{msg}");
-            assert!(msg.contains("test.obj") && msg.contains(needle), "{text:?}: {msg}");
+            assert!(
+                msg.contains("test.obj") && msg.contains(needle),
+                "{text:?}: {msg}"
+            );
         }
     }
 
@@ -473,7 +483,10 @@ mod tests {
                 read_mesh_bytes(&bytes, MeshFormat::Obj, Path::new("rt.obj")).unwrap();
             assert_eq!(back, mesh);
             for (a, b) in back.positions.iter().zip(&mesh.positions) {
-                assert_eq!(a.to_array().map(f64::to_bits), b.to_array().map(f64::to_bits));
+                assert_eq!(
+                    a.to_array().map(f64::to_bits),
+                    b.to_array().map(f64::to_bits)
+                );
             }
             assert!(report.unchanged(), "{report}");
         }
@@ -488,7 +501,12 @@ mod tests {
         ("tess/screw_coarse.obj", 293, 582, 10),
         ("tess/screw_fine.obj", 2376, 4748, 10),
         ("tess/four_cone_coarse.obj", 627, 1250, 10),
-        ("tess/nist_ftc_08_asme1_ap242-2_cadexport.obj", 1636, 3368, 272),
+        (
+            "tess/nist_ftc_08_asme1_ap242-2_cadexport.obj",
+            1636,
+            3368,
+            272,
+        ),
         ("tess/trj6_b1-ec-214_coarse.obj", 15083, 30170, 292),
         ("tess/trj4_pm2-ec-214_fine.obj", 64671, 129310, 840),
         ("tess/Ventilator_coarse.obj", 15590, 31180, 305),
@@ -534,7 +552,11 @@ mod tests {
                 let cols: Vec<&str> = row.split('|').map(str::trim).collect();
                 let nv: usize = cols[3].parse().unwrap();
                 let nf: usize = cols[4].parse().unwrap();
-                assert_eq!((mesh.vertex_count(), mesh.face_count()), (nv, nf), "{rel}: {report}");
+                assert_eq!(
+                    (mesh.vertex_count(), mesh.face_count()),
+                    (nv, nf),
+                    "{rel}: {report}"
+                );
                 if let Ok(ng) = cols[5].parse::<usize>() {
                     assert_eq!(mesh.groups.len(), ng, "{rel}");
                 }

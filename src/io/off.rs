@@ -18,17 +18,20 @@ use crate::mesh::ControlMesh;
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     let err = |line: usize, detail: String| Error::input(path, format!("line {line}: {detail}"));
     // Non-empty lines with comments stripped, with their 1-based line numbers.
-    let mut lines = bytes.split(|&b| b == b'\n').enumerate().filter_map(|(i, l)| {
-        let l = match l.iter().position(|&b| b == b'#') {
-            Some(h) => &l[..h],
-            None => l,
-        };
-        let tokens: Vec<&[u8]> = l
-            .split(|b| b.is_ascii_whitespace())
-            .filter(|t| !t.is_empty())
-            .collect();
-        (!tokens.is_empty()).then_some((i + 1, tokens))
-    });
+    let mut lines = bytes
+        .split(|&b| b == b'\n')
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let l = match l.iter().position(|&b| b == b'#') {
+                Some(h) => &l[..h],
+                None => l,
+            };
+            let tokens: Vec<&[u8]> = l
+                .split(|b| b.is_ascii_whitespace())
+                .filter(|t| !t.is_empty())
+                .collect();
+            (!tokens.is_empty()).then_some((i + 1, tokens))
+        });
 
     let Some((header_line, header)) = lines.next() else {
         return Err(Error::input(path, "empty OFF file"));
@@ -71,12 +74,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     // Counts come from the file: never pre-allocate by them beyond what the bytes can hold.
     raw.positions.reserve(nv.min(bytes.len() / 6));
     for v in 0..nv {
-        let (line, tokens) = lines.next().ok_or_else(|| {
-            Error::input(
-                path,
-                format!("file ends after {v} of {nv} vertices"),
-            )
-        })?;
+        let (line, tokens) = lines
+            .next()
+            .ok_or_else(|| Error::input(path, format!("file ends after {v} of {nv} vertices")))?;
         if tokens.len() < 3 {
             return Err(err(line, "vertex needs 3 coordinates".into()));
         }
@@ -95,7 +95,10 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
             if !c.is_finite() {
                 return Err(err(
                     line,
-                    format!("vertex {v} has a non-finite coordinate `{}`", String::from_utf8_lossy(t)),
+                    format!(
+                        "vertex {v} has a non-finite coordinate `{}`",
+                        String::from_utf8_lossy(t)
+                    ),
                 ));
             }
         }
@@ -106,25 +109,38 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         let (line, tokens) = lines
             .next()
             .ok_or_else(|| Error::input(path, format!("file ends after {f} of {nf} faces")))?;
-        let parse_int = |t: &[u8]| std::str::from_utf8(t).ok().and_then(|s| s.parse::<i64>().ok());
+        let parse_int = |t: &[u8]| {
+            std::str::from_utf8(t)
+                .ok()
+                .and_then(|s| s.parse::<i64>().ok())
+        };
         let n = parse_int(tokens[0])
             .filter(|&n| n >= 0)
-            .ok_or_else(|| err(line, format!("face {f}: invalid vertex count")))? as usize;
+            .ok_or_else(|| err(line, format!("face {f}: invalid vertex count")))?
+            as usize;
         if tokens.len() < n + 1 {
             return Err(err(
                 line,
-                format!("face {f} announces {n} vertices but lists {}", tokens.len() - 1),
+                format!(
+                    "face {f} announces {n} vertices but lists {}",
+                    tokens.len() - 1
+                ),
             ));
         }
         face.clear();
         for t in &tokens[1..=n] {
             let i = parse_int(t).ok_or_else(|| {
-                err(line, format!("face {f}: invalid index `{}`", String::from_utf8_lossy(t)))
+                err(
+                    line,
+                    format!("face {f}: invalid index `{}`", String::from_utf8_lossy(t)),
+                )
             })?;
             if i < 0 || i as usize >= nv {
                 return Err(err(
                     line,
-                    format!("face {f} references vertex {i}, but there are {nv} vertices (0-based)"),
+                    format!(
+                        "face {f} references vertex {i}, but there are {nv} vertices (0-based)"
+                    ),
                 ));
             }
             face.push(i as u32);
@@ -132,7 +148,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         raw.input_faces += 1;
         if n < 3 {
             raw.dropped_short_faces += 1;
-            raw.notes.push(format!("line {line}: face with {n} vertices dropped"));
+            raw.notes
+                .push(format!("line {line}: face with {n} vertices dropped"));
             continue;
         }
         raw.push_face(&face, 0);
@@ -194,14 +211,17 @@ mod tests {
             ("OFF\n3 0\n0 0 0\n1 0 0\n0 1 0\n", "no faces"),
         ] {
             let msg = read(text).unwrap_err().to_string();
-            assert!(msg.contains("t.off") && msg.contains(needle), "{text:?}: {msg}");
+            assert!(
+                msg.contains("t.off") && msg.contains(needle),
+                "{text:?}: {msg}"
+            );
         }
     }
 
     #[test]
     fn round_trip() {
-        let (mesh, _) = read("OFF\n4 2 0\n0 0 0\n0.1 0 0\n0.1 0.2 0\n0 0.2 1e-9\n3 0 1 2\n3 0 2 3\n")
-            .unwrap();
+        let (mesh, _) =
+            read("OFF\n4 2 0\n0 0 0\n0.1 0 0\n0.1 0.2 0\n0 0.2 1e-9\n3 0 1 2\n3 0 2 3\n").unwrap();
         let mut bytes = Vec::new();
         write_mesh_to(&mut bytes, MeshFormat::Off, &mesh, None).unwrap();
         let (back, _) = read_mesh_bytes(&bytes, MeshFormat::Off, Path::new("rt.off")).unwrap();
@@ -215,7 +235,11 @@ mod tests {
         assert_eq!((mesh.vertex_count(), mesh.face_count()), (2132, 4272));
         assert_eq!(report.nonmanifold_edges, 0);
         let (mesh, report) = read_mesh(&dir.join("meshes/crank.off")).unwrap();
-        assert_eq!((mesh.vertex_count(), mesh.face_count()), (49986, 100028), "{report}");
+        assert_eq!(
+            (mesh.vertex_count(), mesh.face_count()),
+            (49986, 100028),
+            "{report}"
+        );
         assert_eq!(report.nonmanifold_edges, 24, "{report}");
     }
 }

@@ -203,7 +203,10 @@ impl PropertyAccess for PlyEdge {
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     let ply_err = |e: &dyn std::fmt::Display| Error::input(path, format!("invalid PLY: {e}"));
     if !bytes.starts_with(b"ply") {
-        return Err(Error::input(path, "not a PLY file (missing `ply` magic line)"));
+        return Err(Error::input(
+            path,
+            "not a PLY file (missing `ply` magic line)",
+        ));
     }
     let mut reader = Reader::new(BufReader::new(bytes));
     let header: Header = Parser::<DefaultElement>::new()
@@ -254,8 +257,10 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                 Parser::<DefaultElement>::new()
                     .read_payload_for_element(&mut reader, def, &header)
                     .map_err(|e| ply_err(&e))?;
-                raw.notes
-                    .push(format!("PLY element `{other}` ({} items) ignored", def.count));
+                raw.notes.push(format!(
+                    "PLY element `{other}` ({} items) ignored",
+                    def.count
+                ));
             }
         }
     }
@@ -352,8 +357,10 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         }
         if polygon.len() < 3 {
             raw.dropped_short_faces += 1;
-            raw.notes
-                .push(format!("PLY face {f} with {} vertices dropped", polygon.len()));
+            raw.notes.push(format!(
+                "PLY face {f} with {} vertices dropped",
+                polygon.len()
+            ));
             continue;
         }
         let group = match group_property {
@@ -370,7 +377,9 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         if a < 0 || b < 0 || a >= nv || b >= nv {
             return Err(Error::input(
                 path,
-                format!("PLY sharp_edge {e} ({a}, {b}) references a missing vertex ({nv} vertices)"),
+                format!(
+                    "PLY sharp_edge {e} ({a}, {b}) references a missing vertex ({nv} vertices)"
+                ),
             ));
         }
         raw.sharp_edges.push([a as u32, b as u32]);
@@ -517,7 +526,12 @@ mod tests {
             element face 2\nproperty uchar patch\nproperty list uchar uint vertex_indices\n\
             end_header\n"
             .to_vec();
-        for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.25]] {
+        for p in [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.25],
+        ] {
             for c in p {
                 bytes.extend_from_slice(&c.to_be_bytes());
             }
@@ -556,7 +570,10 @@ mod tests {
             let err = read(format!("{header}{body}").as_bytes()).unwrap_err();
             assert!(matches!(err, Error::Input { .. }));
             let msg = err.to_string();
-            assert!(msg.contains("t.ply") && msg.contains(needle), "{body:?}: {msg}");
+            assert!(
+                msg.contains("t.ply") && msg.contains(needle),
+                "{body:?}: {msg}"
+            );
         }
         // Binary NaN: reaches our own check, which names the vertex.
         let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n\
@@ -571,7 +588,10 @@ mod tests {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
         let msg = read(&bytes).unwrap_err().to_string();
-        assert!(msg.contains("vertex 2") && msg.contains("non-finite"), "{msg}");
+        assert!(
+            msg.contains("vertex 2") && msg.contains("non-finite"),
+            "{msg}"
+        );
 
         for bad in [
             &b"solid x"[..],

@@ -130,15 +130,22 @@ pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlM
         };
         return Err(Error::input(path, why));
     }
-    if u32::try_from(raw.positions.len()).is_err() || u32::try_from(raw.face_vertices.len()).is_err()
+    if u32::try_from(raw.positions.len()).is_err()
+        || u32::try_from(raw.face_vertices.len()).is_err()
     {
-        return Err(Error::input(path, "mesh too large (more than 2^32 vertices or indices)"));
+        return Err(Error::input(
+            path,
+            "mesh too large (more than 2^32 vertices or indices)",
+        ));
     }
     // Parsers check these with line numbers; this is the safety net for every format.
     if let Some(i) = raw.positions.iter().position(|p| !p.is_finite()) {
         return Err(Error::input(
             path,
-            format!("vertex {i} has a non-finite coordinate {:?}", raw.positions[i]),
+            format!(
+                "vertex {i} has a non-finite coordinate {:?}",
+                raw.positions[i]
+            ),
         ));
     }
     let nv = raw.positions.len() as u32;
@@ -482,7 +489,14 @@ mod tests {
         assert_eq!(mesh.corners.iter().copied().collect::<Vec<_>>(), vec![2]);
         assert_eq!(report.nonmanifold_edges, 0);
         let text = report.repairs.join("\n");
-        for needle in ["degenerate", "repeated", "empty groups", "`empty`", "sharp", "corner"] {
+        for needle in [
+            "degenerate",
+            "repeated",
+            "empty groups",
+            "`empty`",
+            "sharp",
+            "corner",
+        ] {
             assert!(text.contains(needle), "missing `{needle}` in {text}");
         }
         assert!(!report.unchanged());

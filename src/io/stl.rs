@@ -14,8 +14,8 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use super::repair::RawMesh;
 use super::fan_triangles;
+use super::repair::RawMesh;
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
@@ -38,7 +38,10 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         let Some(count) = binary_count else {
             return Err(Error::input(
                 path,
-                format!("not an STL file: {} bytes, too short for a binary STL header", bytes.len()),
+                format!(
+                    "not an STL file: {} bytes, too short for a binary STL header",
+                    bytes.len()
+                ),
             ));
         };
         let available = (bytes.len() - HEADER_LEN - 4) / TRIANGLE_LEN;
@@ -83,13 +86,17 @@ fn push_corner(raw: &mut RawMesh, p: [f32; 3], triangle: usize, path: &Path) -> 
             format!("STL triangle {triangle} has a non-finite vertex coordinate {p:?}"),
         ));
     }
-    raw.positions.push(DVec3::new(p[0].into(), p[1].into(), p[2].into()));
+    raw.positions
+        .push(DVec3::new(p[0].into(), p[1].into(), p[2].into()));
     Ok(())
 }
 
 fn parse_ascii(bytes: &[u8], path: &Path, raw: &mut RawMesh) -> Result<()> {
     // stl_io wants the first line to be `solid <name>`; a bare `solid` line is valid STL too.
-    let first_line_end = bytes.iter().position(|&b| b == b'\n').unwrap_or(bytes.len());
+    let first_line_end = bytes
+        .iter()
+        .position(|&b| b == b'\n')
+        .unwrap_or(bytes.len());
     let mut text = Vec::with_capacity(bytes.len() + 8);
     let first = bytes[..first_line_end].trim_ascii();
     text.extend_from_slice(first);
@@ -101,9 +108,8 @@ fn parse_ascii(bytes: &[u8], path: &Path, raw: &mut RawMesh) -> Result<()> {
     let reader = stl_io::create_stl_reader(&mut cursor)
         .map_err(|e| Error::input(path, format!("invalid ascii STL: {e}")))?;
     for (t, triangle) in reader.enumerate() {
-        let triangle = triangle.map_err(|e| {
-            Error::input(path, format!("invalid ascii STL at triangle {t}: {e}"))
-        })?;
+        let triangle = triangle
+            .map_err(|e| Error::input(path, format!("invalid ascii STL at triangle {t}: {e}")))?;
         for v in triangle.vertices {
             push_corner(raw, v.0, t, path)?;
         }
@@ -173,7 +179,13 @@ mod tests {
         let faces: Vec<Vec<u32>> = back.faces().map(<[u32]>::to_vec).collect();
         assert_eq!(
             faces,
-            vec![vec![0, 1, 2], vec![0, 2, 3], vec![0, 3, 1], vec![1, 4, 3], vec![1, 3, 2]]
+            vec![
+                vec![0, 1, 2],
+                vec![0, 2, 3],
+                vec![0, 3, 1],
+                vec![1, 4, 3],
+                vec![1, 3, 2]
+            ]
         );
         assert_eq!(report.input_vertices, 15);
         assert_eq!(report.welded_vertices, 10);
