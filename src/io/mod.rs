@@ -357,4 +357,158 @@ mod tests {
             assert!(matches!(err, Error::Input { .. }), "{format}: {err}");
         }
     }
+
+    /// Corrupted files (random byte flips, truncations) of every format give `Ok` or `Err`,
+    /// never a panic. Deterministic: a fixed LCG picks the corruptions.
+    #[test]
+    fn corrupted_files_never_panic() {
+        use crate::mesh::PatchKind;
+        let mut mesh = ControlMesh::new();
+        for i in 0..12 {
+            let a = i as f64 * 0.5;
+            mesh.push_vertex(DVec3::new(a.cos(), a.sin(), (i % 3) as f64));
+        }
+        let g0 = mesh.push_group("face_1", PatchKind::default());
+        let g1 = mesh.push_group("face_2", PatchKind::default());
+        for i in 0..10u32 {
+            mesh.push_face(&[i, i + 1, i + 2], if i < 5 { g0 } else { g1 });
+        }
+        mesh.push_face(&[0, 3, 6, 9], g1);
+        mesh.set_sharp(0, 1);
+        mesh.corners.insert(2);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 33) as usize
+        };
+        for format in [
+            MeshFormat::Obj,
+            MeshFormat::Off,
+            MeshFormat::Ply,
+            MeshFormat::Stl,
+            MeshFormat::Glb,
+        ] {
+            let mut clean = Vec::new();
+            write_mesh_to(&mut clean, format, &mesh, None).unwrap();
+            read_mesh_bytes(&clean, format, Path::new("clean")).unwrap();
+            for round in 0..400 {
+                let mut bytes = clean.clone();
+                match round % 4 {
+                    0 => bytes.truncate(next() % clean.len()),
+                    1 => {
+                        let i = next() % bytes.len();
+                        bytes[i] = next() as u8;
+                    }
+                    2 => {
+                        for _ in 0..8 {
+                            let i = next() % bytes.len();
+                            bytes[i] ^= 1 << (next() % 8);
+                        }
+                    }
+                    _ => {
+                        let i = next() % bytes.len();
+                        let digits = b"0123456789-.e ";
+                        bytes[i] = digits[next() % digits.len()];
+                    }
+                }
+                if let Ok((m, _)) = read_mesh_bytes(&bytes, format, Path::new("corrupt")) {
+                    m.validate().unwrap();
+                }
+            }
+        }
+    }
+
+    mod proptests {
+        use super::*;
+        use crate::mesh::PatchKind;
+        use proptest::prelude::*;
+
+        /// Random valid meshes: distinct positions with arbitrary finite bits (subnormals,
+        /// huge, negative zero), polygons of 3-5 distinct vertices, every vertex used, every
+        /// group used, sharp edges on face edges, arbitrary corners.
+        fn mesh_strategy() -> impl Strategy<Value = ControlMesh> {
+            let coord = prop_oneof![
+                any::<f64>().prop_filter("finite", |c| c.is_finite()),
+                Just(-0.0),
+                Just(f64::MIN_POSITIVE / 8.0),
+            ];
+            (4usize..10)
+                .prop_flat_map(move |nv| {
+                    let positions = prop::collection::vec((coord.clone(), coord.clone()), nv);
+                    let face = prop::sample::subsequence(
+                        (0..nv as u32).collect::<Vec<_>>(),
+                        3..=5.min(nv),
+                    )
+                    .prop_shuffle();
+                    let faces = prop::collection::vec(face, 1..8);
+                    (positions, faces, 1usize..4, any::<u64>())
+                })
+                .prop_map(|(xy, faces, ng, bits)| {
+                    let ng = ng.min(faces.len());
+                    // Keep used vertices only, in index order.
+                    let mut used = vec![u32::MAX; xy.len()];
+                    for f in &faces {
+                        for &v in f {
+                            used[v as usize] = 0;
+                        }
+                    }
+                    let mut m = ControlMesh::new();
+                    for (i, &(x, z)) in xy.iter().enumerate() {
+                        if used[i] == 0 {
+                            used[i] = m.push_vertex(DVec3::new(x, i as f64, z));
+                        }
+                    }
+                    for g in 0..ng {
+                        m.push_group(format!("group {g}"), PatchKind::default());
+                    }
+                    for (i, f) in faces.iter().enumerate() {
+                        let f: Vec<u32> = f.iter().map(|&v| used[v as usize]).collect();
+                        m.push_face(&f, (i % ng) as u32);
+                    }
+                    for f in 0..m.face_count() {
+                        let face = m.face(f).to_vec();
+                        if bits >> (f % 64) & 1 == 1 {
+                            m.set_sharp(face[0], face[1]);
+                        }
+                    }
+                    for v in 0..m.vertex_count() as u32 {
+                        if bits >> (32 + v % 32) & 1 == 1 {
+                            m.corners.insert(v);
+                        }
+                    }
+                    m
+                })
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(64))]
+            #[test]
+            fn obj_and_ply_round_trip_exactly(mesh in mesh_strategy()) {
+                for format in [MeshFormat::Obj, MeshFormat::Ply] {
+                    let mut bytes = Vec::new();
+                    write_mesh_to(&mut bytes, format, &mesh, None).unwrap();
+                    let (back, report) =
+                        read_mesh_bytes(&bytes, format, Path::new("p")).unwrap();
+                    prop_assert!(report.unchanged(), "{}: {}", format, report);
+                    prop_assert_eq!(back.positions.len(), mesh.positions.len());
+                    for (a, b) in back.positions.iter().zip(&mesh.positions) {
+                        prop_assert_eq!(
+                            a.to_array().map(f64::to_bits),
+                            b.to_array().map(f64::to_bits)
+                        );
+                    }
+                    prop_assert_eq!(&back, &mesh);
+                }
+            }
+
+            #[test]
+            fn off_round_trips_faces(mesh in mesh_strategy()) {
+                let mut bytes = Vec::new();
+                write_mesh_to(&mut bytes, MeshFormat::Off, &mesh, None).unwrap();
+                let (back, _) = read_mesh_bytes(&bytes, MeshFormat::Off, Path::new("p")).unwrap();
+                prop_assert_eq!(&back.positions, &mesh.positions);
+                prop_assert_eq!(&back.face_vertices, &mesh.face_vertices);
+            }
+        }
+    }
 }
