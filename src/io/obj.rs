@@ -527,6 +527,11 @@ mod tests {
             assert_eq!(report.boundary_edges, 0, "{file}");
             assert_eq!(report.dropped_degenerate_faces, 0, "{file}");
         }
+        // The assembly's touching solids: 22 coincident vertex pairs kept apart (welding them
+        // would create 22 non-manifold edges).
+        let (_, report) = read_mesh(&dir.join("tess/trj4_pm2-ec-214_fine.obj")).unwrap();
+        assert_eq!(report.coincident_vertices_kept, 22);
+        assert_eq!(report.welded_vertices, 0);
     }
 
     #[test]
