@@ -43,17 +43,16 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     // Group name -> index, for re-entering a group by name. Lookup only; group order is the
     // order of first declaration.
     let mut group_index: HashMap<String, u32> = HashMap::new();
-    // Line of the first `g` declaring each group (for the empty-group note).
     let mut current_group: Option<u32> = None;
     let mut object_name: Option<String> = None;
-    // Vertex references of all `f` lines; checked against the final vertex count at the end,
-    // because positive indices may refer forward.
-    let mut pending: Vec<(u32, i64)> = Vec::new();
+    // `f`, `l` and `p` elements with 0-based indices, checked against the final vertex count
+    // at the end because positive indices may refer forward.
+    let mut faces: Vec<PendingElement> = Vec::new();
+    let mut lines_and_points: Vec<PendingElement> = Vec::new();
+    let mut element_indices: Vec<i64> = Vec::new();
     let mut polygon: Vec<i64> = Vec::new();
+    // Unsupported statement -> count, in order of first appearance.
     let mut ignored: Vec<(String, usize)> = Vec::new();
-    let mut face_raw_offsets: Vec<usize> = vec![0];
-    let mut face_raw_indices: Vec<i64> = Vec::new();
-    let mut line_elements: Vec<(u32, Vec<i64>, usize)> = Vec::new();
 
     let err = |line: usize, detail: String| Error::input(path, format!("line {line}: {detail}"));
 
@@ -109,15 +108,11 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                         )
                     })?);
                 }
-                raw.input_faces += 1;
                 if polygon.len() < 3 {
-                    raw.dropped_short_faces += 1;
-                    raw.notes.push(format!(
-                        "line {line_no}: face with {} vertices dropped",
-                        polygon.len()
-                    ));
+                    raw.drop_short_face(format!("line {line_no}"));
                     continue;
                 }
+                raw.input_faces += 1;
                 let group = match current_group {
                     Some(g) => g,
                     None => {
@@ -128,11 +123,15 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                     }
                 };
                 let n_so_far = raw.positions.len() as i64;
+                let start = element_indices.len();
                 for &i in &polygon {
-                    face_raw_indices.push(resolve(i, n_so_far, line_no, "face", path)?);
+                    element_indices.push(resolve(i, n_so_far, line_no, "face", path)?);
                 }
-                face_raw_offsets.push(face_raw_indices.len());
-                pending.push((group, line_no as i64));
+                faces.push(PendingElement {
+                    kind: ElementKind::Face(group),
+                    line: line_no,
+                    indices: start..element_indices.len(),
+                });
             }
             b"g" => {
                 let name = join_names(tokens);
@@ -143,8 +142,13 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                 current_group = None;
             }
             b"l" | b"p" => {
+                let kind = if keyword == b"l" {
+                    ElementKind::Line
+                } else {
+                    ElementKind::Point
+                };
                 let n_so_far = raw.positions.len() as i64;
-                let mut verts = Vec::new();
+                let start = element_indices.len();
                 for token in tokens {
                     let i = parse_index(token).ok_or_else(|| {
                         err(
@@ -152,10 +156,13 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                             format!("invalid vertex index `{}`", String::from_utf8_lossy(token)),
                         )
                     })?;
-                    let what = if keyword == b"l" { "line" } else { "point" };
-                    verts.push(resolve(i, n_so_far, line_no, what, path)?);
+                    element_indices.push(resolve(i, n_so_far, line_no, kind.name(), path)?);
                 }
-                line_elements.push((line_no as u32, verts, (keyword == b"l") as usize));
+                lines_and_points.push(PendingElement {
+                    kind,
+                    line: line_no,
+                    indices: start..element_indices.len(),
+                });
             }
             b"vt" | b"vn" | b"vp" | b"s" | b"usemtl" | b"mtllib" => {}
             other => {
@@ -168,50 +175,38 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         }
     }
 
-    // Resolve faces now that the vertex count is known (positive indices may refer forward).
+    // Resolve elements now that the vertex count is known.
     let nv = raw.positions.len() as i64;
-    let check = |i: i64, line: i64, what: &str| -> Result<u32> {
-        if i >= nv {
-            Err(err(
-                line as usize,
-                format!(
-                    "{what} references vertex {} but the file has only {nv} vertices",
-                    i + 1
-                ),
-            ))
-        } else {
-            Ok(i as u32)
-        }
-    };
-    let mut face = Vec::new();
-    for (f, &(group, line)) in pending.iter().enumerate() {
-        face.clear();
-        for &i in &face_raw_indices[face_raw_offsets[f]..face_raw_offsets[f + 1]] {
-            face.push(check(i, line, "face")?);
-        }
-        raw.push_face(&face, group);
-        raw.face_lines.push(line as u32);
-    }
     let mut short_lines = 0;
-    for (line, verts, is_line) in &line_elements {
-        let verts = verts
-            .iter()
-            .map(|&i| {
-                check(
-                    i,
-                    *line as i64,
-                    if *is_line == 1 { "line" } else { "point" },
-                )
-            })
-            .collect::<Result<Vec<u32>>>()?;
-        if *is_line == 1 {
-            if verts.len() < 2 {
-                short_lines += 1;
+    let mut verts = Vec::new();
+    for element in faces.iter().chain(&lines_and_points) {
+        verts.clear();
+        for &i in &element_indices[element.indices.clone()] {
+            if i >= nv {
+                return Err(err(
+                    element.line,
+                    format!(
+                        "{} references vertex {} but the file has only {nv} vertices",
+                        element.kind.name(),
+                        i + 1
+                    ),
+                ));
             }
-            raw.sharp_edges
-                .extend(verts.windows(2).map(|w| [w[0], w[1]]));
-        } else {
-            raw.corners.extend_from_slice(&verts);
+            verts.push(i as u32);
+        }
+        match element.kind {
+            ElementKind::Face(group) => {
+                raw.push_face(&verts, group);
+                raw.face_lines.push(element.line as u32);
+            }
+            ElementKind::Line => {
+                if verts.len() < 2 {
+                    short_lines += 1;
+                }
+                raw.sharp_edges
+                    .extend(verts.windows(2).map(|w| [w[0], w[1]]));
+            }
+            ElementKind::Point => raw.corners.extend_from_slice(&verts),
         }
     }
     if short_lines > 0 {
@@ -224,6 +219,34 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
             .push(format!("{count} unsupported `{name}` statements ignored"));
     }
     Ok(raw)
+}
+
+/// What an `f`, `l` or `p` statement becomes.
+#[derive(Clone, Copy)]
+enum ElementKind {
+    /// A face in this group.
+    Face(u32),
+    /// A polyline of sharp edges.
+    Line,
+    /// Corner vertices.
+    Point,
+}
+
+impl ElementKind {
+    fn name(self) -> &'static str {
+        match self {
+            ElementKind::Face(_) => "face",
+            ElementKind::Line => "line",
+            ElementKind::Point => "point",
+        }
+    }
+}
+
+/// An element whose (0-based) indices sit in a shared array until the vertex count is known.
+struct PendingElement {
+    kind: ElementKind,
+    line: usize,
+    indices: std::ops::Range<usize>,
 }
 
 /// Returns the index of the group called `name`, creating it if new.

@@ -145,13 +145,11 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
             }
             face.push(i as u32);
         }
-        raw.input_faces += 1;
         if n < 3 {
-            raw.dropped_short_faces += 1;
-            raw.notes
-                .push(format!("line {line}: face with {n} vertices dropped"));
+            raw.drop_short_face(format!("line {line}"));
             continue;
         }
+        raw.input_faces += 1;
         raw.push_face(&face, 0);
         raw.face_lines.push(line as u32);
     }

@@ -344,7 +344,6 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
         } else {
             std::mem::take(&mut face.indices)
         };
-        raw.input_faces += 1;
         polygon.clear();
         for &i in &indices {
             if i < 0 || i >= nv {
@@ -356,13 +355,10 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
             polygon.push(i as u32);
         }
         if polygon.len() < 3 {
-            raw.dropped_short_faces += 1;
-            raw.notes.push(format!(
-                "PLY face {f} with {} vertices dropped",
-                polygon.len()
-            ));
+            raw.drop_short_face(format!("face {f}"));
             continue;
         }
+        raw.input_faces += 1;
         let group = match group_property {
             Some(_) => face
                 .group

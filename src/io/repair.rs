@@ -32,8 +32,11 @@ pub struct RawMesh {
     pub corners: Vec<u32>,
     /// Face records in the file, including those the parser already dropped.
     pub input_faces: usize,
-    /// Faces the parser dropped because the file gave them fewer than 3 vertices.
+    /// Faces the parser dropped because the file gave them fewer than 3 vertices (see
+    /// [`RawMesh::drop_short_face`]).
     pub dropped_short_faces: usize,
+    /// Where the first few of those were, for the report note.
+    pub short_face_examples: Vec<String>,
     /// Parser notes (ignored content, conventions applied); copied into the report.
     pub notes: Vec<String>,
 }
@@ -55,6 +58,16 @@ impl RawMesh {
 
     pub fn face_count(&self) -> usize {
         self.face_groups.len()
+    }
+
+    /// Records a face record with fewer than 3 vertices, which the parser skips. `location`
+    /// says where it is (`"line 12"`, `"face 7"`).
+    pub fn drop_short_face(&mut self, location: String) {
+        self.input_faces += 1;
+        self.dropped_short_faces += 1;
+        if self.short_face_examples.len() < Examples::MAX_SHOWN {
+            self.short_face_examples.push(location);
+        }
     }
 
     fn face(&self, f: usize) -> &[u32] {
@@ -119,6 +132,16 @@ pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlM
     report.input_faces = raw.input_faces.max(raw.face_count());
     report.dropped_degenerate_faces = raw.dropped_short_faces;
     let mut notes = raw.notes.clone();
+    if raw.dropped_short_faces > 0 {
+        Examples {
+            count: raw.dropped_short_faces,
+            shown: raw.short_face_examples.clone(),
+        }
+        .note(
+            "faces with fewer than 3 vertices in the file dropped",
+            &mut notes,
+        );
+    }
 
     if raw.face_count() == 0 {
         let why = if raw.input_faces > 0 {
