@@ -400,30 +400,35 @@ pub fn sorted_edges(mesh: &ControlMesh) -> Vec<(u32, u32)> {
 /// Counting sort by the smaller vertex, then a tiny sort per vertex: linear time, which
 /// matters for 100k-face inputs (a comparison sort of all edges dominated reading time).
 fn sort_edges(face_offsets: &[u32], face_vertices: &[u32], vertex_count: usize) -> Vec<(u32, u32)> {
-    let sides = || {
-        face_offsets.windows(2).flat_map(|w| {
+    let for_each_side = |f: &mut dyn FnMut(u32, u32)| {
+        for w in face_offsets.windows(2) {
             let face = &face_vertices[w[0] as usize..w[1] as usize];
-            (0..face.len()).filter_map(move |i| {
-                let (a, b) = (face[i], face[(i + 1) % face.len()]);
-                (a != b).then(|| edge_key(a, b))
-            })
-        })
+            let mut prev = match face.last() {
+                Some(&v) => v,
+                None => continue,
+            };
+            for &v in face {
+                if v != prev {
+                    let (a, b) = edge_key(prev, v);
+                    f(a, b);
+                }
+                prev = v;
+            }
+        }
     };
     let mut start = vec![0u32; vertex_count + 1];
-    for (a, _) in sides() {
-        start[a as usize + 1] += 1;
-    }
+    for_each_side(&mut |a, _| start[a as usize + 1] += 1);
     for v in 0..vertex_count {
         start[v + 1] += start[v];
     }
     let total = start[vertex_count] as usize;
     let mut next = start.clone();
     let mut edges = vec![(0u32, 0u32); total];
-    for (a, b) in sides() {
+    for_each_side(&mut |a, b| {
         let slot = &mut next[a as usize];
         edges[*slot as usize] = (a, b);
         *slot += 1;
-    }
+    });
     for v in 0..vertex_count {
         edges[start[v] as usize..start[v + 1] as usize].sort_unstable();
     }

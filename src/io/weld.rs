@@ -11,13 +11,11 @@
 //! an assembly that touch at a point or edge and create non-manifold edges (the corpus
 //! assemblies `trj2`, `trj3`, `trj4`, `bug33398` have such contacts).
 
-use std::collections::HashMap;
-
 use glam::DVec3;
 
-/// Bit pattern of a position used as a hash key. `-0.0` is mapped to `+0.0` (adding `0.0`
-/// does exactly that in IEEE arithmetic) so that the two zeros weld. Only used for lookup:
-/// output order never depends on hashing.
+/// Bit pattern of a position used as the sort key. `-0.0` is mapped to `+0.0` (adding `0.0`
+/// does exactly that in IEEE arithmetic) so that the two zeros weld. Only used to find duplicates:
+/// output order is always first-occurrence order.
 #[inline]
 fn key(p: DVec3) -> [u64; 3] {
     [
@@ -56,39 +54,56 @@ pub fn weld(positions: &[DVec3]) -> Welded {
 /// Like [`weld`], but only vertices `i` with `eligible(i)` are merged, and only with each
 /// other; the others keep their own index (and are counted in
 /// [`Welded::coincident_kept`] when they share coordinates with an earlier vertex).
+///
+/// Implemented by sorting `(key, index)` pairs rather than hashing: O(n log n) whatever the
+/// input (no hash flooding from crafted files) and deterministic by construction.
 pub fn weld_where(positions: &[DVec3], eligible: impl Fn(usize) -> bool) -> Welded {
-    // Key -> unique index of the first eligible vertex there (None: only ineligible so far).
-    let mut first_eligible: HashMap<[u64; 3], Option<u32>> =
-        HashMap::with_capacity(positions.len());
-    let mut unique = Vec::with_capacity(positions.len());
-    let mut remap = Vec::with_capacity(positions.len());
+    let n = positions.len();
+    let mut order: Vec<([u64; 3], u32)> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| (key(p), i as u32))
+        .collect();
+    order.sort_unstable();
+    // representative[i]: the vertex `i` merges into (itself if it stays).
+    let mut representative: Vec<u32> = (0..n as u32).collect();
     let mut coincident_kept = 0;
-    for (i, &p) in positions.iter().enumerate() {
-        let next = unique.len() as u32;
-        let is_eligible = eligible(i);
-        let slot = first_eligible.entry(key(p));
-        let idx = match slot {
-            std::collections::hash_map::Entry::Vacant(e) => {
-                e.insert(is_eligible.then_some(next));
-                next
-            }
-            std::collections::hash_map::Entry::Occupied(mut e) => match (*e.get(), is_eligible) {
-                (Some(rep), true) => rep,
-                (None, true) => {
-                    e.insert(Some(next));
-                    coincident_kept += 1;
-                    next
-                }
-                (_, false) => {
-                    coincident_kept += 1;
-                    next
-                }
-            },
-        };
-        if idx == next {
-            unique.push(p);
+    let mut start = 0;
+    while start < order.len() {
+        let mut end = start + 1;
+        while end < order.len() && order[end].0 == order[start].0 {
+            end += 1;
         }
-        remap.push(idx);
+        // Within a run of equal positions, indices ascend: the first eligible vertex is the
+        // representative of every later eligible one.
+        let mut rep: Option<u32> = None;
+        for (k, &(_, i)) in order[start..end].iter().enumerate() {
+            if eligible(i as usize) {
+                match rep {
+                    Some(r) => {
+                        representative[i as usize] = r;
+                        continue;
+                    }
+                    None => rep = Some(i),
+                }
+            }
+            if k > 0 {
+                coincident_kept += 1;
+            }
+        }
+        start = end;
+    }
+    let mut unique = Vec::with_capacity(n);
+    let mut remap = Vec::with_capacity(n);
+    for (i, &p) in positions.iter().enumerate() {
+        let r = representative[i] as usize;
+        if r == i {
+            remap.push(unique.len() as u32);
+            unique.push(p);
+        } else {
+            // r < i, so its new index is already known.
+            remap.push(remap[r]);
+        }
     }
     Welded {
         positions: unique,
@@ -136,5 +151,52 @@ mod tests {
         let a = DVec3::new(0.1 + 0.2, 0.0, 0.0);
         let b = DVec3::new(0.3, 0.0, 0.0);
         assert_eq!(weld(&[a, b]).positions.len(), 2);
+    }
+
+    /// Quadratic reference: the definition of `weld_where`, spelled out.
+    fn reference(positions: &[DVec3], eligible: &[bool]) -> Welded {
+        let same = |a: DVec3, b: DVec3| key(a) == key(b);
+        let mut unique: Vec<DVec3> = Vec::new();
+        let mut remap = Vec::new();
+        let mut coincident_kept = 0;
+        for (i, &p) in positions.iter().enumerate() {
+            let earlier = (0..i).find(|&j| eligible[i] && eligible[j] && same(positions[j], p));
+            match earlier {
+                Some(j) => remap.push(remap[j]),
+                None => {
+                    if (0..i).any(|j| same(positions[j], p)) {
+                        coincident_kept += 1;
+                    }
+                    remap.push(unique.len() as u32);
+                    unique.push(p);
+                }
+            }
+        }
+        Welded {
+            positions: unique,
+            remap,
+            coincident_kept,
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn matches_reference(
+            cells in proptest::collection::vec((0u8..4, 0u8..3, proptest::bool::ANY, proptest::bool::ANY), 0..40)
+        ) {
+            let positions: Vec<DVec3> = cells
+                .iter()
+                .map(|&(x, y, neg, _)| {
+                    let z = if neg { -0.0 } else { 0.0 };
+                    DVec3::new(f64::from(x), f64::from(y), z)
+                })
+                .collect();
+            let eligible: Vec<bool> = cells.iter().map(|&(_, _, _, e)| e).collect();
+            let got = weld_where(&positions, |i| eligible[i]);
+            let want = reference(&positions, &eligible);
+            proptest::prop_assert_eq!(got.remap, want.remap);
+            proptest::prop_assert_eq!(got.coincident_kept, want.coincident_kept);
+            proptest::prop_assert_eq!(got.positions.len(), want.positions.len());
+        }
     }
 }
