@@ -39,6 +39,7 @@ use crate::mesh::ControlMesh;
 
 /// Parses OBJ text into a [`RawMesh`] (file numbering, nothing welded yet).
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes); // UTF-8 BOM
     let mut raw = RawMesh::new();
     // Group name -> index, for re-entering a group by name. Lookup only; group order is the
     // order of first declaration.
@@ -419,7 +420,7 @@ mod tests {
         let (mesh, report) = read("o thing\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
         assert_eq!(mesh.groups[0].name, "thing");
         assert!(report.unchanged(), "{report}");
-        let (mesh, _) = read("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 3 2 1\n").unwrap();
+        let (mesh, _) = read("\u{feff}v 0 0 0\nv 1 0 0\nv 0 1 0\nf 3 2 1\n").unwrap();
         assert_eq!(mesh.groups[0].name, "");
     }
 

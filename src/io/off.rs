@@ -16,6 +16,7 @@ use crate::mesh::ControlMesh;
 
 /// Parses OFF text into a [`RawMesh`].
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes); // UTF-8 BOM
     let err = |line: usize, detail: String| Error::input(path, format!("line {line}: {detail}"));
     // Non-empty lines with comments stripped, with their 1-based line numbers.
     let mut lines = bytes
