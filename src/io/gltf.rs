@@ -1,4 +1,4 @@
-//! glTF 2.0 reader (`.glb` and `.gltf`) and `.glb` writer.
+//! glTF 2.0 reader and writer (`.glb` and `.gltf`).
 //!
 //! # Reading
 //! The `gltf` crate (without its `import` feature) parses and validates the JSON; buffers are
@@ -17,6 +17,7 @@
 //! geometry (`KHR_mesh_quantization`, Draco, meshopt) and sparse accessors are not supported.
 //!
 //! # Writing
+//! `.glb` (binary container), or `.gltf` with the buffer embedded as a base64 `data:` URI.
 //! One shared `POSITION` (and optional `NORMAL`) accessor, and one mesh with one triangle
 //! primitive per non-empty group (fan-triangulated, `u32` indices), named after the group,
 //! each under its own node of the single scene. glTF stores positions as f32, so positions
@@ -421,6 +422,51 @@ pub fn write_glb(
     mesh: &ControlMesh,
     normals: Option<&[DVec3]>,
 ) -> io::Result<()> {
+    let (mut document, mut bin) = build_document(mesh, normals);
+    document["buffers"] = serde_json::json!([{ "byteLength": bin.len() }]);
+    let mut json = serde_json::to_vec(&document).map_err(io::Error::other)?;
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let total =
+        u32::try_from(total).map_err(|_| io::Error::other("mesh too large for a .glb file"))?;
+    let mut w = io::BufWriter::new(out);
+    w.write_all(b"glTF")?;
+    w.write_all(&2u32.to_le_bytes())?;
+    w.write_all(&total.to_le_bytes())?;
+    w.write_all(&(json.len() as u32).to_le_bytes())?;
+    w.write_all(b"JSON")?;
+    w.write_all(&json)?;
+    w.write_all(&(bin.len() as u32).to_le_bytes())?;
+    w.write_all(b"BIN\0")?;
+    w.write_all(&bin)?;
+    w.flush()
+}
+
+/// Writes `mesh` as a self-contained `.gltf`: the same document as [`write_glb`], with the
+/// buffer embedded as a base64 `data:` URI (a third larger than `.glb`).
+pub fn write_gltf(
+    out: &mut dyn Write,
+    mesh: &ControlMesh,
+    normals: Option<&[DVec3]>,
+) -> io::Result<()> {
+    let (mut document, bin) = build_document(mesh, normals);
+    document["buffers"] = serde_json::json!([{
+        "byteLength": bin.len(),
+        "uri": format!("data:application/octet-stream;base64,{}", base64_encode(&bin)),
+    }]);
+    let mut w = io::BufWriter::new(out);
+    serde_json::to_writer(&mut w, &document).map_err(io::Error::other)?;
+    w.write_all(b"\n")?;
+    w.flush()
+}
+
+/// The glTF document (without `buffers`) and the binary buffer it indexes.
+fn build_document(mesh: &ControlMesh, normals: Option<&[DVec3]>) -> (serde_json::Value, Vec<u8>) {
     let nv = mesh.vertex_count();
     let mut bin: Vec<u8> = Vec::new();
     let mut lo = [f32::INFINITY; 3];
@@ -503,29 +549,30 @@ pub fn write_glb(
         "meshes": meshes,
         "accessors": accessors,
         "bufferViews": views,
-        "buffers": [{ "byteLength": bin.len() }],
     });
-    let mut json = serde_json::to_vec(&document).map_err(io::Error::other)?;
-    while json.len() % 4 != 0 {
-        json.push(b' ');
+    (document, bin)
+}
+
+/// Standard base64 with `=` padding.
+fn base64_encode(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for i in 0..4 {
+            if i <= chunk.len() {
+                s.push(ALPHABET[(n >> (18 - 6 * i) & 63) as usize] as char);
+            } else {
+                s.push('=');
+            }
+        }
     }
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let total =
-        u32::try_from(total).map_err(|_| io::Error::other("mesh too large for a .glb file"))?;
-    let mut w = io::BufWriter::new(out);
-    w.write_all(b"glTF")?;
-    w.write_all(&2u32.to_le_bytes())?;
-    w.write_all(&total.to_le_bytes())?;
-    w.write_all(&(json.len() as u32).to_le_bytes())?;
-    w.write_all(b"JSON")?;
-    w.write_all(&json)?;
-    w.write_all(&(bin.len() as u32).to_le_bytes())?;
-    w.write_all(b"BIN\0")?;
-    w.write_all(&bin)?;
-    w.flush()
+    s
 }
 
 #[cfg(test)]
@@ -557,6 +604,18 @@ mod tests {
         m.push_face(&[1, 4, 2], c);
         m.push_face(&[0, 4, 1], c);
         m
+    }
+
+    #[test]
+    fn gltf_text_round_trip() {
+        let mesh = sample_mesh();
+        let mut bytes = Vec::new();
+        write_mesh_to(&mut bytes, MeshFormat::Gltf, &mesh, None).unwrap();
+        gltf::Gltf::from_slice(&bytes).unwrap();
+        let (back, report) = read(&bytes, MeshFormat::Gltf).unwrap();
+        assert!(report.unchanged(), "{report}");
+        assert_eq!(back.face_count(), 4);
+        assert_eq!(back.groups.len(), 2);
     }
 
     #[test]
@@ -641,26 +700,6 @@ mod tests {
         let err = read_mesh(&path).unwrap_err().to_string();
         assert!(err.contains("my data.bin"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    fn base64_encode(bytes: &[u8]) -> String {
-        const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-        let mut s = String::new();
-        for chunk in bytes.chunks(3) {
-            let b = [
-                chunk[0],
-                *chunk.get(1).unwrap_or(&0),
-                *chunk.get(2).unwrap_or(&0),
-            ];
-            let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-            for i in 0..=chunk.len() {
-                s.push(A[(n >> (18 - 6 * i) & 63) as usize] as char);
-            }
-        }
-        while s.len() % 4 != 0 {
-            s.push('=');
-        }
-        s
     }
 
     #[test]

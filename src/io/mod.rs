@@ -10,7 +10,7 @@
 //! | OBJ  | polygons, `o`/`g`, `l`, `p` | yes (f64 exact) | `g` | `l` / `p` elements ([`obj`]) |
 //! | PLY  | ascii, binary LE/BE | binary LE (f64 positions) | face `group` property (+ names in comments) | `sharp_edge` element / vertex `corner` ([`ply`]) |
 //! | STL  | ascii, binary | binary, fan-triangulated | one group | no |
-//! | glTF / glb | triangles, strips, fans | glb, fan-triangulated (f32 positions) | one primitive per group | no |
+//! | glTF / glb | triangles, strips, fans | glb or self-contained gltf, fan-triangulated (f32 positions) | one primitive per group | no |
 //! | OFF  | polygons | yes | one group | no |
 //!
 //! # What every reader does after parsing (see [`repair`])
@@ -60,7 +60,7 @@ pub enum MeshFormat {
     Stl,
     /// Binary glTF (one file with a BIN chunk).
     Glb,
-    /// JSON glTF with external `.bin` buffers or `data:` URIs (read only).
+    /// JSON glTF with external `.bin` buffers or `data:` URIs (written with a `data:` URI).
     Gltf,
     Off,
 }
@@ -258,7 +258,7 @@ pub fn write_mesh(path: &Path, mesh: &ControlMesh, normals: Option<&[DVec3]>) ->
 }
 
 /// Writes a mesh in `format` to `writer`. The mesh must pass [`ControlMesh::validate`];
-/// `normals`, when given, must have one entry per vertex. `.gltf` is not written (use `.glb`).
+/// `normals`, when given, must have one entry per vertex.
 pub fn write_mesh_to(
     writer: &mut dyn std::io::Write,
     format: MeshFormat,
@@ -281,11 +281,7 @@ pub fn write_mesh_to(
         MeshFormat::Ply => ply::write(writer, mesh, normals),
         MeshFormat::Stl => stl::write(writer, mesh),
         MeshFormat::Glb => gltf::write_glb(writer, mesh, normals),
-        MeshFormat::Gltf => {
-            return Err(Error::Parameter(
-                "writing .gltf is not supported; write .glb instead".into(),
-            ))
-        }
+        MeshFormat::Gltf => gltf::write_gltf(writer, mesh, normals),
     };
     result.map_err(|e| Error::io(format!("<{format} output>"), e))
 }
@@ -356,6 +352,7 @@ mod tests {
             MeshFormat::Ply,
             MeshFormat::Stl,
             MeshFormat::Glb,
+            MeshFormat::Gltf,
         ] {
             let err = read_mesh_bytes(b"", format, Path::new("empty.x")).unwrap_err();
             assert!(matches!(err, Error::Input { .. }), "{format}: {err}");
@@ -393,6 +390,7 @@ mod tests {
             MeshFormat::Ply,
             MeshFormat::Stl,
             MeshFormat::Glb,
+            MeshFormat::Gltf,
         ] {
             let mut clean = Vec::new();
             write_mesh_to(&mut clean, format, &mesh, None).unwrap();
