@@ -50,7 +50,9 @@ pub mod repair;
 pub mod stl;
 pub mod weld;
 
-pub use faces_json::{read_faces_json, sidecar_path_for, FaceInfo, SurfaceType};
+pub use faces_json::{
+    face_info_for_groups, read_faces_json, sidecar_path_for, AnalyticParams, FaceInfo, SurfaceType,
+};
 
 /// The mesh file formats scode reads and writes, chosen by file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
