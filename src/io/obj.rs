@@ -434,6 +434,61 @@ mod tests {
         assert_eq!(mesh.face(1), &[1, 3, 2]);
     }
 
+    /// A closed cube stored the way per-object exporters do it: each face group with its own
+    /// copies of its 4 corners. Welding restores the 8 shared vertices and a closed surface.
+    #[test]
+    fn per_group_duplicated_cube_is_welded_closed() {
+        let corner = |i: u32| [(i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64];
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let mut text = String::new();
+        for (g, quad) in quads.iter().enumerate() {
+            text += &format!("g side{g}\n");
+            for &c in quad {
+                let [x, y, z] = corner(c);
+                text += &format!("v {x} {y} {z}\n");
+            }
+            text += "f -4 -3 -2 -1\nl -4 -3\n";
+        }
+        let (mesh, report) = read(&text).unwrap();
+        assert_eq!(
+            (mesh.vertex_count(), mesh.face_count(), mesh.groups.len()),
+            (8, 6, 6)
+        );
+        assert_eq!(report.welded_vertices, 16);
+        assert_eq!(report.boundary_edges, 0);
+        assert_eq!(report.nonmanifold_edges, 0);
+        assert_eq!(report.coincident_vertices_kept, 0);
+        assert_eq!(mesh.sharp_edges.len(), 6);
+        assert!(!report.unchanged());
+    }
+
+    /// Two closed tetrahedra touching at one point (separate solids of an assembly): the
+    /// coincident vertices are not welded, so the solids stay separate.
+    #[test]
+    fn touching_closed_solids_are_not_welded() {
+        let tet = |o: f64| {
+            format!(
+                "v {o} 0 0\nv {} 0 0\nv {o} 1 0\nv {o} 0 1\n\
+                 f -4 -2 -3\nf -4 -3 -1\nf -4 -1 -2\nf -3 -2 -1\n",
+                o + 1.0
+            )
+        };
+        // The first tetrahedron's vertex (1,0,0) is the second's (1,0,0).
+        let (mesh, report) = read(&(tet(0.0) + &tet(1.0))).unwrap();
+        assert_eq!(mesh.vertex_count(), 8);
+        assert_eq!(report.coincident_vertices_kept, 1);
+        assert_eq!(report.welded_vertices, 0);
+        assert_eq!((report.boundary_edges, report.nonmanifold_edges), (0, 0));
+        assert!(report.unchanged());
+    }
+
     #[test]
     fn malformed_inputs_give_errors_naming_the_line() {
         let cases = [
