@@ -259,7 +259,10 @@ pub(crate) fn eval_normal(
     let vp = eval_vertex(l, t, base, p, v);
     let q = |i: usize| eval_edge(l, base, p, ring[i % ring.len()] as usize);
     let is_crease_edge = |i: usize| l.eclass[ring[i % ring.len()] as usize] & eclass::CREASE != 0;
-    let start = (0..ring.len()).find(|&i| is_crease_edge(i)).unwrap_or(0);
+    let Some(start) = (0..ring.len()).find(|&i| is_crease_edge(i)) else {
+        // a tagged corner without creases: no curve tangents; use the fan normal
+        return normalize_or_zero(fan_normal(&ring_pt, pv, 0, nw));
+    };
     let mut total = DVec3::ZERO;
     let mut i = 0;
     while i < nw {
@@ -306,6 +309,10 @@ pub(crate) fn eval_normal(
                 a
             };
             n = along.cross(across);
+        }
+        if n.length_squared() <= 1e-24 * fan.length_squared() {
+            // degenerate tangents (e.g. a corner with a single crease edge)
+            n = fan;
         }
         if n.dot(fan) < 0.0 {
             n = -n;
