@@ -235,7 +235,7 @@ pub(crate) fn eval_normal(
         let k = ring.len();
         let (mut t1, mut t2) = (DVec3::ZERO, DVec3::ZERO);
         for i in 0..k {
-            let (s, co) = (2.0 * PI * i as f64 / k as f64).sin_cos();
+            let (co, s) = t.cos_sin(k, i);
             let q = ring_pt(i);
             t1 += q * co;
             t2 += q * s;

@@ -103,6 +103,8 @@ pub(crate) struct ValenceTables {
     pub beta: Vec<f64>,
     /// `(centre, neighbour)` limit weights per valence.
     pub limit: Vec<(f64, f64)>,
+    /// `(cos, sin)(2 pi i / k)` for i < k, concatenated over k (offset k (k - 1) / 2).
+    pub trig: Vec<(f64, f64)>,
 }
 
 impl ValenceTables {
@@ -115,7 +117,25 @@ impl ValenceTables {
             let w = loop_omega(k);
             limit[k] = (w / (w + k as f64), 1.0 / (w + k as f64));
         }
-        ValenceTables { beta, limit }
+        let mut trig = Vec::with_capacity(n * n / 2);
+        for k in 0..n {
+            for i in 0..k {
+                let (s, c) = (2.0 * PI * i as f64 / k as f64).sin_cos();
+                trig.push((c, s));
+            }
+        }
+        ValenceTables { beta, limit, trig }
+    }
+    /// `(cos, sin)(2 pi i / k)`.
+    #[inline]
+    pub fn cos_sin(&self, k: usize, i: usize) -> (f64, f64) {
+        match self.trig.get(k * (k.saturating_sub(1)) / 2 + i) {
+            Some(&cs) if k < self.beta.len() => cs,
+            _ => {
+                let (s, c) = (2.0 * PI * i as f64 / k as f64).sin_cos();
+                (c, s)
+            }
+        }
     }
     #[inline]
     pub fn beta(&self, k: usize) -> f64 {

@@ -218,6 +218,11 @@ impl Refinement {
         levels.push(l0);
         for j in 0..max_level {
             let next = topology::refine_level(&levels[j as usize], &base, j);
+            if j + 1 < max_level {
+                // coarser levels need rings for position evaluation; the finest builds
+                // them on demand (limit positions, normals)
+                let _ = next.rings.set(topology::build_rings(&levels[j as usize]));
+            }
             levels.push(next);
         }
         Ok(Refinement {
@@ -255,6 +260,16 @@ impl Refinement {
         }
     }
 
+    /// Level `m` with its vertex rings built.
+    fn level_with_rings(&self, m: usize) -> &Level {
+        let l = &self.levels[m];
+        if m > 0 {
+            l.rings
+                .get_or_init(|| topology::build_rings(&self.levels[m - 1]));
+        }
+        l
+    }
+
     fn check_control(&self, control: &[DVec3]) -> Result<()> {
         if control.len() != self.control_count() {
             return Err(Error::Parameter(format!(
@@ -268,6 +283,20 @@ impl Refinement {
 
     /// Positions of all vertices of level `m` (subdivided, not limit).
     pub fn positions_at(&self, control: &[DVec3], m: u32) -> Result<Vec<DVec3>> {
+        let (mut out, mut scratch) = (Vec::new(), Vec::new());
+        self.positions_into(control, m, &mut out, &mut scratch)?;
+        Ok(out)
+    }
+
+    /// [`Refinement::positions_at`] into caller-owned buffers (`out` receives the level-`m`
+    /// positions, `scratch` is working space), so repeated evaluations allocate nothing.
+    pub fn positions_into(
+        &self,
+        control: &[DVec3],
+        m: u32,
+        out: &mut Vec<DVec3>,
+        scratch: &mut Vec<DVec3>,
+    ) -> Result<()> {
         self.check_control(control)?;
         if m > self.max_level() {
             return Err(Error::Parameter(format!(
@@ -276,20 +305,26 @@ impl Refinement {
             )));
         }
         let n_out = self.levels[m as usize].nv;
-        let mut cur = Vec::with_capacity(n_out);
+        // ping-pong so that the last step writes into `out`
+        let (mut cur, mut next) = if m % 2 == 0 {
+            (out, scratch)
+        } else {
+            (scratch, out)
+        };
+        cur.clear();
+        cur.reserve(n_out);
+        next.clear();
+        next.reserve(n_out);
         cur.extend_from_slice(control);
-        let mut next: Vec<DVec3> = Vec::with_capacity(n_out);
         for j in 0..m as usize {
             let l = &self.levels[j];
             next.clear();
-            next.resize(l.nv + l.ne(), DVec3::ZERO);
-            let (old, new) = next.split_at_mut(l.nv);
             let (t, b, p) = (&self.tables, &self.base, &cur[..]);
-            par::for_each_mut(old, |v, out| *out = eval::eval_vertex(l, t, b, p, v));
-            par::for_each_mut(new, |e, out| *out = eval::eval_edge(l, b, p, e));
+            par::extend_mapped(next, l.nv, |v| eval::eval_vertex(l, t, b, p, v));
+            par::extend_mapped(next, l.ne(), |e| eval::eval_edge(l, b, p, e));
             std::mem::swap(&mut cur, &mut next);
         }
-        Ok(cur)
+        Ok(())
     }
 
     /// Positions of the finest level.
@@ -329,12 +364,13 @@ impl Refinement {
     }
 
     fn checked_level(&self, pos: &[DVec3], m: u32) -> Result<&Level> {
-        let l = self.levels.get(m as usize).ok_or_else(|| {
-            Error::Parameter(format!(
+        if m > self.max_level() {
+            return Err(Error::Parameter(format!(
                 "level {m} requested, refinement built to {}",
                 self.max_level()
-            ))
-        })?;
+            )));
+        }
+        let l = self.level_with_rings(m as usize);
         if pos.len() != l.nv {
             return Err(Error::Parameter(format!(
                 "{} positions given, level {m} has {} vertices",
@@ -364,7 +400,7 @@ impl Refinement {
         let mut scratch: Vec<(u32, f64)> = Vec::new();
         let mut exact_acc;
         for j in 0..=m as usize {
-            let l = &self.levels[j];
+            let l = self.level_with_rings(j);
             let last = j == m as usize;
             if last && !limit {
                 break;

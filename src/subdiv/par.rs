@@ -79,3 +79,14 @@ pub(crate) fn for_each_segment_mut<T: Send>(
         f(i, &mut data[offsets[i] as usize..offsets[i + 1] as usize]);
     }
 }
+
+/// Appends `f(0), f(1), .., f(n - 1)` to `out` (in order, without zero-filling first).
+pub(crate) fn extend_mapped<T: Send>(out: &mut Vec<T>, n: usize, f: impl Fn(usize) -> T + Sync + Send) {
+    #[cfg(feature = "parallel")]
+    if n >= MIN_PARALLEL {
+        use rayon::prelude::*;
+        out.par_extend((0..n).into_par_iter().with_min_len(2048).map(f));
+        return;
+    }
+    out.extend((0..n).map(f));
+}

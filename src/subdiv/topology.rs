@@ -6,6 +6,7 @@
 //! step a set of independent per-element writes that parallelise trivially.
 
 use std::collections::HashMap;
+use std::sync::OnceLock;
 
 use crate::error::{Error, Result};
 use crate::mesh::{edge_key, ControlMesh, PatchKind};
@@ -34,15 +35,22 @@ pub(crate) struct Level {
     /// `[left, right]`: `left` traverses the edge `a -> b` (always present), `right` the other
     /// way or `NONE` on the mesh boundary.
     pub edge_faces: Vec<[u32; 2]>,
-    /// CSR ring of incident edges per vertex, counter-clockwise; for a boundary vertex it
-    /// starts and ends with the two boundary edges (so it has one more edge than faces).
-    pub ring_offsets: Vec<u32>,
-    pub ring_edges: Vec<u32>,
+    /// Vertex rings; built lazily for the finest level (plain positions do not need them).
+    pub rings: OnceLock<Rings>,
     pub vclass: Vec<u8>,
     pub eclass: Vec<u8>,
     /// Frame id (0 = Cartesian) per vertex / edge; empty when the mesh has no frames.
     pub vframe: Vec<u16>,
     pub eframe: Vec<u16>,
+}
+
+/// CSR ring of incident edges per vertex, counter-clockwise; for a boundary vertex it starts
+/// and ends with the two boundary edges (so it has one more edge than faces). CSR rather than
+/// a fixed stride because control meshes have arbitrary valences.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Rings {
+    pub offsets: Vec<u32>,
+    pub edges: Vec<u32>,
 }
 
 impl Level {
@@ -54,7 +62,9 @@ impl Level {
     }
     #[inline]
     pub fn ring(&self, v: usize) -> &[u32] {
-        &self.ring_edges[self.ring_offsets[v] as usize..self.ring_offsets[v + 1] as usize]
+        // Internal invariant: `Refinement` builds the rings of a level before evaluating it.
+        let r = self.rings.get().expect("rings are built before use");
+        &r.edges[r.offsets[v] as usize..r.offsets[v + 1] as usize]
     }
     /// The other end of edge `e` seen from `v`.
     #[inline]
@@ -310,8 +320,10 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
         }
         ring_offsets.push(ring_edges.len() as u32);
     }
-    lvl.ring_offsets = ring_offsets;
-    lvl.ring_edges = ring_edges;
+    let _ = lvl.rings.set(Rings {
+        offsets: ring_offsets,
+        edges: ring_edges,
+    });
 
     let face_group = |f: u32| base.group[f as usize] as usize;
     for v in 0..nv {
@@ -541,47 +553,6 @@ pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
         });
     }
 
-    // Rings: old vertices map their edges to the halves at themselves; a new vertex on e
-    // gets [toward b, two interior edges of the left face, toward a, two of the right face].
-    let old_ring_len = l.ring_edges.len();
-    let mut ring_offsets = Vec::with_capacity(nv2 + 1);
-    ring_offsets.extend_from_slice(&l.ring_offsets);
-    let mut acc = old_ring_len as u32;
-    for e in 0..ne {
-        acc += if l.edge_faces[e][1] == NONE { 4 } else { 6 };
-        ring_offsets.push(acc);
-    }
-    let mut ring_edges = vec![0u32; acc as usize];
-    {
-        let (old_r, new_r) = ring_edges.split_at_mut(old_ring_len);
-        // old part: position i belongs to vertex v; do it per vertex chunk via offsets
-        par::for_each_segment_mut(old_r, &l.ring_offsets, |v, out| {
-            for (o, &e) in out.iter_mut().zip(l.ring(v)) {
-                *o = half(e, v as u32);
-            }
-        });
-        let new_offsets: Vec<u32> = ring_offsets[nv..]
-            .iter()
-            .map(|&o| o - old_ring_len as u32)
-            .collect();
-        par::for_each_segment_mut(new_r, &new_offsets, |e, out| {
-            let [fl, fr] = l.edge_faces[e];
-            let e32 = e as u32;
-            let interior = |f: u32| -> (u32, u32) {
-                let s = l.slot(f as usize, e32) as u32;
-                let i0 = 2 * ne as u32 + 3 * f;
-                (i0 + (s + 1) % 3, i0 + s)
-            };
-            let (l1, l2) = interior(fl);
-            if fr == NONE {
-                out.copy_from_slice(&[2 * e32 + 1, l1, l2, 2 * e32]);
-            } else {
-                let (r1, r2) = interior(fr);
-                out.copy_from_slice(&[2 * e32 + 1, l1, l2, 2 * e32, r1, r2]);
-            }
-        });
-    }
-
     // Classes.
     let mut vcls = Vec::with_capacity(nv2);
     vcls.extend_from_slice(&l.vclass);
@@ -650,11 +621,70 @@ pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
         face_edges,
         edges,
         edge_faces,
-        ring_offsets,
-        ring_edges,
+        rings: OnceLock::new(),
         vclass: vcls,
         eclass: ecls,
         vframe,
         eframe,
+    }
+}
+
+/// Rings of level j+1 from level j.
+pub(crate) fn build_rings(l: &Level) -> Rings {
+    let nv = l.nv;
+    let ne = l.ne();
+    let nv2 = nv + ne;
+    let half = |e: u32, x: u32| -> u32 {
+        if l.edges[e as usize][0] == x {
+            2 * e
+        } else {
+            2 * e + 1
+        }
+    };
+    // Rings: old vertices map their edges to the halves at themselves; a new vertex on e
+    // gets [toward b, two interior edges of the left face, toward a, two of the right face].
+    let lr = l.rings.get().expect("rings of the coarser level are built first");
+    let old_ring_len = lr.edges.len();
+    let mut ring_offsets = Vec::with_capacity(nv2 + 1);
+    ring_offsets.extend_from_slice(&lr.offsets);
+    let mut acc = old_ring_len as u32;
+    for e in 0..ne {
+        acc += if l.edge_faces[e][1] == NONE { 4 } else { 6 };
+        ring_offsets.push(acc);
+    }
+    let mut ring_edges = vec![0u32; acc as usize];
+    {
+        let (old_r, new_r) = ring_edges.split_at_mut(old_ring_len);
+        // old part: position i belongs to vertex v; do it per vertex chunk via offsets
+        par::for_each_segment_mut(old_r, &lr.offsets, |v, out| {
+            for (o, &e) in out.iter_mut().zip(l.ring(v)) {
+                *o = half(e, v as u32);
+            }
+        });
+        let new_offsets: Vec<u32> = ring_offsets[nv..]
+            .iter()
+            .map(|&o| o - old_ring_len as u32)
+            .collect();
+        par::for_each_segment_mut(new_r, &new_offsets, |e, out| {
+            let [fl, fr] = l.edge_faces[e];
+            let e32 = e as u32;
+            let interior = |f: u32| -> (u32, u32) {
+                let s = l.slot(f as usize, e32) as u32;
+                let i0 = 2 * ne as u32 + 3 * f;
+                (i0 + (s + 1) % 3, i0 + s)
+            };
+            let (l1, l2) = interior(fl);
+            if fr == NONE {
+                out.copy_from_slice(&[2 * e32 + 1, l1, l2, 2 * e32]);
+            } else {
+                let (r1, r2) = interior(fr);
+                out.copy_from_slice(&[2 * e32 + 1, l1, l2, 2 * e32, r1, r2]);
+            }
+        });
+    }
+
+    Rings {
+        offsets: ring_offsets,
+        edges: ring_edges,
     }
 }
