@@ -90,7 +90,10 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
     let mesh = parse_obj(&text);
     let all = rayon::current_num_threads();
     for threads in [1, all] {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         let mut group = c.benchmark_group(format!("{name}/{threads}thr"));
         group.sample_size(10);
         group.warm_up_time(std::time::Duration::from_millis(300));
@@ -102,22 +105,40 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
             let (mut out, mut scratch) = (Vec::new(), Vec::new());
             group.bench_with_input(BenchmarkId::new("positions", level), &level, |b, &l| {
                 b.iter(|| {
-                    pool.install(|| r.positions_into(&mesh.positions, l, &mut out, &mut scratch).unwrap())
-                })
-            });
-            group.bench_with_input(BenchmarkId::new("topology+positions", level), &level, |b, &l| {
-                b.iter(|| {
                     pool.install(|| {
-                        let r = Refinement::new(&mesh, l).unwrap();
-                        r.positions(&mesh.positions).unwrap()
+                        r.positions_into(&mesh.positions, l, &mut out, &mut scratch)
+                            .unwrap()
                     })
                 })
             });
+            group.bench_with_input(
+                BenchmarkId::new("topology+positions", level),
+                &level,
+                |b, &l| {
+                    b.iter(|| {
+                        pool.install(|| {
+                            let r = Refinement::new(&mesh, l).unwrap();
+                            r.positions(&mesh.positions).unwrap()
+                        })
+                    })
+                },
+            );
             if level >= 3 {
                 let p = r.positions(&mesh.positions).unwrap();
-                group.bench_with_input(BenchmarkId::new("limit+normals", level), &level, |b, &l| {
-                    b.iter(|| pool.install(|| (r.limit_positions(&p, l).unwrap(), r.limit_normals(&p, l).unwrap())))
-                });
+                group.bench_with_input(
+                    BenchmarkId::new("limit+normals", level),
+                    &level,
+                    |b, &l| {
+                        b.iter(|| {
+                            pool.install(|| {
+                                (
+                                    r.limit_positions(&p, l).unwrap(),
+                                    r.limit_normals(&p, l).unwrap(),
+                                )
+                            })
+                        })
+                    },
+                );
             }
         }
         group.finish();

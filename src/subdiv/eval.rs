@@ -87,7 +87,7 @@ impl Terms {
 }
 
 #[inline]
-fn frame_of<'a>(base: &'a Base, id: u16) -> Option<&'a Frame> {
+fn frame_of(base: &Base, id: u16) -> Option<&Frame> {
     if id == 0 {
         None
     } else {
@@ -97,7 +97,13 @@ fn frame_of<'a>(base: &'a Base, id: u16) -> Option<&'a Frame> {
 
 /// Position of the new vertex `v` (old vertex rule) from level positions `p`.
 #[inline]
-pub(crate) fn eval_vertex(l: &Level, t: &ValenceTables, base: &Base, p: &[DVec3], v: usize) -> DVec3 {
+pub(crate) fn eval_vertex(
+    l: &Level,
+    t: &ValenceTables,
+    base: &Base,
+    p: &[DVec3],
+    v: usize,
+) -> DVec3 {
     let mut acc = DVec3::ZERO;
     if let Some(fr) = frame_of(base, l.vframe(v)) {
         let mut terms = Terms::new();
@@ -163,7 +169,13 @@ pub(crate) fn limit_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut impl
 }
 
 /// Limit position of vertex `v` from level positions `p`.
-pub(crate) fn eval_limit(l: &Level, t: &ValenceTables, base: &Base, p: &[DVec3], v: usize) -> DVec3 {
+pub(crate) fn eval_limit(
+    l: &Level,
+    t: &ValenceTables,
+    base: &Base,
+    p: &[DVec3],
+    v: usize,
+) -> DVec3 {
     let c = l.vclass[v];
     if vclass::is_crease(c) {
         if let Some(fr) = frame_of(base, l.vframe(v)) {
@@ -183,7 +195,7 @@ pub(crate) fn eval_limit(l: &Level, t: &ValenceTables, base: &Base, p: &[DVec3],
 
 /// Frame of the boundary patch containing face `f` of level `j`, if any.
 #[inline]
-fn face_frame<'a>(base: &'a Base, j: u32, f: u32) -> Option<&'a Frame> {
+fn face_frame(base: &Base, j: u32, f: u32) -> Option<&Frame> {
     let b = (f as usize) >> (2 * j);
     if base.boundary_patch[b] {
         frame_of(base, base.group_frame[base.group[b] as usize])
@@ -221,7 +233,11 @@ pub(crate) fn eval_normal(
     }
     let pv = p[v];
     let is_boundary = l.edge_faces[ring[0] as usize][1] == NONE;
-    let nw = if is_boundary { ring.len() - 1 } else { ring.len() };
+    let nw = if is_boundary {
+        ring.len() - 1
+    } else {
+        ring.len()
+    };
     let ring_pt = |i: usize| p[l.other(ring[i % ring.len()], v as u32) as usize];
     // area-weighted face normal sum of the wedges [i0, i0 + n)
     let fan_normal = |pts: &dyn Fn(usize) -> DVec3, centre: DVec3, i0: usize, n: usize| {
@@ -241,7 +257,11 @@ pub(crate) fn eval_normal(
             t2 += q * s;
         }
         let n = t1.cross(t2);
-        let n = if n.dot(fan_normal(&ring_pt, pv, 0, nw)) < 0.0 { -n } else { n };
+        let n = if n.dot(fan_normal(&ring_pt, pv, 0, nw)) < 0.0 {
+            -n
+        } else {
+            n
+        };
         return normalize_or_zero(n);
     }
     if c == vclass::FIXED || !(vclass::is_crease(c) || c == vclass::CORNER) {

@@ -46,7 +46,7 @@ impl Frame {
             BoundarySurface::Cone { axis } => (axis, true),
         };
         let len = axis.direction.length();
-        if !(len.is_finite() && len > 1e-300) || !axis.origin.is_finite() {
+        if !(len.is_finite() && len > 1e-300 && axis.origin.is_finite()) {
             return Some(Err(format!(
                 "axis origin {:?} / direction {:?} is not a finite non-zero vector",
                 axis.origin, axis.direction
@@ -66,7 +66,7 @@ impl Frame {
 
     /// `(theta, h, r)` of a point.
     #[inline]
-    pub fn to_local(&self, p: DVec3) -> (f64, f64, f64) {
+    pub fn cyl_coords(&self, p: DVec3) -> (f64, f64, f64) {
         let d = p - self.origin;
         let h = d.dot(self.axis);
         let x = d.dot(self.e1);
@@ -75,7 +75,7 @@ impl Frame {
     }
 
     #[inline]
-    pub fn from_local(&self, theta: f64, h: f64, r: f64) -> DVec3 {
+    pub fn point_at(&self, theta: f64, h: f64, r: f64) -> DVec3 {
         let (s, c) = theta.sin_cos();
         self.origin + self.axis * h + (self.e1 * c + self.e2 * s) * r
     }
@@ -89,7 +89,7 @@ impl Frame {
         let mut dtheta = 0.0;
         let mut wtheta = 0.0;
         for &(p, w) in pts {
-            let (t, hi, ri) = self.to_local(p);
+            let (t, hi, ri) = self.cyl_coords(p);
             h += w * hi;
             r += w * ri;
             if ri > self.eps {
@@ -102,7 +102,7 @@ impl Frame {
             Some(t0) if wtheta.abs() > 1e-300 => t0 + dtheta / wtheta,
             _ => 0.0,
         };
-        self.from_local(theta, h, r)
+        self.point_at(theta, h, r)
     }
 
     /// Unit surface normal at `p` (radially outward; for a cone tilted by the half-angle).
@@ -142,10 +142,10 @@ mod tests {
         )
         .unwrap()
         .unwrap();
-        let a = f.from_local(3.0, 0.0, 2.0);
-        let b = f.from_local(-3.0, 1.0, 2.0); // across the +-pi seam
+        let a = f.point_at(3.0, 0.0, 2.0);
+        let b = f.point_at(-3.0, 1.0, 2.0); // across the +-pi seam
         let m = f.combine(&[(a, 0.5), (b, 0.5)]);
-        let (t, h, r) = f.to_local(m);
+        let (t, h, r) = f.cyl_coords(m);
         assert!((r - 2.0).abs() < 1e-12);
         assert!((h - 0.5).abs() < 1e-12);
         assert!((wrap(t - std::f64::consts::PI)).abs() < 1e-12);

@@ -57,7 +57,9 @@ pub(crate) fn extract(
         )));
     }
     if pos.len() != ln.nv {
-        return Err(Error::Parameter("positions do not match the finest level".into()));
+        return Err(Error::Parameter(
+            "positions do not match the finest level".into(),
+        ));
     }
     let e0 = l0.ne();
     let span = 1usize << n;
@@ -111,8 +113,8 @@ pub(crate) fn extract(
             poly.clear();
             let mut edges_with_extras = 0;
             let mut extra_edge = 0;
-            for s in 0..3 {
-                poly.push(c[s]);
+            for (s, &cs) in c.iter().enumerate() {
+                poly.push(cs);
                 let eps = lm.face_edges[3 * f + s] as usize;
                 if eps >= e0 << m {
                     continue;
@@ -132,7 +134,7 @@ pub(crate) fn extract(
                 let seg = eps - (be << m);
                 let per = 1usize << (n - m);
                 let step = 1usize << (n - lo);
-                let forward = lm.edges[eps][0] == c[s];
+                let forward = lm.edges[eps][0] == cs;
                 let cnt = per / step;
                 for t in 1..cnt {
                     let tt = if forward { t } else { cnt - t };

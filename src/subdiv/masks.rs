@@ -205,10 +205,16 @@ mod tests {
     #[test]
     fn crease_rules_by_type() {
         use vclass::*;
-        assert_eq!(eclass::crease_rule(CREASE_REGULAR, CREASE_REGULAR), eclass::MID);
+        assert_eq!(
+            eclass::crease_rule(CREASE_REGULAR, CREASE_REGULAR),
+            eclass::MID
+        );
         assert_eq!(eclass::crease_rule(CORNER, CREASE_NONREG), eclass::MID);
         assert_eq!(eclass::crease_rule(CREASE_REGULAR, CORNER), eclass::W58A);
-        assert_eq!(eclass::crease_rule(CREASE_NONREG, CREASE_REGULAR), eclass::W58B);
+        assert_eq!(
+            eclass::crease_rule(CREASE_NONREG, CREASE_REGULAR),
+            eclass::W58B
+        );
         assert_eq!(eclass::crease_rule(DART, CREASE_REGULAR), eclass::SMOOTH);
     }
 }

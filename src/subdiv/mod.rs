@@ -100,7 +100,11 @@ impl<'a> LevelView<'a> {
         &self.l.faces
     }
     pub fn triangle(&self, f: usize) -> [u32; 3] {
-        [self.l.faces[3 * f], self.l.faces[3 * f + 1], self.l.faces[3 * f + 2]]
+        [
+            self.l.faces[3 * f],
+            self.l.faces[3 * f + 1],
+            self.l.faces[3 * f + 2],
+        ]
     }
     /// Edge ids of face f: `(c0c1, c1c2, c2c0)`.
     pub fn face_edges(&self, f: usize) -> [u32; 3] {
@@ -179,17 +183,18 @@ impl Refinement {
     /// Builds the topology of levels 0..=`max_level`; `Error::LimitsExceeded` when the
     /// finest level would have more than `max_faces` triangles. `Error::Mesh` for
     /// non-manifold or inconsistently oriented meshes, unknown sharp edges, bad axes.
-    pub fn with_max_faces(mesh: &ControlMesh, max_level: u32, max_faces: u64) -> Result<Refinement> {
+    pub fn with_max_faces(
+        mesh: &ControlMesh,
+        max_level: u32,
+        max_faces: u64,
+    ) -> Result<Refinement> {
         if max_level > MAX_LEVEL {
             return Err(Error::Parameter(format!(
                 "subdivision level {max_level} exceeds the maximum {MAX_LEVEL}"
             )));
         }
         // Check counts before building anything.
-        let tri: u64 = mesh
-            .faces()
-            .map(|f| f.len().saturating_sub(2) as u64)
-            .sum();
+        let tri: u64 = mesh.faces().map(|f| f.len().saturating_sub(2) as u64).sum();
         let ftot = tri.saturating_mul(1u64 << (2 * max_level));
         if ftot > max_faces {
             return Err(Error::LimitsExceeded {
@@ -210,10 +215,7 @@ impl Refinement {
                 limit: u32::MAX as u64,
             });
         }
-        let max_k = (0..l0.nv)
-            .map(|v| l0.ring(v).len())
-            .max()
-            .unwrap_or(6);
+        let max_k = (0..l0.nv).map(|v| l0.ring(v).len()).max().unwrap_or(6);
         let mut levels = Vec::with_capacity(max_level as usize + 1);
         levels.push(l0);
         for j in 0..max_level {
@@ -337,7 +339,9 @@ impl Refinement {
         let l = self.checked_level(level_positions, m)?;
         let mut out = vec![DVec3::ZERO; l.nv];
         let (t, b) = (&self.tables, &self.base);
-        par::for_each_mut(&mut out, |v, o| *o = eval::eval_limit(l, t, b, level_positions, v));
+        par::for_each_mut(&mut out, |v, o| {
+            *o = eval::eval_limit(l, t, b, level_positions, v)
+        });
         Ok(out)
     }
 
@@ -409,25 +413,26 @@ impl Refinement {
                 offsets: vec![0],
                 ..Default::default()
             };
-            let push_row = |scratch: &mut Vec<(u32, f64)>, exact: bool, next: &mut SparseStencils| {
-                scratch.sort_unstable_by_key(|&(i, _)| i);
-                let mut k = 0;
-                while k < scratch.len() {
-                    let (i, mut w) = scratch[k];
-                    k += 1;
-                    while k < scratch.len() && scratch[k].0 == i {
-                        w += scratch[k].1;
+            let push_row =
+                |scratch: &mut Vec<(u32, f64)>, exact: bool, next: &mut SparseStencils| {
+                    scratch.sort_unstable_by_key(|&(i, _)| i);
+                    let mut k = 0;
+                    while k < scratch.len() {
+                        let (i, mut w) = scratch[k];
                         k += 1;
+                        while k < scratch.len() && scratch[k].0 == i {
+                            w += scratch[k].1;
+                            k += 1;
+                        }
+                        if w != 0.0 {
+                            next.indices.push(i);
+                            next.weights.push(w);
+                        }
                     }
-                    if w != 0.0 {
-                        next.indices.push(i);
-                        next.weights.push(w);
-                    }
-                }
-                next.offsets.push(next.indices.len() as u32);
-                next.exact.push(exact);
-                scratch.clear();
-            };
+                    next.offsets.push(next.indices.len() as u32);
+                    next.exact.push(exact);
+                    scratch.clear();
+                };
             let gather = |i: u32, w: f64, scratch: &mut Vec<(u32, f64)>, ex: &mut bool| {
                 let (ix, ws) = cur.row(i as usize);
                 *ex &= cur.exact[i as usize];
@@ -472,7 +477,10 @@ pub fn subdivide(
     let r = Refinement::with_max_faces(mesh, level, opts.max_faces)?;
     let p = r.positions(&mesh.positions)?;
     let (positions, normals) = if opts.limit {
-        (r.limit_positions(&p, level)?, Some(r.limit_normals(&p, level)?))
+        (
+            r.limit_positions(&p, level)?,
+            Some(r.limit_normals(&p, level)?),
+        )
     } else {
         (p, None)
     };

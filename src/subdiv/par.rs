@@ -81,7 +81,11 @@ pub(crate) fn for_each_segment_mut<T: Send>(
 }
 
 /// Appends `f(0), f(1), .., f(n - 1)` to `out` (in order, without zero-filling first).
-pub(crate) fn extend_mapped<T: Send>(out: &mut Vec<T>, n: usize, f: impl Fn(usize) -> T + Sync + Send) {
+pub(crate) fn extend_mapped<T: Send>(
+    out: &mut Vec<T>,
+    n: usize,
+    f: impl Fn(usize) -> T + Sync + Send,
+) {
     #[cfg(feature = "parallel")]
     if n >= MIN_PARALLEL {
         use rayon::prelude::*;

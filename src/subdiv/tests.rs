@@ -34,7 +34,10 @@ fn tetrahedron() -> ControlMesh {
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
 }
@@ -71,7 +74,10 @@ fn tetrahedron_numbering_and_positions() {
     let m = tetrahedron();
     let r = Refinement::new(&m, 3).unwrap();
     let l0 = r.level(0);
-    assert_eq!(l0.edges(), &[[0, 1], [1, 2], [2, 0], [0, 3], [3, 1], [2, 3]]);
+    assert_eq!(
+        l0.edges(),
+        &[[0, 1], [1, 2], [2, 0], [0, 3], [3, 1], [2, 3]]
+    );
     let fe: Vec<[u32; 3]> = (0..4).map(|f| l0.face_edges(f)).collect();
     assert_eq!(fe, vec![[0, 1, 2], [3, 4, 0], [2, 5, 3], [4, 5, 1]]);
     let l1 = r.level(1);
@@ -115,7 +121,10 @@ fn tetrahedron_numbering_and_positions() {
             (l.vertex_count(), l.edge_count(), l.face_count())
         })
         .collect();
-    assert_eq!(counts, vec![(4, 6, 4), (10, 24, 16), (34, 96, 64), (130, 384, 256)]);
+    assert_eq!(
+        counts,
+        vec![(4, 6, 4), (10, 24, 16), (34, 96, 64), (130, 384, 256)]
+    );
     // every face's edges match its corner pairs, every edge has 2 faces
     for j in 0..=3 {
         let l = r.level(j);
@@ -161,7 +170,11 @@ fn lod_extraction_formula_matches_levels() {
         for g in 0..lm.face_count() {
             for c in 0..3 {
                 let f = lod_corner_face(g, n, mm, c);
-                assert_eq!(fine.triangle(f)[c], lm.triangle(g)[c], "level {mm} face {g}");
+                assert_eq!(
+                    fine.triangle(f)[c],
+                    lm.triangle(g)[c],
+                    "level {mm} face {g}"
+                );
             }
         }
     }
@@ -172,7 +185,12 @@ fn lod_extraction_formula_matches_levels() {
 
 #[test]
 fn grid_exact_limit_points() {
-    let z = [[0., 1., 0., 2.], [1., 3., 2., 0.], [0., 2., 4., 1.], [2., 0., 1., 0.]];
+    let z = [
+        [0., 1., 0., 2.],
+        [1., 3., 2., 0.],
+        [0., 2., 4., 1.],
+        [2., 0., 1., 0.],
+    ];
     let m = grid(3, 3, |i, j| z[j][i]);
     let want = [
         (v3(1. / 5., 1. / 5., 2. / 5.), v3(0., 0., 0.)),
@@ -202,7 +220,11 @@ fn grid_exact_limit_points() {
     let r = Refinement::new(&mc, 0).unwrap();
     let lim = r.limit_positions(&mc.positions, 0).unwrap();
     for (v, (_, w)) in want.iter().enumerate() {
-        assert!(close(lim[v], *w, 1e-14), "corner-tagged v{v}: {:?} vs {w:?}", lim[v]);
+        assert!(
+            close(lim[v], *w, 1e-14),
+            "corner-tagged v{v}: {:?} vs {w:?}",
+            lim[v]
+        );
     }
     // stencils give the same limit points
     let st = r.stencils(0, true).unwrap();
@@ -231,7 +253,9 @@ fn table1_masks_by_iterated_polyline_subdivision() {
         let mut types = vec![CORNER, R, R, R, tl, tc, tr, R, R, R, CORNER];
         let centre = 5;
         for (probe, want) in [(centre - 1, wl), (centre, wc), (centre + 1, wr)] {
-            let mut vals: Vec<f64> = (0..types.len()).map(|i| (i == probe) as u8 as f64).collect();
+            let mut vals: Vec<f64> = (0..types.len())
+                .map(|i| (i == probe) as u8 as f64)
+                .collect();
             let mut ty = types.clone();
             let mut c = centre;
             for _ in 0..40 {
@@ -261,7 +285,11 @@ fn table1_masks_by_iterated_polyline_subdivision() {
                 ty[10] = CORNER;
                 c = 5;
             }
-            assert!((vals[c] - want).abs() < 1e-9, "{tl}{tc}{tr} probe {probe}: {} vs {want}", vals[c]);
+            assert!(
+                (vals[c] - want).abs() < 1e-9,
+                "{tl}{tc}{tr} probe {probe}: {} vs {want}",
+                vals[c]
+            );
         }
         types.clear();
         // the closed-form recipe of §4.2 agrees
@@ -307,9 +335,9 @@ fn regular_crease_converges_to_cubic_bspline() {
     for (e, &[a, b]) in l0.edges().iter().enumerate() {
         // crease edge (row(i), row(i+1)) with i in 3..=8: all of i-1..i+2 regular and away
         // from the boundary corners
-        let (i, fwd) = if a >= 13 && a <= 25 && b == a + 1 {
+        let (i, fwd) = if (13..=25).contains(&a) && b == a + 1 {
             ((a - 13) as usize, true)
-        } else if b >= 13 && b <= 25 && a == b + 1 {
+        } else if (13..=25).contains(&b) && a == b + 1 {
             ((b - 13) as usize, false)
         } else {
             continue;
@@ -339,7 +367,10 @@ fn regular_crease_converges_to_cubic_bspline() {
 fn planar_mesh_stays_planar_and_corners_fixed() {
     let mut rng = Lcg(3);
     let mut m = grid(5, 4, |_, _| 0.0);
-    let (u, w) = (v3(1.0, 0.2, 0.3).normalize(), v3(-0.1, 1.0, 0.5).normalize());
+    let (u, w) = (
+        v3(1.0, 0.2, 0.3).normalize(),
+        v3(-0.1, 1.0, 0.5).normalize(),
+    );
     let normal = u.cross(w).normalize();
     let origin = v3(0.3, -2.0, 5.0);
     for p in &mut m.positions {
@@ -368,7 +399,11 @@ fn planar_mesh_stays_planar_and_corners_fixed() {
     // limit normals of a planar surface are the plane normal
     let nn = r.limit_normals(&p, n).unwrap();
     for (v, q) in nn.iter().enumerate() {
-        assert!(q.dot(normal).abs() > 1.0 - 1e-9, "v{v} class {}: {q:?}", r.levels[n as usize].vclass[v]);
+        assert!(
+            q.dot(normal).abs() > 1.0 - 1e-9,
+            "v{v} class {}: {q:?}",
+            r.levels[n as usize].vclass[v]
+        );
     }
 }
 
@@ -400,7 +435,9 @@ fn limit_points_invariant_across_levels() {
     let m = mixed_mesh();
     let r = Refinement::new(&m, 6).unwrap();
     let l0 = r.level(0);
-    let classes: Vec<u8> = (0..l0.vertex_count()).map(|v| r.levels[0].vclass[v]).collect();
+    let classes: Vec<u8> = (0..l0.vertex_count())
+        .map(|v| r.levels[0].vclass[v])
+        .collect();
     assert!(classes.contains(&vclass::DART));
     assert!(classes.contains(&vclass::CORNER));
     assert!(classes.contains(&vclass::CREASE_REGULAR));
@@ -410,7 +447,12 @@ fn limit_points_invariant_across_levels() {
         let pj = r.positions_at(&m.positions, j).unwrap();
         let limj = r.limit_positions(&pj, j).unwrap();
         for v in 0..lim0.len() {
-            assert!(close(lim0[v], limj[v], 1e-12), "v{v} level {j}: {:?} {:?}", lim0[v], limj[v]);
+            assert!(
+                close(lim0[v], limj[v], 1e-12),
+                "v{v} level {j}: {:?} {:?}",
+                lim0[v],
+                limj[v]
+            );
         }
     }
     // limit stencils reproduce it
@@ -590,7 +632,10 @@ fn cylinder_and_cone_patches_stay_on_their_surfaces() {
                 .flat_map(|f| rc.level(n).triangle(f))
                 .map(|v| surface_error(pc[v as usize], origin, axis, cone))
                 .fold(0.0, f64::max);
-            assert!(worst_c > 1e-3, "closed-patch refinement unexpectedly exact: {worst_c}");
+            assert!(
+                worst_c > 1e-3,
+                "closed-patch refinement unexpectedly exact: {worst_c}"
+            );
             // and the boundary-patch surface is watertight
             check_closed_or_boundary(ln.triangles(), |a, b| {
                 let lv = r.level(n);
@@ -643,7 +688,10 @@ fn cone_patch_with_apex() {
         let d = p[v as usize] - apex;
         let h = d.dot(axis);
         let rr = (d - axis * h).length();
-        assert!((rr - 0.6 * h).abs() < 1e-12 * (1.0 + h), "v{v}: r {rr} h {h}");
+        assert!(
+            (rr - 0.6 * h).abs() < 1e-12 * (1.0 + h),
+            "v{v}: r {rr} h {h}"
+        );
     }
     assert_eq!(p[0], apex);
 }
@@ -664,7 +712,10 @@ fn boundary_edge(l: &LevelView<'_>, a: u32, b: u32) -> bool {
 fn check_closed_or_boundary(tris: &[u32], on_boundary: impl Fn(u32, u32) -> bool) {
     let mut directed: Vec<(u32, u32)> = Vec::with_capacity(tris.len());
     for t in tris.chunks(3) {
-        assert!(t[0] != t[1] && t[1] != t[2] && t[0] != t[2], "degenerate triangle {t:?}");
+        assert!(
+            t[0] != t[1] && t[1] != t[2] && t[0] != t[2],
+            "degenerate triangle {t:?}"
+        );
         for s in 0..3 {
             directed.push((t[s], t[(s + 1) % 3]));
         }
@@ -673,8 +724,10 @@ fn check_closed_or_boundary(tris: &[u32], on_boundary: impl Fn(u32, u32) -> bool
     for w in directed.windows(2) {
         assert_ne!(w[0], w[1], "directed edge {:?} used twice", w[0]);
     }
-    let mut undirected: Vec<(u32, u32)> =
-        directed.iter().map(|&(a, b)| (a.min(b), a.max(b))).collect();
+    let mut undirected: Vec<(u32, u32)> = directed
+        .iter()
+        .map(|&(a, b)| (a.min(b), a.max(b)))
+        .collect();
     undirected.sort_unstable();
     let mut i = 0;
     while i < undirected.len() {
@@ -722,7 +775,11 @@ fn corpus_models_are_watertight_uniform_and_lod() {
             .collect();
         let lod = lod::extract(&r, &p, None, &levels).unwrap();
         check_closed_or_boundary(&flat(&lod.triangles), |_, _| false);
-        eprintln!("{name}: level {max} {} triangles; LOD {} triangles", r.level(max).face_count(), lod.triangles.len());
+        eprintln!(
+            "{name}: level {max} {} triangles; LOD {} triangles",
+            r.level(max).face_count(),
+            lod.triangles.len()
+        );
     }
 }
 
@@ -745,16 +802,27 @@ fn gap_filling_puts_fine_vertices_on_coarse_chords() {
             check_closed_or_boundary(&flat(&lod.triangles), |a, b| {
                 // open edges only on the grid's outer boundary
                 let (pa, pb) = (lod.positions[a as usize], lod.positions[b as usize]);
-                let same_side = (pa.x - pb.x).abs() < 1e-12 && (pa.x.abs() < 1e-12 || (pa.x - 2.0).abs() < 1e-12)
-                    || (pa.y - pb.y).abs() < 1e-12 && (pa.y.abs() < 1e-12 || (pa.y - 1.0).abs() < 1e-12);
-                same_side
+                (pa.x - pb.x).abs() < 1e-12 && (pa.x.abs() < 1e-12 || (pa.x - 2.0).abs() < 1e-12)
+                    || (pa.y - pb.y).abs() < 1e-12
+                        && (pa.y.abs() < 1e-12 || (pa.y - 1.0).abs() < 1e-12)
             });
             // the fine side's vertices on the shared base edge 0-4 sit on the coarse chords
-            let e = r.level(0).edges().iter().position(|&[a, b]| (a, b) == (0, 4) || (a, b) == (4, 0)).unwrap();
+            let e = r
+                .level(0)
+                .edges()
+                .iter()
+                .position(|&[a, b]| (a, b) == (0, 4) || (a, b) == (4, 0))
+                .unwrap();
             let (lc, lf) = (la.min(lb) as usize, la.max(lb) as usize);
             let span = 1usize << n;
             let ln = r.level(n);
-            let xj = |j: usize| if j == span { ln.edges()[e * span + span - 1][1] } else { ln.edges()[e * span + j][0] };
+            let xj = |j: usize| {
+                if j == span {
+                    ln.edges()[e * span + span - 1][1]
+                } else {
+                    ln.edges()[e * span + j][0]
+                }
+            };
             let s = 1usize << (n as usize - lc);
             let step = 1usize << (n as usize - lf);
             for j in (0..=span).step_by(step) {
@@ -765,9 +833,15 @@ fn gap_filling_puts_fine_vertices_on_coarse_chords() {
                     let t = (j - j0) as f64 / s as f64;
                     p[xj(j0) as usize] * (1.0 - t) + p[xj(j0 + s) as usize] * t
                 };
-                assert!(lod.positions.iter().any(|&q| close(q, want, 1e-12)), "levels {la} {lb} j {j}");
+                assert!(
+                    lod.positions.iter().any(|&q| close(q, want, 1e-12)),
+                    "levels {la} {lb} j {j}"
+                );
                 if j % s != 0 && !close(want, p[xj(j) as usize], 1e-9) {
-                    assert!(!lod.positions.iter().any(|&q| close(q, p[xj(j) as usize], 1e-12)));
+                    assert!(!lod
+                        .positions
+                        .iter()
+                        .any(|&q| close(q, p[xj(j) as usize], 1e-12)));
                 }
             }
             // every output vertex on an interior base edge lies on the segment of the coarser
@@ -787,7 +861,15 @@ fn gap_filling_puts_fine_vertices_on_coarse_chords() {
 #[test]
 fn subdivide_keeps_groups_sharp_edges_corners() {
     let m = mixed_mesh();
-    let (out, normals) = subdivide(&m, 2, &SubdivOptions { limit: true, ..Default::default() }).unwrap();
+    let (out, normals) = subdivide(
+        &m,
+        2,
+        &SubdivOptions {
+            limit: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     out.validate().unwrap();
     assert_eq!(out.face_count(), m.face_count() * 16);
     assert_eq!(out.sharp_edges.len(), m.sharp_edges.len() * 4);
@@ -800,8 +882,15 @@ fn subdivide_keeps_groups_sharp_edges_corners() {
     let r = Refinement::new(&m, 3).unwrap();
     let p3 = r.positions(&m.positions).unwrap();
     // same vertex numbering is not expected (different level-0 edge order), compare sets
-    let mut a: Vec<[i64; 3]> = o3.positions.iter().map(|q| (*q * 1e9).round().as_i64vec3().to_array()).collect();
-    let mut b: Vec<[i64; 3]> = p3.iter().map(|q| (*q * 1e9).round().as_i64vec3().to_array()).collect();
+    let mut a: Vec<[i64; 3]> = o3
+        .positions
+        .iter()
+        .map(|q| (*q * 1e9).round().as_i64vec3().to_array())
+        .collect();
+    let mut b: Vec<[i64; 3]> = p3
+        .iter()
+        .map(|q| (*q * 1e9).round().as_i64vec3().to_array())
+        .collect();
     a.sort();
     b.sort();
     assert_eq!(a.len(), b.len());
@@ -852,7 +941,12 @@ fn rejects_bad_meshes() {
     for p in [v3(3., 3., 3.), v3(3., 1., 1.), v3(1., 3., 1.)] {
         m.push_vertex(p);
     }
-    for f in [[0, off, off + 1], [0, off + 2, off], [0, off + 1, off + 2], [off, off + 2, off + 1]] {
+    for f in [
+        [0, off, off + 1],
+        [0, off + 2, off],
+        [0, off + 1, off + 2],
+        [off, off + 2, off + 1],
+    ] {
         m.push_face(&f, 0);
     }
     assert!(matches!(Refinement::new(&m, 1), Err(Error::Mesh(_))));

@@ -136,9 +136,8 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
     for (g, group) in mesh.groups.iter().enumerate() {
         if let PatchKind::Boundary(s) = &group.patch {
             if let Some(fr) = Frame::of_surface(s, scale) {
-                let fr = fr.map_err(|e| {
-                    Error::Mesh(format!("group {g} (`{}`): {e}", group.name))
-                })?;
+                let fr =
+                    fr.map_err(|e| Error::Mesh(format!("group {g} (`{}`): {e}", group.name)))?;
                 if frames.len() >= u16::MAX as usize - 1 {
                     return Err(Error::Mesh("too many cylinder/cone groups".into()));
                 }
@@ -243,18 +242,19 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
     };
 
     // Crease flags.
-    let mut ecls = vec![0u8; ne];
-    for e in 0..ne {
-        let [a, b] = lvl.edges[e];
-        let mut c = 0;
-        if lvl.edge_faces[e][1] == NONE {
-            c |= eclass::CREASE | eclass::BOUNDARY;
-        }
-        if mesh.sharp_edges.contains(&edge_key(a, b)) {
-            c |= eclass::CREASE | eclass::SHARP;
-        }
-        ecls[e] = c;
-    }
+    let mut ecls: Vec<u8> = (0..ne)
+        .map(|e| {
+            let [a, b] = lvl.edges[e];
+            let mut c = 0;
+            if lvl.edge_faces[e][1] == NONE {
+                c |= eclass::CREASE | eclass::BOUNDARY;
+            }
+            if mesh.sharp_edges.contains(&edge_key(a, b)) {
+                c |= eclass::CREASE | eclass::SHARP;
+            }
+            c
+        })
+        .collect();
 
     // Rings (CCW fans) and classification.
     let mut ring_offsets = Vec::with_capacity(nv + 1);
@@ -325,8 +325,7 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
         edges: ring_edges,
     });
 
-    let face_group = |f: u32| base.group[f as usize] as usize;
-    for v in 0..nv {
+    for (v, vc) in vcls.iter_mut().enumerate() {
         let ring = lvl.ring(v);
         if ring.is_empty() {
             continue;
@@ -334,7 +333,6 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
         let is_boundary = ecls[ring[0] as usize] & eclass::BOUNDARY != 0;
         let s = ring
             .iter()
-            .take(if is_boundary { ring.len() } else { ring.len() })
             .filter(|&&e| ecls[e as usize] & eclass::CREASE != 0)
             .count();
         // faces of the wedge i: between ring[i] and ring[i+1]; the face is the one on the
@@ -350,10 +348,14 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
                 ef[1]
             }
         };
-        let nwedges = if is_boundary { ring.len() - 1 } else { ring.len() };
+        let nwedges = if is_boundary {
+            ring.len() - 1
+        } else {
+            ring.len()
+        };
         let touches_bp = (0..nwedges).any(|i| base.boundary_patch[wedge_face(i) as usize]);
         let tagged = mesh.corners.contains(&(v as u32));
-        vcls[v] = if tagged || s >= 3 {
+        *vc = if tagged || s >= 3 {
             vclass::CORNER
         } else if s == 2 {
             // sectors: walk wedges starting after a crease edge
@@ -395,11 +397,14 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
         } else {
             vclass::SMOOTH
         };
-        let _ = face_group;
     }
 
     // Edge rules and frames.
-    let mut eframe = if has_frames { vec![0u16; ne] } else { Vec::new() };
+    let mut eframe = if has_frames {
+        vec![0u16; ne]
+    } else {
+        Vec::new()
+    };
     for e in 0..ne {
         let ef = lvl.edge_faces[e];
         let [a, b] = lvl.edges[e];
@@ -425,7 +430,11 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
                 .unwrap_or(0);
         }
     }
-    let mut vframe = if has_frames { vec![0u16; nv] } else { Vec::new() };
+    let mut vframe = if has_frames {
+        vec![0u16; nv]
+    } else {
+        Vec::new()
+    };
     if has_frames {
         for v in 0..nv {
             if vclass::is_crease(vcls[v]) {
@@ -593,9 +602,13 @@ pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
     let (vframe, eframe) = if has_frames {
         let mut vframe = Vec::with_capacity(nv2);
         vframe.extend_from_slice(&l.vframe);
-        vframe.extend(
-            (0..ne).map(|e| if l.eclass[e] & eclass::CREASE != 0 { l.eframe[e] } else { 0 }),
-        );
+        vframe.extend((0..ne).map(|e| {
+            if l.eclass[e] & eclass::CREASE != 0 {
+                l.eframe[e]
+            } else {
+                0
+            }
+        }));
         let mut eframe = vec![0u16; ne2];
         for e in 0..ne {
             eframe[2 * e] = l.eframe[e];
@@ -643,7 +656,10 @@ pub(crate) fn build_rings(l: &Level) -> Rings {
     };
     // Rings: old vertices map their edges to the halves at themselves; a new vertex on e
     // gets [toward b, two interior edges of the left face, toward a, two of the right face].
-    let lr = l.rings.get().expect("rings of the coarser level are built first");
+    let lr = l
+        .rings
+        .get()
+        .expect("rings of the coarser level are built first");
     let old_ring_len = lr.edges.len();
     let mut ring_offsets = Vec::with_capacity(nv2 + 1);
     ring_offsets.extend_from_slice(&lr.offsets);
