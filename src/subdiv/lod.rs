@@ -41,8 +41,8 @@ pub(crate) fn extract(
     levels: &[u8],
 ) -> Result<AdaptiveMesh> {
     let n = r.max_level();
-    let l0 = &r.levels[0];
-    let ln = &r.levels[n as usize];
+    let l0 = r.full(0);
+    let ln = r.full(n);
     if levels.len() != l0.nf() {
         return Err(Error::Parameter(format!(
             "{} per-face levels given, the mesh has {} base triangles",
@@ -105,7 +105,7 @@ pub(crate) fn extract(
     let mut poly: Vec<u32> = Vec::with_capacity(64);
     for k in 0..l0.nf() {
         let m = levels[k] as u32;
-        let lm = &r.levels[m as usize];
+        let lm = r.full(m);
         let g = r.base.group[k];
         let q = 1usize << (2 * m);
         for f in k * q..(k + 1) * q {

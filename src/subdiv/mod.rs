@@ -24,6 +24,8 @@ pub(crate) mod test_support;
 #[cfg(test)]
 mod tests;
 
+use std::sync::OnceLock;
+
 use glam::DVec3;
 
 use crate::error::{Error, Result};
@@ -68,52 +70,67 @@ impl Default for SubdivOptions {
 /// "base faces" are these level-0 triangles.
 #[derive(Clone, Debug)]
 pub struct Refinement {
-    /// `levels[j]`: connectivity and classification of level j.
+    /// `levels[j]`: connectivity and classification of level j < n (level 0 when n = 0).
     levels: Vec<Level>,
+    /// Triangles of the finest level n (always built: uniform output needs only these).
+    finest_faces: Vec<u32>,
+    finest_nv: usize,
+    /// Full connectivity of level n, built on first use (edges, LOD, limit, normals), so
+    /// that positions + triangles cost no more than they need.
+    finest: OnceLock<Level>,
+    max_level: u32,
     base: Base,
     tables: ValenceTables,
 }
 
-/// A read-only view of one level's connectivity.
+/// A read-only view of one level's connectivity. Triangles are always available; edge
+/// queries on the finest level build its full connectivity on first use.
 #[derive(Clone, Copy, Debug)]
 pub struct LevelView<'a> {
     level: u32,
-    l: &'a Level,
-    base: &'a Base,
+    r: &'a Refinement,
 }
 
 impl<'a> LevelView<'a> {
+    fn full(&self) -> &'a Level {
+        self.r.full(self.level)
+    }
     pub fn level(&self) -> u32 {
         self.level
     }
     pub fn vertex_count(&self) -> usize {
-        self.l.nv
+        if self.level == self.r.max_level {
+            self.r.finest_nv
+        } else {
+            self.r.levels[self.level as usize].nv
+        }
     }
     pub fn face_count(&self) -> usize {
-        self.l.nf()
+        self.triangles().len() / 3
     }
     pub fn edge_count(&self) -> usize {
-        self.l.ne()
+        self.full().ne()
     }
     /// Triangle corners, 3 per face, counter-clockwise.
     pub fn triangles(&self) -> &'a [u32] {
-        &self.l.faces
+        if self.level == self.r.max_level {
+            &self.r.finest_faces
+        } else {
+            &self.r.levels[self.level as usize].faces
+        }
     }
     pub fn triangle(&self, f: usize) -> [u32; 3] {
-        [
-            self.l.faces[3 * f],
-            self.l.faces[3 * f + 1],
-            self.l.faces[3 * f + 2],
-        ]
+        let t = self.triangles();
+        [t[3 * f], t[3 * f + 1], t[3 * f + 2]]
     }
     /// Edge ids of face f: `(c0c1, c1c2, c2c0)`.
     pub fn face_edges(&self, f: usize) -> [u32; 3] {
-        let fe = &self.l.face_edges[3 * f..3 * f + 3];
+        let fe = &self.full().face_edges[3 * f..3 * f + 3];
         [fe[0], fe[1], fe[2]]
     }
     /// Edges in their stored orientation.
     pub fn edges(&self) -> &'a [[u32; 2]] {
-        &self.l.edges
+        &self.full().edges
     }
     /// Base (level-0) triangle of face f.
     pub fn base_face(&self, f: usize) -> usize {
@@ -121,19 +138,19 @@ impl<'a> LevelView<'a> {
     }
     /// Group (CAD face) of face f.
     pub fn face_group(&self, f: usize) -> u32 {
-        self.base.group[self.base_face(f)]
+        self.r.base.group[self.base_face(f)]
     }
     /// The edge descends from an edge flagged sharp in the control mesh.
     pub fn edge_is_sharp(&self, e: usize) -> bool {
-        self.l.eclass[e] & eclass::SHARP != 0
+        self.full().eclass[e] & eclass::SHARP != 0
     }
     /// The edge is a crease (sharp or mesh boundary).
     pub fn edge_is_crease(&self, e: usize) -> bool {
-        self.l.eclass[e] & eclass::CREASE != 0
+        self.full().eclass[e] & eclass::CREASE != 0
     }
     /// The edge lies on the mesh boundary.
     pub fn edge_is_boundary(&self, e: usize) -> bool {
-        self.l.eclass[e] & eclass::BOUNDARY != 0
+        self.full().eclass[e] & eclass::BOUNDARY != 0
     }
 }
 
@@ -218,24 +235,45 @@ impl Refinement {
         let max_k = (0..l0.nv).map(|v| l0.ring(v).len()).max().unwrap_or(6);
         let mut levels = Vec::with_capacity(max_level as usize + 1);
         levels.push(l0);
-        for j in 0..max_level {
-            let next = topology::refine_level(&levels[j as usize], &base, j);
-            if j + 1 < max_level {
-                // coarser levels need rings for position evaluation; the finest builds
-                // them on demand (limit positions, normals)
-                let _ = next.rings.set(topology::build_rings(&levels[j as usize]));
-            }
+        for j in 1..max_level {
+            let prev = &levels[j as usize - 1];
+            let next = topology::refine_level(prev, &base, j - 1);
+            let _ = next.rings.set(topology::build_rings(prev));
             levels.push(next);
         }
+        let finest = OnceLock::new();
+        let (finest_faces, finest_nv) = if max_level == 0 {
+            let l0 = &levels[0];
+            let _ = finest.set(l0.clone());
+            (l0.faces.clone(), l0.nv)
+        } else {
+            let prev = &levels[max_level as usize - 1];
+            (topology::refine_faces(prev), prev.nv + prev.ne())
+        };
         Ok(Refinement {
             levels,
+            finest_faces,
+            finest_nv,
+            finest,
+            max_level,
             base,
             tables: ValenceTables::new(max_k),
         })
     }
 
     pub fn max_level(&self) -> u32 {
-        (self.levels.len() - 1) as u32
+        self.max_level
+    }
+
+    /// Full connectivity of level `m` (the finest is built on first use).
+    fn full(&self, m: u32) -> &Level {
+        if m < self.max_level || (m == 0 && self.max_level == 0) {
+            return &self.levels[m as usize];
+        }
+        self.finest.get_or_init(|| {
+            let prev = &self.levels[m as usize - 1];
+            topology::refine_level(prev, &self.base, m - 1)
+        })
     }
 
     /// Number of base (level-0) triangles.
@@ -255,19 +293,16 @@ impl Refinement {
 
     /// Connectivity of level `m` (panics if `m > max_level()`).
     pub fn level(&self, m: u32) -> LevelView<'_> {
-        LevelView {
-            level: m,
-            l: &self.levels[m as usize],
-            base: &self.base,
-        }
+        assert!(m <= self.max_level, "level {m} > max level {}", self.max_level);
+        LevelView { level: m, r: self }
     }
 
     /// Level `m` with its vertex rings built.
     fn level_with_rings(&self, m: usize) -> &Level {
-        let l = &self.levels[m];
+        let l = self.full(m as u32);
         if m > 0 {
             l.rings
-                .get_or_init(|| topology::build_rings(&self.levels[m - 1]));
+                .get_or_init(|| topology::build_rings(self.full(m as u32 - 1)));
         }
         l
     }
@@ -306,7 +341,7 @@ impl Refinement {
                 self.max_level()
             )));
         }
-        let n_out = self.levels[m as usize].nv;
+        let n_out = self.level(m).vertex_count();
         // ping-pong so that the last step writes into `out`
         let (mut cur, mut next) = if m % 2 == 0 {
             (out, scratch)

@@ -402,7 +402,7 @@ fn planar_mesh_stays_planar_and_corners_fixed() {
         assert!(
             q.dot(normal).abs() > 1.0 - 1e-9,
             "v{v} class {}: {q:?}",
-            r.levels[n as usize].vclass[v]
+            r.full(n).vclass[v]
         );
     }
 }
@@ -436,7 +436,7 @@ fn limit_points_invariant_across_levels() {
     let r = Refinement::new(&m, 6).unwrap();
     let l0 = r.level(0);
     let classes: Vec<u8> = (0..l0.vertex_count())
-        .map(|v| r.levels[0].vclass[v])
+        .map(|v| r.full(0).vclass[v])
         .collect();
     assert!(classes.contains(&vclass::DART));
     assert!(classes.contains(&vclass::CORNER));
@@ -482,7 +482,7 @@ fn normals_invariant_across_levels() {
     let p6 = r.positions(&m.positions).unwrap();
     let n1 = r.limit_normals(&p1, 1).unwrap();
     let n6 = r.limit_normals(&p6, 6).unwrap();
-    let l1 = &r.levels[1];
+    let l1 = r.level_with_rings(1);
     let mut kinds = BTreeMap::new();
     for v in 0..l1.nv {
         // skip sectors of two triangles (reference §5.2: unresolved) and darts' neighbours

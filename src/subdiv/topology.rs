@@ -461,6 +461,22 @@ pub(crate) fn next_counts(v: u64, e: u64, f: u64) -> (u64, u64, u64) {
     (v + e, 2 * e + 3 * f, 4 * f)
 }
 
+/// Triangles of level j+1 from level j: the only part of the finest level that plain
+/// uniform output needs.
+pub(crate) fn refine_faces(l: &Level) -> Vec<u32> {
+    let nv = l.nv;
+    let mut faces = vec![0u32; 12 * l.nf()];
+    par::for_each_chunk_mut(&mut faces, 12, |f, out| {
+        let c = &l.faces[3 * f..3 * f + 3];
+        let fe = &l.face_edges[3 * f..3 * f + 3];
+        let m0 = nv as u32 + fe[0];
+        let m1 = nv as u32 + fe[1];
+        let m2 = nv as u32 + fe[2];
+        out.copy_from_slice(&[c[0], m0, m2, m0, c[1], m1, m2, m1, c[2], m0, m1, m2]);
+    });
+    faces
+}
+
 /// Level j+1 from level j (reference §1.2). `base` supplies per-base-face groups/frames for
 /// the edges created inside faces.
 pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
@@ -482,16 +498,8 @@ pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
     };
 
     // Faces and face edges: 4 children per face.
-    let mut faces = vec![0u32; 12 * nf];
+    let faces = refine_faces(l);
     let mut face_edges = vec![0u32; 12 * nf];
-    par::for_each_chunk_mut(&mut faces, 12, |f, out| {
-        let c = &l.faces[3 * f..3 * f + 3];
-        let fe = &l.face_edges[3 * f..3 * f + 3];
-        let m0 = nv as u32 + fe[0];
-        let m1 = nv as u32 + fe[1];
-        let m2 = nv as u32 + fe[2];
-        out.copy_from_slice(&[c[0], m0, m2, m0, c[1], m1, m2, m1, c[2], m0, m1, m2]);
-    });
     par::for_each_chunk_mut(&mut face_edges, 12, |f, out| {
         let c = &l.faces[3 * f..3 * f + 3];
         let fe = &l.face_edges[3 * f..3 * f + 3];
