@@ -109,7 +109,8 @@ pub(crate) struct ValenceTables {
 
 impl ValenceTables {
     pub fn new(max_k: usize) -> Self {
-        let n = max_k.max(12) + 1;
+        // tables stay small for huge valences (a fan vertex); beyond, values are computed
+        let n = max_k.clamp(12, 64) + 1;
         let mut beta = vec![0.0; n];
         let mut limit = vec![(1.0, 0.0); n];
         for k in 1..n {

@@ -286,6 +286,45 @@ impl Refinement {
         self.base.control_face[k] as usize
     }
 
+    /// Expands per-control-face levels to per-base-triangle levels (every triangle of a
+    /// fan-triangulated polygon gets its polygon's level).
+    pub fn base_levels_from_control(&self, per_control_face: &[u8]) -> Result<Vec<u8>> {
+        self.base
+            .control_face
+            .iter()
+            .map(|&f| {
+                per_control_face.get(f as usize).copied().ok_or_else(|| {
+                    Error::Parameter(format!(
+                        "{} per-face levels given, control face {f} has none",
+                        per_control_face.len()
+                    ))
+                })
+            })
+            .collect()
+    }
+
+    /// Level-of-detail mesh: base triangle k shown at level `per_face_levels[k]`, from the
+    /// finest-level positions `finest` (subdivided or limit) and optional normals, with gap
+    /// filling and stitching (`spec/subdivision.md` §7). Reuse one `Refinement` for many
+    /// extractions (a viewer changing levels per frame).
+    pub fn extract_lod(
+        &self,
+        finest: &[DVec3],
+        normals: Option<&[DVec3]>,
+        per_face_levels: &[u8],
+    ) -> Result<AdaptiveMesh> {
+        if let Some(nn) = normals {
+            if nn.len() != finest.len() {
+                return Err(Error::Parameter(format!(
+                    "{} normals for {} positions",
+                    nn.len(),
+                    finest.len()
+                )));
+            }
+        }
+        lod::extract(self, finest, normals, per_face_levels)
+    }
+
     /// Number of control points expected by [`Refinement::positions`].
     pub fn control_count(&self) -> usize {
         self.levels[0].nv
@@ -293,7 +332,11 @@ impl Refinement {
 
     /// Connectivity of level `m` (panics if `m > max_level()`).
     pub fn level(&self, m: u32) -> LevelView<'_> {
-        assert!(m <= self.max_level, "level {m} > max level {}", self.max_level);
+        assert!(
+            m <= self.max_level,
+            "level {m} > max level {}",
+            self.max_level
+        );
         LevelView { level: m, r: self }
     }
 
@@ -540,22 +583,32 @@ pub fn subdivide(
     Ok((out, normals))
 }
 
-/// Level-of-detail extraction: base triangle k is shown at level `per_face_levels[k]`
-/// (at most `max_level`), with S-CODE's gap filling and a conforming stitch so the output
-/// is watertight (see [`lod`](AdaptiveMesh)). Positions are the finest-level (or limit)
-/// positions.
+/// Level-of-detail extraction in one call: control face f is shown at level
+/// `per_control_face_levels[f]` (all triangles of a polygon share its level), with S-CODE's
+/// gap filling and a conforming stitch, so the output is watertight. Positions are the
+/// finest-level (or, with `opts.limit`, limit) positions. A viewer that changes levels often
+/// should build one [`Refinement`] and call [`Refinement::extract_lod`] with per-base-triangle
+/// levels instead.
 pub fn subdivide_adaptive(
     mesh: &ControlMesh,
-    per_face_levels: &[u8],
+    per_control_face_levels: &[u8],
     opts: &SubdivOptions,
 ) -> Result<AdaptiveMesh> {
-    let max = per_face_levels.iter().copied().max().unwrap_or(0) as u32;
+    if per_control_face_levels.len() != mesh.face_count() {
+        return Err(Error::Parameter(format!(
+            "{} per-face levels given, the mesh has {} faces",
+            per_control_face_levels.len(),
+            mesh.face_count()
+        )));
+    }
+    let max = per_control_face_levels.iter().copied().max().unwrap_or(0) as u32;
     let r = Refinement::with_max_faces(mesh, max, opts.max_faces)?;
+    let levels = r.base_levels_from_control(per_control_face_levels)?;
     let p = r.positions(&mesh.positions)?;
     let (pos, normals) = if opts.limit {
         (r.limit_positions(&p, max)?, Some(r.limit_normals(&p, max)?))
     } else {
         (p, None)
     };
-    lod::extract(&r, &pos, normals.as_deref(), per_face_levels)
+    r.extract_lod(&pos, normals.as_deref(), &levels)
 }

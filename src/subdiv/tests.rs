@@ -757,7 +757,7 @@ fn corpus_models_are_watertight_uniform_and_lod() {
         ("tess/block_fillet3_coarse.obj", 4),
         ("tess/bug3883_xr2-ct-214_plate_coarse.obj", 3),
         ("tess/abc_00000050_coarse.obj", 3),
-        ("meshes/fandisk.obj", 2),
+        ("meshes/fandisk.obj", 3),
     ];
     let mut rng = Lcg(99);
     for (name, max) in models {
@@ -781,6 +781,106 @@ fn corpus_models_are_watertight_uniform_and_lod() {
             lod.triangles.len()
         );
     }
+}
+
+#[test]
+fn boundary_patch_lod_is_watertight_and_on_surface() {
+    for cone in [false, true] {
+        let (m, origin, axis) = belt_mesh(8, cone, true);
+        let mut rng = Lcg(17);
+        for _ in 0..20 {
+            let levels: Vec<u8> = (0..m.face_count())
+                .map(|_| (rng.next() * 4.0) as u8)
+                .collect();
+            let lod = subdivide_adaptive(
+                &m,
+                &levels,
+                &SubdivOptions {
+                    limit: true,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            check_closed_or_boundary(&flat(&lod.triangles), |_, _| false);
+            // vertices are exactly on the surface unless gap filling moved them onto a coarse
+            // chord (or they are stitch centroids): those are within the chord sagitta of
+            // the 8-gon (about 8% of the radius)
+            let (mut exact, mut moved) = (0, 0);
+            for (t, &g) in lod.triangles.iter().zip(&lod.face_groups) {
+                if g == 1 {
+                    for &v in t {
+                        let err = surface_error(lod.positions[v as usize], origin, axis, cone);
+                        assert!(err < 0.2, "{err}");
+                        if err < 1e-9 {
+                            exact += 1;
+                        } else {
+                            moved += 1;
+                        }
+                    }
+                }
+            }
+            assert!(exact > moved, "{exact} {moved}");
+            let nn = lod.normals.as_ref().unwrap();
+            assert!(nn.iter().all(|n| (n.length() - 1.0).abs() < 1e-9));
+        }
+    }
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let Some(m) = load_corpus("tess/block_fillet3_coarse.obj") else {
+        return;
+    };
+    let r = Refinement::new(&m, 3).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    let lim = r.limit_positions(&p, 3).unwrap();
+    let nn = r.limit_normals(&p, 3).unwrap();
+    #[cfg(feature = "parallel")]
+    {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let r1 = pool.install(|| Refinement::new(&m, 3).unwrap());
+        let (p1, l1, n1) = pool.install(|| {
+            let p1 = r1.positions(&m.positions).unwrap();
+            let l1 = r1.limit_positions(&p1, 3).unwrap();
+            let n1 = r1.limit_normals(&p1, 3).unwrap();
+            (p1, l1, n1)
+        });
+        assert_eq!(p, p1);
+        assert_eq!(lim, l1);
+        assert_eq!(nn, n1);
+        assert_eq!(r.level(3).triangles(), r1.level(3).triangles());
+    }
+    // positions_into with reused buffers equals positions
+    let (mut out, mut scratch) = (Vec::new(), Vec::new());
+    for lvl in [3, 1, 2, 0] {
+        r.positions_into(&m.positions, lvl, &mut out, &mut scratch)
+            .unwrap();
+        assert_eq!(out, r.positions_at(&m.positions, lvl).unwrap());
+    }
+    let _ = (lim, nn);
+}
+
+#[test]
+fn empty_and_isolated_vertices() {
+    let m = ControlMesh::new();
+    let r = Refinement::new(&m, 2).unwrap();
+    assert_eq!(r.positions(&[]).unwrap().len(), 0);
+    let mut m = tetrahedron();
+    m.push_vertex(v3(5., 5., 5.));
+    let (out, nn) = subdivide(
+        &m,
+        2,
+        &SubdivOptions {
+            limit: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(out.positions[4], v3(5., 5., 5.));
+    assert_eq!(nn.unwrap()[4], DVec3::ZERO);
 }
 
 #[test]
