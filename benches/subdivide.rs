@@ -2,11 +2,15 @@
 //! one core and on all cores (rayon pools), for (a) position evaluation on a prebuilt
 //! topology (the encoder / viewer hot path) and (b) topology + positions from scratch.
 //!
-//! Run: `cargo bench --bench subdivide` (set SCODE_CORPUS to override the corpus folder).
+//! Run: `cargo bench --bench subdivide` (wall time, rayon pools of 1 thread and of all
+//! threads) and `cargo bench --bench subdivide --no-default-features` (sequential build,
+//! measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
+//! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use glam::DVec3;
 use scode::mesh::{edge_key, ControlMesh, PatchKind};
@@ -78,7 +82,47 @@ fn parse_obj(text: &str) -> ControlMesh {
     m
 }
 
-fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
+/// CPU time of the calling thread (the sequential build runs everything on it).
+#[cfg_attr(feature = "parallel", allow(dead_code))]
+struct ThreadCpuTime;
+
+#[cfg_attr(feature = "parallel", allow(dead_code))]
+static WALL: WallTime = WallTime;
+
+impl Measurement for ThreadCpuTime {
+    type Intermediate = cpu_time::ThreadTime;
+    type Value = std::time::Duration;
+    fn start(&self) -> cpu_time::ThreadTime {
+        cpu_time::ThreadTime::now()
+    }
+    fn end(&self, i: cpu_time::ThreadTime) -> std::time::Duration {
+        i.elapsed()
+    }
+    fn add(&self, a: &Self::Value, b: &Self::Value) -> Self::Value {
+        *a + *b
+    }
+    fn zero(&self) -> Self::Value {
+        std::time::Duration::ZERO
+    }
+    fn to_f64(&self, v: &Self::Value) -> f64 {
+        v.as_nanos() as f64
+    }
+    fn formatter(&self) -> &dyn ValueFormatter {
+        WALL.formatter()
+    }
+}
+
+/// Runs `f` in the rayon pool (parallel build) or directly on this thread (sequential build,
+/// so that the thread's CPU time covers the work).
+fn run<R: Send>(pool: &rayon::ThreadPool, f: impl FnOnce() -> R + Send) -> R {
+    if cfg!(feature = "parallel") {
+        pool.install(f)
+    } else {
+        f()
+    }
+}
+
+fn bench_model<M: Measurement>(c: &mut Criterion<M>, name: &str, rel: &str, max_level: u32) {
     let Some(dir) = corpus_dir() else {
         eprintln!("corpus not found, skipping");
         return;
@@ -88,13 +132,22 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
         return;
     };
     let mesh = parse_obj(&text);
-    let all = rayon::current_num_threads();
+    let all = if cfg!(feature = "parallel") {
+        rayon::current_num_threads()
+    } else {
+        1
+    };
     for threads in [1, all] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        let mut group = c.benchmark_group(format!("{name}/{threads}thr"));
+        let label = if cfg!(feature = "parallel") {
+            format!("{name}/{threads}thr")
+        } else {
+            format!("{name}/sequential-cpu")
+        };
+        let mut group = c.benchmark_group(label);
         group.sample_size(10);
         group.warm_up_time(std::time::Duration::from_millis(300));
         group.measurement_time(std::time::Duration::from_secs(2));
@@ -105,7 +158,7 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
             let (mut out, mut scratch) = (Vec::new(), Vec::new());
             group.bench_with_input(BenchmarkId::new("positions", level), &level, |b, &l| {
                 b.iter(|| {
-                    pool.install(|| {
+                    run(&pool, || {
                         r.positions_into(&mesh.positions, l, &mut out, &mut scratch)
                             .unwrap()
                     })
@@ -116,7 +169,7 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
                 &level,
                 |b, &l| {
                     b.iter(|| {
-                        pool.install(|| {
+                        run(&pool, || {
                             let r = Refinement::new(&mesh, l).unwrap();
                             r.positions(&mesh.positions).unwrap()
                         })
@@ -130,7 +183,7 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
                     &level,
                     |b, &l| {
                         b.iter(|| {
-                            pool.install(|| {
+                            run(&pool, || {
                                 (
                                     r.limit_positions(&p, l).unwrap(),
                                     r.limit_normals(&p, l).unwrap(),
@@ -148,10 +201,17 @@ fn bench_model(c: &mut Criterion, name: &str, rel: &str, max_level: u32) {
     }
 }
 
-fn benches(c: &mut Criterion) {
+fn benches<M: Measurement>(c: &mut Criterion<M>) {
     bench_model(c, "plate", "tess/bug3883_xr2-ct-214_plate_coarse.obj", 5);
     bench_model(c, "fandisk", "meshes/fandisk.obj", 4);
 }
 
+#[cfg(feature = "parallel")]
 criterion_group!(subdivide, benches);
+#[cfg(not(feature = "parallel"))]
+criterion_group! {
+    name = subdivide;
+    config = Criterion::default().with_measurement(ThreadCpuTime);
+    targets = benches
+}
 criterion_main!(subdivide);

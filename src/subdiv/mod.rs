@@ -369,7 +369,8 @@ impl Refinement {
     }
 
     /// [`Refinement::positions_at`] into caller-owned buffers (`out` receives the level-`m`
-    /// positions, `scratch` is working space), so repeated evaluations allocate nothing.
+    /// positions, `scratch` is working space of a quarter of that size), so repeated
+    /// evaluations allocate nothing.
     pub fn positions_into(
         &self,
         control: &[DVec3],
@@ -385,24 +386,22 @@ impl Refinement {
             )));
         }
         let n_out = self.level(m).vertex_count();
-        // ping-pong so that the last step writes into `out`
-        let (mut cur, mut next) = if m % 2 == 0 {
-            (out, scratch)
-        } else {
-            (scratch, out)
-        };
-        cur.clear();
-        cur.reserve(n_out);
-        next.clear();
-        next.reserve(n_out);
-        cur.extend_from_slice(control);
+        // One output buffer grows level by level (vertex ids nest): edge points are appended
+        // after the old points they read; new vertex points go through `scratch` (a quarter of
+        // the output size) and are copied back.
+        out.clear();
+        out.reserve(n_out);
+        out.extend_from_slice(control);
         for j in 0..m as usize {
             let l = &self.levels[j];
-            next.clear();
-            let (t, b, p) = (&self.tables, &self.base, &cur[..]);
-            par::extend_mapped(next, l.nv, |v| eval::eval_vertex(l, t, b, p, v));
-            par::extend_mapped(next, l.ne(), |e| eval::eval_edge(l, b, p, e));
-            std::mem::swap(&mut cur, &mut next);
+            let (t, b) = (&self.tables, &self.base);
+            out.resize(l.nv + l.ne(), DVec3::ZERO);
+            let (old, new) = out.split_at_mut(l.nv);
+            let p: &[DVec3] = old;
+            par::for_each_mut(new, |e, o| *o = eval::eval_edge(l, b, p, e));
+            scratch.clear();
+            par::extend_mapped(scratch, l.nv, |v| eval::eval_vertex(l, t, b, p, v));
+            old.copy_from_slice(scratch);
         }
         Ok(())
     }
