@@ -217,7 +217,8 @@ fn wedge_face(l: &Level, v: usize, e: u32) -> u32 {
 }
 
 /// Limit normal of vertex `v` at level `j` (reference §5). Crease and corner vertices get
-/// the normalised mean of their sector normals.
+/// the normalised mean of their sector normals, or with `wedge = Some(i)` the normal of the
+/// sector containing ring wedge i (the face between ring edges i and i+1).
 pub(crate) fn eval_normal(
     l: &Level,
     t: &ValenceTables,
@@ -225,6 +226,7 @@ pub(crate) fn eval_normal(
     j: u32,
     p: &[DVec3],
     v: usize,
+    wedge: Option<usize>,
 ) -> DVec3 {
     let c = l.vclass[v];
     let ring = l.ring(v);
@@ -336,6 +338,12 @@ pub(crate) fn eval_normal(
         }
         if n.dot(fan) < 0.0 {
             n = -n;
+        }
+        if let Some(w) = wedge {
+            let rel = (w + ring.len() - start) % ring.len();
+            if (i..i + nt).contains(&rel) {
+                return normalize_or_zero(n);
+            }
         }
         total += normalize_or_zero(n);
         i += nt;

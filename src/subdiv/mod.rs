@@ -8,9 +8,20 @@
 //!
 //! Usage: build a [`Refinement`] once per control-mesh connectivity (the topology of every
 //! level 0..=n), then evaluate positions for any set of control points with
-//! [`Refinement::positions`] (a pure function of topology and control points; the encoder
-//! calls it many times), or get the linear map itself with [`Refinement::stencils`].
-//! [`subdivide`] and [`subdivide_adaptive`] are the one-call conveniences.
+//! [`Refinement::positions`] / [`Refinement::positions_into`] (a pure function of topology
+//! and control points; the encoder calls it many times with reused buffers), or get the
+//! linear map itself with [`Refinement::stencils`]. Limit points and normals:
+//! [`Refinement::limit_positions`], [`Refinement::limit_normals`]. Level of detail:
+//! [`Refinement::extract_lod`] with one level per base triangle. [`subdivide`] and
+//! [`subdivide_adaptive`] are the one-call conveniences.
+//!
+//! Layout: `topology` (level 0 build, classification, one refinement step as index
+//! arithmetic), `masks` (weights), `eval` (mask producers shared by positions, limits,
+//! normals and stencils), `frame` (cylindrical coordinates of cylinder/cone patches), `lod`
+//! (extraction, gap filling, stitching), `par` (rayon-or-sequential loops; every output
+//! element is written by exactly one closure call, so results do not depend on the thread
+//! count). Parallelism is over vertices / edges / faces of a level, which balances better
+//! than over base faces and needs no stitching of per-face results.
 
 mod eval;
 mod frame;
@@ -429,7 +440,32 @@ impl Refinement {
         let mut out = vec![DVec3::ZERO; l.nv];
         let (t, b) = (&self.tables, &self.base);
         par::for_each_mut(&mut out, |v, o| {
-            *o = eval::eval_normal(l, t, b, m, level_positions, v)
+            *o = eval::eval_normal(l, t, b, m, level_positions, v, None)
+        });
+        Ok(out)
+    }
+
+    /// Per-corner limit normals of the level-`m` triangles (3 per face, in corner order):
+    /// at crease and corner vertices each corner gets the normal of its own smooth sector,
+    /// so sharp edges shade sharp; elsewhere the vertex normal.
+    pub fn limit_corner_normals(&self, level_positions: &[DVec3], m: u32) -> Result<Vec<DVec3>> {
+        let vertex_normals = self.limit_normals(level_positions, m)?;
+        let l = self.checked_level(level_positions, m)?;
+        let mut out = vec![DVec3::ZERO; l.faces.len()];
+        let (t, b, p) = (&self.tables, &self.base, level_positions);
+        par::for_each_chunk_mut(&mut out, 3, |f, o| {
+            for (c, oc) in o.iter_mut().enumerate() {
+                let v = l.faces[3 * f + c] as usize;
+                let cls = l.vclass[v];
+                *oc = vertex_normals[v];
+                if masks::vclass::is_crease(cls) || cls == masks::vclass::CORNER {
+                    // the wedge of face f at v starts with f's edge leaving v
+                    let e_out = l.face_edges[3 * f + c];
+                    if let Some(w) = l.ring(v).iter().position(|&e| e == e_out) {
+                        *oc = eval::eval_normal(l, t, b, m, p, v, Some(w));
+                    }
+                }
+            }
         });
         Ok(out)
     }

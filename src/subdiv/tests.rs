@@ -508,6 +508,42 @@ fn normals_invariant_across_levels() {
     }
 }
 
+#[test]
+fn corner_normals_split_at_creases() {
+    // a roof: two planes meeting at a sharp ridge along y = 2
+    let mut m = grid(6, 4, |_, j| -(j as f64 - 2.0).abs() * 0.7);
+    let id = |i: u32, j: u32| i + 7 * j;
+    for i in 0..6 {
+        m.set_sharp(id(i, 2), id(i + 1, 2));
+    }
+    let n = 2;
+    let r = Refinement::new(&m, n).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    let cn = r.limit_corner_normals(&p, n).unwrap();
+    let vn = r.limit_normals(&p, n).unwrap();
+    let lv = r.level(n);
+    let left = v3(0.0, 0.7, 1.0).normalize(); // plane z = 0.7 (y - 2), y < 2
+    let right = v3(0.0, -0.7, 1.0).normalize();
+    let mut split = 0;
+    for f in 0..lv.face_count() {
+        let tri = lv.triangle(f);
+        let centroid_y: f64 = tri.iter().map(|&v| p[v as usize].y).sum::<f64>() / 3.0;
+        let want = if centroid_y < 2.0 { right } else { left };
+        let want = if want.z < 0.0 { -want } else { want };
+        for c in 0..3 {
+            let got = cn[3 * f + c];
+            assert!(
+                got.dot(want) > 1.0 - 1e-9,
+                "face {f} corner {c}: {got:?} vs {want:?}"
+            );
+            if (got - vn[tri[c] as usize]).length() > 1e-6 {
+                split += 1;
+            }
+        }
+    }
+    assert!(split > 0);
+}
+
 // ---------------------------------------------------------------------------------------
 // Boundary patches (cylinder / cone)
 
