@@ -48,8 +48,9 @@ pub use masks::{loop_beta, loop_omega};
 use masks::{eclass, ValenceTables};
 use topology::{Base, Level};
 
-/// Default cap on the number of finest-level triangles (`Error::LimitsExceeded` above it).
-pub const DEFAULT_MAX_FACES: u64 = 1 << 28;
+/// Default cap on the number of finest-level triangles (`Error::LimitsExceeded` above it):
+/// 64 Mi triangles need about 4 GB for topology and positions.
+pub const DEFAULT_MAX_FACES: u64 = 1 << 26;
 
 /// Largest accepted refinement level.
 pub const MAX_LEVEL: u32 = 12;

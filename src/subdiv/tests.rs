@@ -1099,3 +1099,91 @@ fn polygons_are_fan_triangulated() {
     assert_eq!(r.base_control_face(1), 0);
     assert_eq!(r.base_control_face(19), 7);
 }
+
+// ---------------------------------------------------------------------------------------
+// Properties on random meshes
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A random grid mesh with random heights, sharp edges and corner tags.
+    fn random_mesh(
+        seed: u64,
+        nx: usize,
+        ny: usize,
+        sharp_pct: u32,
+        corner_pct: u32,
+    ) -> ControlMesh {
+        let mut rng = Lcg(seed);
+        let mut m = grid(nx, ny, |_, _| 0.0);
+        for p in &mut m.positions {
+            p.x += 0.3 * (rng.next() - 0.5);
+            p.y += 0.3 * (rng.next() - 0.5);
+            p.z = rng.next();
+        }
+        let edges: Vec<(u32, u32)> = m
+            .faces()
+            .flat_map(|f| (0..3).map(move |i| crate::mesh::edge_key(f[i], f[(i + 1) % 3])))
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        for (a, b) in edges {
+            if rng.next() * 100.0 < sharp_pct as f64 {
+                m.set_sharp(a, b);
+            }
+        }
+        for v in 0..m.vertex_count() as u32 {
+            if rng.next() * 100.0 < corner_pct as f64 {
+                m.corners.insert(v);
+            }
+        }
+        m
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+
+        #[test]
+        fn limit_invariance_affinity_and_stencils(
+            seed in 0u64..1_000_000,
+            nx in 2usize..6,
+            ny in 2usize..6,
+            sharp_pct in 0u32..40,
+            corner_pct in 0u32..15,
+        ) {
+            let m = random_mesh(seed, nx, ny, sharp_pct, corner_pct);
+            let r = Refinement::new(&m, 3).unwrap();
+            // limit points do not depend on the level they are computed from
+            let lim0 = r.limit_positions(&m.positions, 0).unwrap();
+            let p3 = r.positions(&m.positions).unwrap();
+            let lim3 = r.limit_positions(&p3, 3).unwrap();
+            for v in 0..lim0.len() {
+                prop_assert!(close(lim0[v], lim3[v], 1e-11), "v{}: {:?} {:?}", v, lim0[v], lim3[v]);
+            }
+            // affine invariance: refining moved control points = moving refined points
+            let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 1.2, -0.4) * 1.7;
+            let shift = v3(3.0, -1.0, 0.5);
+            let moved: Vec<DVec3> = m.positions.iter().map(|&q| rot * q + shift).collect();
+            let pm = r.positions(&moved).unwrap();
+            for (a, b) in pm.iter().zip(&p3) {
+                prop_assert!(close(*a, rot * *b + shift, 1e-11));
+            }
+            // stencils are the same linear map, with affine rows
+            let st = r.stencils(3, false).unwrap();
+            prop_assert!(st.exact.iter().all(|&e| e));
+            for (a, b) in st.apply(&m.positions).iter().zip(&p3) {
+                prop_assert!(close(*a, *b, 1e-11));
+            }
+            for i in 0..st.row_count() {
+                let (_, w) = st.row(i);
+                prop_assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+                prop_assert!(w.iter().all(|&x| x >= 0.0));
+            }
+            // every refined level is a valid, consistently oriented surface
+            for j in 1..=3 {
+                check_closed_or_boundary(r.level(j).triangles(), |_, _| true);
+            }
+        }
+    }
+}
