@@ -302,7 +302,8 @@ pub(crate) fn eval_normal(
         };
         let mut n = DVec3::ZERO;
         if let (true, Some(fr)) = (in_bp, framed) {
-            n = fr.surface_normal(pv);
+            // analytic normal at the vertex's limit point
+            n = fr.surface_normal(eval_limit(l, t, base, p, v));
         } else if in_bp {
             n = fan;
         } else if c == vclass::CORNER {

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use glam::{DMat3, DVec3};
 
 use super::masks::{crease_limit_weights, eclass, vclass};
-use super::test_support::load_corpus;
+use super::test_support::{self, load_corpus};
 use super::*;
 use crate::mesh::{Axis, BoundarySurface, PatchKind};
 
@@ -917,6 +917,34 @@ fn empty_and_isolated_vertices() {
     .unwrap();
     assert_eq!(out.positions[4], v3(5., 5., 5.));
     assert_eq!(nn.unwrap()[4], DVec3::ZERO);
+}
+
+/// Every coarse tessellation in the corpus refines (manifold, consistently oriented) to a
+/// watertight level 2, also as a random mixed-level LOD.
+#[test]
+fn all_corpus_tessellations_refine_watertight() {
+    let Some(dir) = test_support::corpus_dir() else {
+        eprintln!("corpus not found; skipping");
+        return;
+    };
+    let Ok(entries) = std::fs::read_dir(dir.join("tess")) else { return };
+    let mut names: Vec<String> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with("_coarse.obj"))
+        .collect();
+    names.sort();
+    let mut rng = Lcg(5);
+    for name in &names {
+        let Some(m) = load_corpus(&format!("tess/{name}")) else { continue };
+        let r = Refinement::new(&m, 2).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let p = r.positions(&m.positions).unwrap();
+        check_closed_or_boundary(r.level(2).triangles(), |_, _| false);
+        let levels: Vec<u8> = (0..r.base_face_count()).map(|_| (rng.next() * 3.0) as u8).collect();
+        let lod = r.extract_lod(&p, None, &levels).unwrap();
+        check_closed_or_boundary(&flat(&lod.triangles), |_, _| false);
+    }
+    assert!(names.len() >= 10, "{names:?}");
 }
 
 #[test]
