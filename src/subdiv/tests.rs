@@ -927,7 +927,9 @@ fn all_corpus_tessellations_refine_watertight() {
         eprintln!("corpus not found; skipping");
         return;
     };
-    let Ok(entries) = std::fs::read_dir(dir.join("tess")) else { return };
+    let Ok(entries) = std::fs::read_dir(dir.join("tess")) else {
+        return;
+    };
     let mut names: Vec<String> = entries
         .filter_map(|e| e.ok())
         .map(|e| e.file_name().to_string_lossy().into_owned())
@@ -936,11 +938,15 @@ fn all_corpus_tessellations_refine_watertight() {
     names.sort();
     let mut rng = Lcg(5);
     for name in &names {
-        let Some(m) = load_corpus(&format!("tess/{name}")) else { continue };
+        let Some(m) = load_corpus(&format!("tess/{name}")) else {
+            continue;
+        };
         let r = Refinement::new(&m, 2).unwrap_or_else(|e| panic!("{name}: {e}"));
         let p = r.positions(&m.positions).unwrap();
         check_closed_or_boundary(r.level(2).triangles(), |_, _| false);
-        let levels: Vec<u8> = (0..r.base_face_count()).map(|_| (rng.next() * 3.0) as u8).collect();
+        let levels: Vec<u8> = (0..r.base_face_count())
+            .map(|_| (rng.next() * 3.0) as u8)
+            .collect();
         let lod = r.extract_lod(&p, None, &levels).unwrap();
         check_closed_or_boundary(&flat(&lod.triangles), |_, _| false);
     }
