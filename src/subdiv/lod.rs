@@ -33,6 +33,22 @@ pub struct AdaptiveMesh {
     pub face_groups: Vec<u32>,
 }
 
+impl AdaptiveMesh {
+    /// The mesh as a triangle `ControlMesh` with the given groups (those of the input
+    /// mesh; `face_groups` index them). Sharp flags and corner tags are not carried.
+    pub fn to_control_mesh(&self, groups: &[crate::mesh::Group]) -> crate::mesh::ControlMesh {
+        let nf = self.triangles.len() as u32;
+        crate::mesh::ControlMesh {
+            positions: self.positions.clone(),
+            face_offsets: (0..=nf).map(|i| 3 * i).collect(),
+            face_vertices: self.triangles.iter().flatten().copied().collect(),
+            face_groups: self.face_groups.clone(),
+            groups: groups.to_vec(),
+            ..Default::default()
+        }
+    }
+}
+
 /// Extracts the LOD mesh from finest-level positions `pos` (and optional normals).
 pub(crate) fn extract(
     r: &Refinement,

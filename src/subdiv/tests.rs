@@ -856,6 +856,7 @@ fn boundary_patch_lod_is_watertight_and_on_surface() {
                 }
             }
             assert!(exact > moved, "{exact} {moved}");
+            lod.to_control_mesh(&m.groups).validate().unwrap();
             let nn = lod.normals.as_ref().unwrap();
             assert!(nn.iter().all(|n| (n.length() - 1.0).abs() < 1e-9));
         }
