@@ -1,0 +1,217 @@
+//! Subdivision throughput: output triangles per second at levels 1-5 on corpus models, on
+//! one core and on all cores (rayon pools), for (a) position evaluation on a prebuilt
+//! topology (the encoder / viewer hot path) and (b) topology + positions from scratch.
+//!
+//! Run: `cargo bench --bench subdivide` (wall time, rayon pools of 1 thread and of all
+//! threads) and `cargo bench --bench subdivide --no-default-features` (sequential build,
+//! measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
+//! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use criterion::measurement::{Measurement, ValueFormatter, WallTime};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use glam::DVec3;
+use scode::mesh::{edge_key, ControlMesh, PatchKind};
+use scode::subdiv::Refinement;
+
+fn corpus_dir() -> Option<PathBuf> {
+    if let Ok(p) = std::env::var("SCODE_CORPUS") {
+        return Some(PathBuf::from(p));
+    }
+    let local = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus");
+    if local.is_dir() {
+        return Some(local);
+    }
+    let abs = PathBuf::from("/work/shared/corpus");
+    abs.is_dir().then_some(abs)
+}
+
+/// Minimal OBJ reader (v / f / g); edges between groups become sharp. Copy of the test
+/// helper, to be replaced by `scode::io` at merge.
+fn parse_obj(text: &str) -> ControlMesh {
+    let mut m = ControlMesh::new();
+    let mut group_ids: BTreeMap<String, u32> = BTreeMap::new();
+    let mut current = None;
+    for line in text.lines() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => {
+                let c: Vec<f64> = it.take(3).map(|s| s.parse().unwrap()).collect();
+                m.push_vertex(DVec3::new(c[0], c[1], c[2]));
+            }
+            Some("g") => {
+                let name = it.next().unwrap_or("").to_string();
+                let next = group_ids.len() as u32;
+                let id = *group_ids.entry(name.clone()).or_insert(next);
+                if id == next {
+                    m.push_group(name, PatchKind::Closed);
+                }
+                current = Some(id);
+            }
+            Some("f") => {
+                let idx: Vec<u32> = it
+                    .map(|s| s.split('/').next().unwrap().parse::<u32>().unwrap() - 1)
+                    .collect();
+                let g = *current.get_or_insert_with(|| m.push_group("default", PatchKind::Closed));
+                m.push_face(&idx, g);
+            }
+            _ => {}
+        }
+    }
+    let mut edge_group: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+    let mut sharp = Vec::new();
+    for f in 0..m.face_count() {
+        let face = m.face(f).to_vec();
+        let g = m.face_groups[f];
+        for i in 0..face.len() {
+            let k = edge_key(face[i], face[(i + 1) % face.len()]);
+            match edge_group.get(&k) {
+                Some(&g2) if g2 != g => sharp.push(k),
+                Some(_) => {}
+                None => {
+                    edge_group.insert(k, g);
+                }
+            }
+        }
+    }
+    for (a, b) in sharp {
+        m.set_sharp(a, b);
+    }
+    m
+}
+
+/// CPU time of the calling thread (the sequential build runs everything on it).
+#[cfg_attr(feature = "parallel", allow(dead_code))]
+struct ThreadCpuTime;
+
+#[cfg_attr(feature = "parallel", allow(dead_code))]
+static WALL: WallTime = WallTime;
+
+impl Measurement for ThreadCpuTime {
+    type Intermediate = cpu_time::ThreadTime;
+    type Value = std::time::Duration;
+    fn start(&self) -> cpu_time::ThreadTime {
+        cpu_time::ThreadTime::now()
+    }
+    fn end(&self, i: cpu_time::ThreadTime) -> std::time::Duration {
+        i.elapsed()
+    }
+    fn add(&self, a: &Self::Value, b: &Self::Value) -> Self::Value {
+        *a + *b
+    }
+    fn zero(&self) -> Self::Value {
+        std::time::Duration::ZERO
+    }
+    fn to_f64(&self, v: &Self::Value) -> f64 {
+        v.as_nanos() as f64
+    }
+    fn formatter(&self) -> &dyn ValueFormatter {
+        WALL.formatter()
+    }
+}
+
+/// Runs `f` in the rayon pool (parallel build) or directly on this thread (sequential build,
+/// so that the thread's CPU time covers the work).
+fn run<R: Send>(pool: &rayon::ThreadPool, f: impl FnOnce() -> R + Send) -> R {
+    if cfg!(feature = "parallel") {
+        pool.install(f)
+    } else {
+        f()
+    }
+}
+
+fn bench_model<M: Measurement>(c: &mut Criterion<M>, name: &str, rel: &str, max_level: u32) {
+    let Some(dir) = corpus_dir() else {
+        eprintln!("corpus not found, skipping");
+        return;
+    };
+    let Ok(text) = std::fs::read_to_string(dir.join(rel)) else {
+        eprintln!("{rel} not found, skipping");
+        return;
+    };
+    let mesh = parse_obj(&text);
+    let all = if cfg!(feature = "parallel") {
+        rayon::current_num_threads()
+    } else {
+        1
+    };
+    for threads in [1, all] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let label = if cfg!(feature = "parallel") {
+            format!("{name}/{threads}thr")
+        } else {
+            format!("{name}/sequential-cpu")
+        };
+        let mut group = c.benchmark_group(label);
+        group.sample_size(10);
+        group.warm_up_time(std::time::Duration::from_millis(300));
+        group.measurement_time(std::time::Duration::from_secs(2));
+        for level in 1..=max_level {
+            let r = Refinement::new(&mesh, level).unwrap();
+            let tris = r.level(level).face_count() as u64;
+            group.throughput(Throughput::Elements(tris));
+            let (mut out, mut scratch) = (Vec::new(), Vec::new());
+            group.bench_with_input(BenchmarkId::new("positions", level), &level, |b, &l| {
+                b.iter(|| {
+                    run(&pool, || {
+                        r.positions_into(&mesh.positions, l, &mut out, &mut scratch)
+                            .unwrap()
+                    })
+                })
+            });
+            group.bench_with_input(
+                BenchmarkId::new("topology+positions", level),
+                &level,
+                |b, &l| {
+                    b.iter(|| {
+                        run(&pool, || {
+                            let r = Refinement::new(&mesh, l).unwrap();
+                            r.positions(&mesh.positions).unwrap()
+                        })
+                    })
+                },
+            );
+            if level >= 3 {
+                let p = r.positions(&mesh.positions).unwrap();
+                group.bench_with_input(
+                    BenchmarkId::new("limit+normals", level),
+                    &level,
+                    |b, &l| {
+                        b.iter(|| {
+                            run(&pool, || {
+                                (
+                                    r.limit_positions(&p, l).unwrap(),
+                                    r.limit_normals(&p, l).unwrap(),
+                                )
+                            })
+                        })
+                    },
+                );
+            }
+        }
+        group.finish();
+        if threads == all {
+            break;
+        }
+    }
+}
+
+fn benches<M: Measurement>(c: &mut Criterion<M>) {
+    bench_model(c, "plate", "tess/bug3883_xr2-ct-214_plate_coarse.obj", 5);
+    bench_model(c, "fandisk", "meshes/fandisk.obj", 4);
+}
+
+#[cfg(feature = "parallel")]
+criterion_group!(subdivide, benches);
+#[cfg(not(feature = "parallel"))]
+criterion_group! {
+    name = subdivide;
+    config = Criterion::default().with_measurement(ThreadCpuTime);
+    targets = benches
+}
+criterion_main!(subdivide);
