@@ -12,6 +12,8 @@ mod surface;
 pub use distance::{
     hausdorff, one_sided_distances, point_distances, DistanceOptions, DistanceReport, OneSided,
 };
+#[cfg(test)]
+pub(crate) use sampling::SplitMixForTests;
 pub use sampling::{sample_surface, SampleCount, SurfaceSample};
 pub use surface::{closest_point_on_triangle, ClosestPoint, TriangleSurface};
 

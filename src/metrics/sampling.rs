@@ -113,3 +113,17 @@ pub fn sample_surface(
     }
     out
 }
+
+/// Seeded generator for tests in other modules (same SplitMix64 stream).
+#[cfg(test)]
+pub(crate) struct SplitMixForTests(SplitMix64);
+
+#[cfg(test)]
+impl SplitMixForTests {
+    pub(crate) fn new(seed: u64) -> Self {
+        SplitMixForTests(SplitMix64::new(seed))
+    }
+    pub(crate) fn f(&mut self) -> f64 {
+        self.0.next_f64()
+    }
+}
