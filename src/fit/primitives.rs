@@ -317,17 +317,27 @@ pub fn fit_sphere(points: &[DVec3]) -> Option<PrimitiveFit> {
     if r2 <= 0.0 {
         return None;
     }
-    let mut p = [c.x, c.y, c.z, r2.sqrt()];
+    lm_sphere(&frame, &q, c, r2.sqrt(), points)
+}
+
+fn lm_sphere(
+    frame: &Frame,
+    q: &[DVec3],
+    c: DVec3,
+    r: f64,
+    points: &[DVec3],
+) -> Option<PrimitiveFit> {
+    let mut p = [c.x, c.y, c.z, r];
     levenberg_marquardt(
         &mut p,
         q.len(),
         |p, out| {
             let c = DVec3::new(p[0], p[1], p[2]);
-            for (o, x) in out.iter_mut().zip(&q) {
+            for (o, x) in out.iter_mut().zip(q) {
                 *o = (*x - c).length() - p[3];
             }
         },
-        50,
+        40,
     );
     finish(
         Primitive::Sphere {
@@ -353,18 +363,36 @@ pub fn fit_cylinder(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit>
     let (e1, e2) = basis(a0);
     let uv: Vec<(f64, f64)> = q.iter().map(|p| (p.dot(e1), p.dot(e2))).collect();
     let ((cu, cv), r) = circle_2d(&uv)?;
-    let mut p = [cu, cv, 0.0, 0.0, r];
+    lm_cylinder(&frame, &q, a0, cu * e1 + cv * e2, r, points)
+}
+
+/// LM on a cylinder in local coordinates, starting from axis direction `a0`, axis point
+/// `c0` and radius `r`.
+fn lm_cylinder(
+    frame: &Frame,
+    q: &[DVec3],
+    a0: DVec3,
+    c0: DVec3,
+    r: f64,
+    points: &[DVec3],
+) -> Option<PrimitiveFit> {
+    if points.len() < 5 {
+        return None;
+    }
+    let (e1, e2) = basis(a0);
+    let c0 = c0 - c0.dot(a0) * a0;
+    let mut p = [c0.dot(e1), c0.dot(e2), 0.0, 0.0, r];
     levenberg_marquardt(
         &mut p,
         q.len(),
         |p, out| {
             let a = perturbed(a0, e1, e2, p[2], p[3]);
             let c = p[0] * e1 + p[1] * e2;
-            for (o, x) in out.iter_mut().zip(&q) {
+            for (o, x) in out.iter_mut().zip(q) {
                 *o = (*x - c).cross(a).length() - p[4];
             }
         },
-        60,
+        40,
     );
     let a = perturbed(a0, e1, e2, p[2], p[3]);
     let c = p[0] * e1 + p[1] * e2;
@@ -415,6 +443,43 @@ pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         })
         .sum::<f64>()
         / q.len() as f64;
+    let mut best = lm_cone(&frame, &q, apex, a0, angle, points);
+    // Second start for narrow or nearly cylindrical cones, where the normals' cone is
+    // too thin to give the axis: the best cylinder with a small opening either way.
+    if let Some(PrimitiveFit {
+        primitive: Primitive::Cylinder { axis, radius },
+        ..
+    }) = fit_cylinder(points, normals)
+    {
+        let a = axis.direction;
+        let c = (axis.origin - frame.center) / frame.scale;
+        let r = radius / frame.scale;
+        let theta: f64 = 0.05;
+        for sign in [1.0, -1.0] {
+            let dir = a * sign;
+            let apex = c - dir * (r / theta.tan());
+            let cand = lm_cone(&frame, &q, apex, dir, theta, points);
+            if let Some(c) = cand {
+                if best.is_none_or(|b| c.residuals.rms < b.residuals.rms) {
+                    best = Some(c);
+                }
+            }
+        }
+    }
+    best
+}
+
+fn lm_cone(
+    frame: &Frame,
+    q: &[DVec3],
+    apex: DVec3,
+    a0: DVec3,
+    angle: f64,
+    points: &[DVec3],
+) -> Option<PrimitiveFit> {
+    if points.len() < 6 {
+        return None;
+    }
     let (e1, e2) = basis(a0);
     let mut p = [apex.x, apex.y, apex.z, 0.0, 0.0, angle];
     levenberg_marquardt(
@@ -424,14 +489,14 @@ pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
             let apex = DVec3::new(p[0], p[1], p[2]);
             let a = perturbed(a0, e1, e2, p[3], p[4]);
             let (s, c) = p[5].sin_cos();
-            for (o, x) in out.iter_mut().zip(&q) {
+            for (o, x) in out.iter_mut().zip(q) {
                 let v = *x - apex;
                 let h = v.dot(a);
                 let rho = (v - h * a).length();
                 *o = rho * c - h * s;
             }
         },
-        60,
+        40,
     );
     let a = perturbed(a0, e1, e2, p[3], p[4]);
     // rho cos t - h sin t changes sign under t -> t + pi, so t is defined modulo pi; an
@@ -489,7 +554,21 @@ pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         })
         .collect();
     let ((h0, big_r), small_r) = circle_2d(&hr)?;
-    let c0 = x0 + h0 * a0;
+    lm_torus(&frame, &q, x0 + h0 * a0, a0, big_r, small_r, points)
+}
+
+fn lm_torus(
+    frame: &Frame,
+    q: &[DVec3],
+    c0: DVec3,
+    a0: DVec3,
+    big_r: f64,
+    small_r: f64,
+    points: &[DVec3],
+) -> Option<PrimitiveFit> {
+    if points.len() < 8 {
+        return None;
+    }
     let (e1, e2) = basis(a0);
     let mut p = [c0.x, c0.y, c0.z, 0.0, 0.0, big_r, small_r];
     levenberg_marquardt(
@@ -498,14 +577,14 @@ pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         |p, out| {
             let c = DVec3::new(p[0], p[1], p[2]);
             let a = perturbed(a0, e1, e2, p[3], p[4]);
-            for (o, x) in out.iter_mut().zip(&q) {
+            for (o, x) in out.iter_mut().zip(q) {
                 let v = *x - c;
                 let h = v.dot(a);
                 let rho = (v - h * a).length();
                 *o = ((rho - p[5]).powi(2) + h * h).sqrt() - p[6];
             }
         },
-        60,
+        40,
     );
     finish(
         Primitive::Torus {
@@ -518,6 +597,51 @@ pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         },
         points,
     )
+}
+
+/// Refits `start`'s kind to `points`, starting Levenberg-Marquardt from `start` (much more
+/// robust than a fresh initialisation when a region grows: the old fit is already close).
+/// Planes are refitted in closed form.
+pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
+    let (frame, q) = Frame::new(points)?;
+    let lp = |p: DVec3| (p - frame.center) / frame.scale;
+    let ll = |l: f64| l / frame.scale;
+    match *start {
+        Primitive::Plane { .. } => fit_plane(points),
+        Primitive::Sphere { center, radius } => {
+            (q.len() >= 4).then_some(())?;
+            lm_sphere(&frame, &q, lp(center), ll(radius), points)
+        }
+        Primitive::Cylinder { axis, radius } => lm_cylinder(
+            &frame,
+            &q,
+            axis.direction,
+            lp(axis.origin),
+            ll(radius),
+            points,
+        ),
+        Primitive::Cone { axis, half_angle } => lm_cone(
+            &frame,
+            &q,
+            lp(axis.origin),
+            axis.direction,
+            half_angle,
+            points,
+        ),
+        Primitive::Torus {
+            axis,
+            major_radius,
+            minor_radius,
+        } => lm_torus(
+            &frame,
+            &q,
+            lp(axis.origin),
+            axis.direction,
+            ll(major_radius),
+            ll(minor_radius),
+            points,
+        ),
+    }
 }
 
 /// Fits `kind` to the points (normals are needed for cylinder, cone and torus).
@@ -637,6 +761,16 @@ mod tests {
         assert!(f.residuals.max < 1.5e-5);
         // Normals are required.
         assert!(fit_cylinder(&pts, &[]).is_none());
+        // Refining from a perturbed start recovers the same cylinder.
+        let start = Primitive::Cylinder {
+            axis: Axis {
+                origin: o + DVec3::new(0.05, -0.03, 0.02),
+                direction: (a + 0.05 * e1).normalize(),
+            },
+            radius: r * 1.1,
+        };
+        let g = refine(&start, &pts).unwrap();
+        assert!(g.residuals.max < 1.5e-5, "{:?}", g.residuals);
     }
 
     #[test]
