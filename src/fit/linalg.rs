@@ -162,7 +162,7 @@ pub(crate) fn levenberg_marquardt(
             }
         }
         let mut improved = false;
-        for _ in 0..12 {
+        for _ in 0..8 {
             let mut damped = jtj.clone();
             for a in 0..n {
                 damped[a * n + a] += lambda * (jtj[a * n + a] + 1e-12);
@@ -183,7 +183,7 @@ pub(crate) fn levenberg_marquardt(
                 c = c_try;
                 lambda = (lambda * 0.3).max(1e-12);
                 improved = true;
-                if rel < 1e-10 {
+                if rel < 1e-8 {
                     return c;
                 }
                 break;

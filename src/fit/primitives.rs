@@ -337,7 +337,7 @@ fn lm_sphere(
                 *o = (*x - c).length() - p[3];
             }
         },
-        40,
+        25,
     );
     finish(
         Primitive::Sphere {
@@ -392,7 +392,7 @@ fn lm_cylinder(
                 *o = (*x - c).cross(a).length() - p[4];
             }
         },
-        40,
+        25,
     );
     let a = perturbed(a0, e1, e2, p[2], p[3]);
     let c = p[0] * e1 + p[1] * e2;
@@ -446,6 +446,10 @@ pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
     let mut best = lm_cone(&frame, &q, apex, a0, angle, points);
     // Second start for narrow or nearly cylindrical cones, where the normals' cone is
     // too thin to give the axis: the best cylinder with a small opening either way.
+    let good_enough = best.is_some_and(|b| b.residuals.rms <= 1e-7 * frame.scale);
+    if good_enough {
+        return best;
+    }
     if let Some(PrimitiveFit {
         primitive: Primitive::Cylinder { axis, radius },
         ..
@@ -496,7 +500,7 @@ fn lm_cone(
                 *o = rho * c - h * s;
             }
         },
-        40,
+        25,
     );
     let a = perturbed(a0, e1, e2, p[3], p[4]);
     // rho cos t - h sin t changes sign under t -> t + pi, so t is defined modulo pi; an
@@ -584,7 +588,7 @@ fn lm_torus(
                 *o = ((rho - p[5]).powi(2) + h * h).sqrt() - p[6];
             }
         },
-        40,
+        25,
     );
     finish(
         Primitive::Torus {

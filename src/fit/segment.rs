@@ -51,6 +51,10 @@ pub struct SegmentOptions {
     /// At most this many vertices are used per fit (deterministic stride subsampling); the
     /// tolerance is then checked on all vertices.
     pub max_fit_points: usize,
+    /// A growing region whose primitive had to be refitted more often than this to absorb
+    /// its next ring is drifting along a freeform surface: it is dropped (its faces end
+    /// up in a freeform region).
+    pub max_refits: usize,
 }
 
 impl Default for SegmentOptions {
@@ -67,7 +71,8 @@ impl Default for SegmentOptions {
                 PrimitiveKind::Cone,
                 PrimitiveKind::Sphere,
             ],
-            max_fit_points: 600,
+            max_fit_points: 400,
+            max_refits: 6,
         }
     }
 }
@@ -334,6 +339,7 @@ impl<'a> Segmenter<'a> {
         let mut rejected_mark: BTreeMap<u32, ()> = BTreeMap::new();
         let mut queue: VecDeque<u32> = self.neighbours(seed).iter().copied().collect();
         let mut last_fit = patch.len();
+        let mut refits = 0;
         for _round in 0..64 {
             while let Some(f) = queue.pop_front() {
                 if self.face_stamp[f as usize] == in_region || state[f as usize] == FaceState::Taken
@@ -374,9 +380,16 @@ impl<'a> Segmenter<'a> {
             let mut candidates = region.clone();
             candidates.extend_from_slice(&rejected);
             let size_before = region.len();
-            if let Some(m) = self.refine_faces(&candidates, &model.primitive) {
-                model = m;
-            } else if let Some(m) = self.fit_faces(&candidates, &kinds) {
+            let absorbed = self
+                .refine_faces(&candidates, &model.primitive)
+                .or_else(|| self.fit_faces(&candidates, &kinds));
+            if let Some(m) = absorbed {
+                // A true primitive is found in a few refits; a model that keeps drifting
+                // ring after ring is following a freeform surface.
+                refits += 1;
+                if refits > self.opts.max_refits {
+                    return Err(region);
+                }
                 model = m;
             } else if region.len() * 2 > last_fit * 3 {
                 // Cannot absorb the ring: sharpen the model on the region alone once it
@@ -753,12 +766,10 @@ mod tests {
     #[test]
     #[ignore = "exploration: prints segmentations of corpus meshes"]
     fn explore_corpus() {
-        for name in [
-            "tess/four_cone_coarse.obj",
-            "meshes/fandisk.obj",
-            "meshes/block.off",
-            "meshes/rocker-arm.obj",
-        ] {
+        let list = std::env::var("SCODE_EXPLORE").unwrap_or_else(|_| {
+            "tess/four_cone_coarse.obj,meshes/fandisk.obj,meshes/block.off,meshes/rocker-arm.obj".into()
+        });
+        for name in list.split(',') {
             let Some(m) = load_corpus(name) else { return };
             let t = std::time::Instant::now();
             let (out, rep) = segment(
