@@ -55,6 +55,15 @@ pub struct SegmentOptions {
     /// its next ring is drifting along a freeform surface: it is dropped (its faces end
     /// up in a freeform region).
     pub max_refits: usize,
+    /// A primitive whose max residual is at most this fraction of the tolerance is
+    /// "confident" (tessellations of real planes, cylinders... fit far below the
+    /// tolerance); adjacent non-confident pieces of one smooth component are merged into
+    /// one region (they are usually pieces of one freeform surface).
+    pub confident_fraction: f64,
+    /// Regions separated by edges no sharper than this (but sharper than
+    /// `sharp_angle_deg`) merge when one primitive fits their union confidently: coarse
+    /// tessellations of small cylinders and spheres have facets 45 degrees apart.
+    pub facet_merge_angle_deg: f64,
 }
 
 impl Default for SegmentOptions {
@@ -73,6 +82,8 @@ impl Default for SegmentOptions {
             ],
             max_fit_points: 400,
             max_refits: 6,
+            confident_fraction: 0.25,
+            facet_merge_angle_deg: 60.0,
         }
     }
 }
@@ -168,6 +179,8 @@ struct Segmenter<'a> {
     vertex_stamp: Vec<u32>,
     vertex_slot: Vec<u32>,
     face_stamp: Vec<u32>,
+    /// Scratch region index per face (u32::MAX when unused).
+    region_label: Vec<u32>,
     generation: u32,
 }
 
@@ -436,6 +449,75 @@ impl<'a> Segmenter<'a> {
         Ok((region, model))
     }
 
+    fn is_confident(&self, fit: &Option<PrimitiveFit>) -> bool {
+        fit.is_some_and(|f| f.residuals.max <= self.opts.confident_fraction * self.tol)
+    }
+
+    /// Merges smoothly adjacent regions of `regions[first..]` (one split component) that
+    /// are not confident primitives, then refits each merged region.
+    fn merge_uncertain(&mut self, regions: &mut [Region], first: usize) {
+        let n = regions.len() - first;
+        if n < 2 {
+            return;
+        }
+        for (i, r) in regions[first..].iter().enumerate() {
+            for &f in &r.faces {
+                self.region_label[f as usize] = i as u32;
+            }
+        }
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(p: &mut [usize], mut i: usize) -> usize {
+            while p[i] != i {
+                p[i] = p[p[i]];
+                i = p[i];
+            }
+            i
+        }
+        let uncertain: Vec<bool> = regions[first..]
+            .iter()
+            .map(|r| !self.is_confident(&r.fit))
+            .collect();
+        for i in 0..n {
+            if !uncertain[i] {
+                continue;
+            }
+            for &f in &regions[first + i].faces {
+                for &g in self.neighbours(f) {
+                    let j = self.region_label[g as usize] as usize;
+                    if j < n && j != i && uncertain[j] {
+                        let (a, b) = (root(&mut parent, i), root(&mut parent, j));
+                        if a != b {
+                            parent[a.max(b)] = a.min(b);
+                        }
+                    }
+                }
+            }
+        }
+        let kinds = self.opts.kinds.clone();
+        let mut members = vec![0usize; n];
+        for i in 0..n {
+            let r = root(&mut parent, i);
+            members[r] += 1;
+            if r != i {
+                let moved = std::mem::take(&mut regions[first + i].faces);
+                regions[first + r].faces.extend(moved);
+            }
+        }
+        for i in 0..n {
+            if members[i] > 1 {
+                let mut faces = std::mem::take(&mut regions[first + i].faces);
+                faces.sort_unstable();
+                regions[first + i].fit = self.fit_faces(&faces, &kinds);
+                regions[first + i].faces = faces;
+            }
+        }
+        for r in regions[first..].iter() {
+            for &f in &r.faces {
+                self.region_label[f as usize] = u32::MAX;
+            }
+        }
+    }
+
     /// Splits one smooth component that no single primitive fits.
     fn split_component(&mut self, comp: &[u32], state: &mut [FaceState], out: &mut Vec<Region>) {
         let mut order: Vec<(f64, u32)> = comp
@@ -583,6 +665,7 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         vertex_stamp: vec![0; mesh.vertex_count()],
         vertex_slot: vec![0; mesh.vertex_count()],
         face_stamp: vec![0; nf],
+        region_label: vec![u32::MAX; nf],
         generation: 0,
     };
 
@@ -623,7 +706,9 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
                 from_split: false,
             });
         } else {
+            let first = regions.len();
             seg.split_component(comp, &mut state, &mut regions);
+            seg.merge_uncertain(&mut regions, first);
         }
     }
 
@@ -684,6 +769,85 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         }
     }
     regions.retain(|r| !r.faces.is_empty());
+
+    // 5. Merge across moderately sharp edges when one primitive fits the union
+    //    confidently and every face normal agrees with it (coarse facets of one surface).
+    let cos_facet = opts.facet_merge_angle_deg.to_radians().cos();
+    for _round in 0..8 {
+        let mut label = vec![0u32; nf];
+        for (r, reg) in regions.iter().enumerate() {
+            for &f in &reg.faces {
+                label[f as usize] = r as u32;
+            }
+        }
+        // (region a < region b) -> (shared edges, min normal dot across them)
+        let mut pairs: BTreeMap<(u32, u32), (usize, f64)> = BTreeMap::new();
+        for e in 0..edges.len() {
+            let fs = edges.faces(e);
+            if fs.len() != 2 {
+                continue;
+            }
+            let (f, g) = (fs[0].0 as usize, fs[1].0 as usize);
+            let (a, b) = (label[f], label[g]);
+            if a == b {
+                continue;
+            }
+            let d = seg.normals[f].dot(seg.normals[g]);
+            let entry = pairs.entry((a.min(b), a.max(b))).or_insert((0, 1.0));
+            entry.0 += 1;
+            entry.1 = entry.1.min(d);
+        }
+        let mut cands: Vec<((u32, u32), usize)> = pairs
+            .into_iter()
+            .filter(|(_, (_, d))| *d >= cos_facet)
+            .map(|(k, (n, _))| (k, n))
+            .collect();
+        cands.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
+        let mut touched = vec![false; regions.len()];
+        let mut merged = false;
+        for ((a, b), _) in cands {
+            let (a, b) = (a as usize, b as usize);
+            if touched[a] || touched[b] {
+                continue;
+            }
+            // Only pieces of the same curved kind (two strips of one coarse cylinder, two
+            // patches of one sphere); a plane next to a plane across a sharp edge, or a
+            // plane strip next to a curved piece, stays apart (ambiguous on facets).
+            let (Some(fa), Some(fb)) = (regions[a].fit, regions[b].fit) else {
+                continue;
+            };
+            let kind = fa.primitive.kind();
+            if kind == PrimitiveKind::Plane || fb.primitive.kind() != kind {
+                continue;
+            }
+            let mut faces = regions[a].faces.clone();
+            faces.extend_from_slice(&regions[b].faces);
+            faces.sort_unstable();
+            let start = if regions[a].faces.len() >= regions[b].faces.len() {
+                fa.primitive
+            } else {
+                fb.primitive
+            };
+            let Some(fit) = seg.refine_faces(&faces, &start) else {
+                continue;
+            };
+            if !seg.is_confident(&Some(fit))
+                || !faces.iter().all(|&f| seg.face_fits(&fit.primitive, f))
+            {
+                continue;
+            }
+            regions[a].faces = faces;
+            regions[a].fit = Some(fit);
+            regions[b].faces.clear();
+            touched[a] = true;
+            touched[b] = true;
+            merged = true;
+        }
+        regions.retain(|r| !r.faces.is_empty());
+        if !merged {
+            break;
+        }
+    }
     // Groups in order of their first face.
     regions.sort_by_key(|r| r.faces[0]);
 
@@ -828,45 +992,5 @@ mod tests {
                 t.elapsed()
             );
         }
-    }
-}
-#[cfg(test)]
-mod debug_tests {
-    use super::*;
-    use crate::fit::test_support::load_corpus;
-    #[test]
-    #[ignore]
-    fn debug_four_cone() {
-        let Some(m) = load_corpus("tess/four_cone_coarse.obj") else {
-            return;
-        };
-        let faces: Vec<u32> = (0..m.face_count() as u32)
-            .filter(|&f| m.face_groups[f as usize] == 1)
-            .collect();
-        let opts = SegmentOptions::default();
-        let (normals, areas) = face_normals_and_areas(&m);
-        let mut seg = Segmenter {
-            mesh: &m,
-            opts: &opts,
-            tol: 0.1225,
-            cos_normal: 0.9,
-            normals,
-            areas,
-            nbr_offsets: vec![],
-            nbrs: vec![],
-            vertex_stamp: vec![0; m.vertex_count()],
-            vertex_slot: vec![0; m.vertex_count()],
-            face_stamp: vec![0; m.face_count()],
-            generation: 0,
-        };
-        let (pts, nrm) = seg.points_and_normals(&faces);
-        for k in PrimitiveKind::ALL {
-            println!("{k:?}: {:?}", fit_kind(k, &pts, &nrm));
-        }
-        for f in &faces {
-            let n = seg.normals[*f as usize];
-            print!("{:.2} ", n.z);
-        }
-        println!();
     }
 }
