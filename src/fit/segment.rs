@@ -317,12 +317,16 @@ impl<'a> Segmenter<'a> {
         seed: u32,
         state: &[FaceState],
     ) -> std::result::Result<(Vec<u32>, PrimitiveFit), Vec<u32>> {
-        // Initial patch: BFS rings around the seed.
+        // Initial model: fit growing BFS rings around the seed and stop at the first ring
+        // whose best primitive is confident. Small patches first, so that a seed near a
+        // curvature change (plane next to a fillet) picks the surface it lies on.
         let gen = self.next_generation();
         let mut patch = vec![seed];
         self.face_stamp[seed as usize] = gen;
         let mut ring_start = 0;
-        for _ring in 0..3 {
+        let split_kinds = self.opts.split_kinds.clone();
+        let mut model: Option<PrimitiveFit> = None;
+        for _ring in 0..4 {
             let ring_end = patch.len();
             for i in ring_start..ring_end {
                 let f = patch[i];
@@ -335,12 +339,19 @@ impl<'a> Segmenter<'a> {
                 }
             }
             ring_start = ring_end;
-            if patch.len() >= 16 {
+            if patch.len() < 3 {
+                continue;
+            }
+            let fit = self.fit_faces(&patch, &split_kinds);
+            let confident = self.is_confident(&fit);
+            if fit.is_some() {
+                model = fit;
+            }
+            if confident || patch.len() >= 24 {
                 break;
             }
         }
-        let split_kinds = self.opts.split_kinds.clone();
-        let Some(mut model) = self.fit_faces(&patch, &split_kinds) else {
+        let Some(mut model) = model else {
             return Err(patch);
         };
         let upgrade_limit = (4 * patch.len()).max(64);
@@ -537,7 +548,16 @@ impl<'a> Segmenter<'a> {
             if state[seed as usize] != FaceState::Free {
                 continue;
             }
-            match self.grow(seed, state) {
+            let grown = self.grow(seed, state);
+            if std::env::var("SCODE_DEBUG").is_ok() {
+                match &grown {
+                    Ok((f, m)) => {
+                        eprintln!("seed {seed}: {} faces {:?}", f.len(), m.primitive.kind())
+                    }
+                    Err(f) => eprintln!("seed {seed}: failed ({} tried)", f.len()),
+                }
+            }
+            match grown {
                 Ok((faces, fit)) if faces.len() >= self.opts.min_region_triangles => {
                     for &f in &faces {
                         state[f as usize] = FaceState::Taken;
@@ -912,7 +932,213 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::test_support::load_corpus;
+    use crate::fit::test_support::{grid_cube, load_corpus};
+
+    /// An open strip: plane z = 0 (x in [-2, 0]), a quarter-cylinder fillet of radius 1
+    /// (axis along y through (0, *, 1)) and the plane x = 1 (z in [1, 3]); all joins are
+    /// tangent, so there is no sharp edge. Returns the mesh and the triangle counts
+    /// (plane, fillet, plane).
+    fn fillet_strip() -> (ControlMesh, [usize; 3]) {
+        let mut profile: Vec<(f64, f64)> = Vec::new();
+        let (n_plane, n_arc, m) = (8, 12, 6);
+        for i in 0..n_plane {
+            profile.push((-2.0 + 2.0 * i as f64 / n_plane as f64, 0.0));
+        }
+        for i in 0..n_arc {
+            let t = -std::f64::consts::FRAC_PI_2
+                + std::f64::consts::FRAC_PI_2 * i as f64 / n_arc as f64;
+            profile.push((t.cos(), 1.0 + t.sin()));
+        }
+        for i in 0..=n_plane {
+            profile.push((1.0, 1.0 + 2.0 * i as f64 / n_plane as f64));
+        }
+        let mut mesh = ControlMesh::new();
+        let g = mesh.push_group("all", PatchKind::Closed);
+        for j in 0..=m {
+            for &(x, z) in &profile {
+                mesh.push_vertex(DVec3::new(x, 2.0 * j as f64 / m as f64, z));
+            }
+        }
+        let w = profile.len() as u32;
+        for j in 0..m as u32 {
+            for i in 0..w - 1 {
+                let (a, b) = (j * w + i, j * w + i + 1);
+                let (c, d) = (a + w, b + w);
+                mesh.push_face(&[a, c, d], g);
+                mesh.push_face(&[a, d, b], g);
+            }
+        }
+        (mesh, [2 * n_plane * m, 2 * n_arc * m, 2 * n_plane * m])
+    }
+
+    pub(super) fn fillet_strip_pub() -> (ControlMesh, [usize; 3]) {
+        fillet_strip()
+    }
+
+    #[test]
+    fn cube_is_six_planes() {
+        let m = grid_cube(5);
+        let (out, rep) = segment(&m, &SegmentOptions::default()).unwrap();
+        out.validate().unwrap();
+        assert_eq!(rep.regions.len(), 6);
+        assert_eq!(rep.smooth_components, 6);
+        assert!(out
+            .groups
+            .iter()
+            .all(|g| g.patch == PatchKind::Boundary(BoundarySurface::Plane)));
+        // Every face of one input side lands in one group.
+        for f in 0..m.face_count() {
+            let same_side: Vec<usize> = (0..m.face_count())
+                .filter(|&g| m.face_groups[g] == m.face_groups[f])
+                .collect();
+            assert!(same_side
+                .iter()
+                .all(|&g| out.face_groups[g] == out.face_groups[f]));
+        }
+        // All 12 cube edges (5 mesh edges each) are sharp.
+        assert_eq!(out.sharp_edges.len(), 60);
+        assert_eq!(rep.sharp_edges, 60);
+        assert_eq!(out.groups[0].name, "face_0");
+    }
+
+    #[test]
+    fn tangent_fillet_is_split_at_curvature_change() {
+        let (m, counts) = fillet_strip();
+        let (out, rep) = segment(&m, &SegmentOptions::default()).unwrap();
+        assert_eq!(rep.smooth_components, 1);
+        assert_eq!(rep.sharp_edges, 0);
+        assert!(out.sharp_edges.is_empty());
+        let mut got: Vec<(RegionKind, usize)> =
+            rep.regions.iter().map(|r| (r.kind, r.triangles)).collect();
+        got.sort();
+        let mut want = vec![
+            (RegionKind::Primitive(PrimitiveKind::Plane), counts[0]),
+            (RegionKind::Primitive(PrimitiveKind::Plane), counts[2]),
+            (RegionKind::Primitive(PrimitiveKind::Cylinder), counts[1]),
+        ];
+        want.sort();
+        assert_eq!(got, want, "{}", rep.summary());
+        let cyl = rep
+            .regions
+            .iter()
+            .find_map(|r| match r.primitive {
+                Some(Primitive::Cylinder { axis, radius }) => Some((axis, radius)),
+                _ => None,
+            })
+            .unwrap();
+        assert!((cyl.1 - 1.0).abs() < 1e-6);
+        assert!(cyl.0.direction.dot(DVec3::Y).abs() > 1.0 - 1e-9);
+        let off = cyl.0.origin - DVec3::new(0.0, 0.0, 1.0);
+        assert!((off - off.dot(DVec3::Y) * DVec3::Y).length() < 1e-6);
+        // The patch kind carries the axis.
+        assert!(out.groups.iter().any(|g| matches!(
+            g.patch,
+            PatchKind::Boundary(BoundarySurface::Cylinder { .. })
+        )));
+        // Deterministic.
+        let (out2, rep2) = segment(&m, &SegmentOptions::default()).unwrap();
+        assert_eq!(out, out2);
+        assert_eq!(rep, rep2);
+    }
+
+    #[test]
+    fn rejects_bad_input() {
+        let (m, _) = fillet_strip();
+        let bad = |o: SegmentOptions| segment(&m, &o).is_err();
+        assert!(bad(SegmentOptions {
+            sharp_angle_deg: 0.0,
+            ..Default::default()
+        }));
+        assert!(bad(SegmentOptions {
+            sharp_angle_deg: f64::NAN,
+            ..Default::default()
+        }));
+        assert!(bad(SegmentOptions {
+            tolerance: Some(-1.0),
+            ..Default::default()
+        }));
+        assert!(bad(SegmentOptions {
+            normal_angle_deg: 120.0,
+            ..Default::default()
+        }));
+        assert!(segment(&ControlMesh::new(), &SegmentOptions::default()).is_err());
+        let mut broken = m.clone();
+        broken.face_vertices[0] = 1_000_000;
+        assert!(segment(&broken, &SegmentOptions::default()).is_err());
+    }
+
+    /// Segments a grouped corpus model while ignoring its groups and checks that regions
+    /// and true CAD faces correspond one to one, with the right surface types.
+    fn check_exact(name: &str, want: &[(RegionKind, usize)]) {
+        let Some(m) = load_corpus(name) else { return };
+        let (out, rep) = segment(&m, &SegmentOptions::default()).unwrap();
+        let mut pairs: Vec<(u32, u32)> = (0..m.face_count())
+            .map(|f| (m.face_groups[f], out.face_groups[f]))
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        assert_eq!(pairs.len(), m.groups.len(), "{name}: {}", rep.summary());
+        assert_eq!(
+            out.groups.len(),
+            m.groups.len(),
+            "{name}: {}",
+            rep.summary()
+        );
+        let counts = rep.counts();
+        for (k, n) in want {
+            assert_eq!(counts.get(k), Some(n), "{name}: {}", rep.summary());
+        }
+    }
+
+    #[test]
+    fn corpus_models_with_exact_answers() {
+        use PrimitiveKind::*;
+        let p = RegionKind::Primitive;
+        check_exact(
+            "abc/abc_00000006.obj",
+            &[(p(Plane), 8), (p(Cone), 6), (p(Cylinder), 1)],
+        );
+        check_exact("tess/four_cone_coarse.obj", &[(p(Plane), 6), (p(Cone), 4)]);
+        check_exact(
+            "tess/block_fillet3_coarse.obj",
+            &[(p(Plane), 6), (p(Cylinder), 3), (p(Sphere), 1)],
+        );
+        check_exact("tess/tr8_bv1_ec_coarse.obj", &[(p(Plane), 18)]);
+    }
+
+    #[test]
+    fn fandisk_regions() {
+        let Some(m) = load_corpus("meshes/fandisk.obj") else {
+            return;
+        };
+        let (out, rep) = segment(&m, &SegmentOptions::default()).unwrap();
+        out.validate().unwrap();
+        let counts = rep.counts();
+        let n = rep.regions.len();
+        assert!((15..=35).contains(&n), "{}", rep.summary());
+        assert!(counts
+            .get(&RegionKind::Primitive(PrimitiveKind::Plane))
+            .is_some_and(|&c| c >= 5));
+        assert!(counts
+            .get(&RegionKind::Primitive(PrimitiveKind::Cylinder))
+            .is_some_and(|&c| c >= 3));
+        // Every primitive region is within the tolerance.
+        for r in &rep.regions {
+            if let Some(res) = r.residuals {
+                assert!(res.max <= rep.tolerance * (1.0 + 1e-9));
+            }
+        }
+        // Sharp edges only on group boundaries.
+        let edges = EdgeTable::new(&out);
+        for &(a, b) in &out.sharp_edges {
+            let e = edges.find(a, b).unwrap();
+            let fs = edges.faces(e);
+            assert!(
+                fs.len() == 2
+                    && out.face_groups[fs[0].0 as usize] != out.face_groups[fs[1].0 as usize]
+            );
+        }
+    }
 
     fn describe(report: &SegmentReport) -> String {
         let mut s = report.summary();
@@ -990,6 +1216,26 @@ mod tests {
                 rep.smooth_components,
                 rep.summary(),
                 t.elapsed()
+            );
+        }
+    }
+}
+#[cfg(test)]
+mod dbg {
+    #[test]
+    #[ignore]
+    fn dbg_fillet() {
+        let (m, _) = super::tests::fillet_strip_pub();
+        let (out, rep) = super::segment(&m, &super::SegmentOptions::default()).unwrap();
+        for (i, r) in rep.regions.iter().enumerate() {
+            let fs: Vec<usize> = (0..m.face_count())
+                .filter(|&f| out.face_groups[f] == i as u32)
+                .collect();
+            println!(
+                "{i}: {:?} {:?} first faces {:?}",
+                r.kind,
+                r.primitive,
+                &fs[..fs.len().min(12)]
             );
         }
     }
