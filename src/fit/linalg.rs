@@ -113,12 +113,14 @@ pub(crate) fn solve(mut a: Vec<f64>, mut b: Vec<f64>, n: usize) -> Option<Vec<f6
 
 /// Levenberg-Marquardt on `residuals(params, out)` (m residuals) with a central-difference
 /// Jacobian. Parameters should be of order 1 (callers normalise coordinates). Returns the
-/// final sum of squared residuals. Deterministic: fixed iteration rules, no randomness.
+/// final sum of squared residuals. Gives up once the RMS residual is still above
+/// `abandon_rms` after six iterations. Deterministic: fixed iteration rules, no randomness.
 pub(crate) fn levenberg_marquardt(
     params: &mut [f64],
     m: usize,
     residuals: impl Fn(&[f64], &mut [f64]),
     max_iter: usize,
+    abandon_rms: f64,
 ) -> f64 {
     let n = params.len();
     let mut r = vec![0.0; m];
@@ -133,7 +135,12 @@ pub(crate) fn levenberg_marquardt(
     let mut lambda = 1e-3;
     let mut jac = vec![0.0; m * n];
     let mut p_try = params.to_vec();
-    for _ in 0..max_iter {
+    for iter in 0..max_iter {
+        // A fit that is still far off after a few iterations will not get within the
+        // caller's tolerance: stop early (the caller rejects it anyway).
+        if iter >= 6 && (c / m as f64).sqrt() > abandon_rms {
+            return c;
+        }
         // Jacobian by forward differences (column j at jac[i * n + j]); the step is
         // sqrt(machine epsilon) relative, accurate to ~1e-8, plenty for Gauss-Newton.
         for j in 0..n {
@@ -237,6 +244,7 @@ mod tests {
                 }
             },
             100,
+            f64::INFINITY,
         );
         assert!(c < 1e-20, "{c}");
         assert!((p[0] - 2.5).abs() < 1e-8 && (p[1] + 0.7).abs() < 1e-8);

@@ -295,7 +295,12 @@ pub fn fit_plane(points: &[DVec3]) -> Option<PrimitiveFit> {
 
 /// Best-fit sphere (geometric distances). Needs 4 points not on one plane.
 pub fn fit_sphere(points: &[DVec3]) -> Option<PrimitiveFit> {
+    fit_sphere_impl(points, f64::INFINITY)
+}
+
+fn fit_sphere_impl(points: &[DVec3], abandon_world: f64) -> Option<PrimitiveFit> {
     let (frame, q) = Frame::new(points)?;
+    let abandon = abandon_world / frame.scale;
     if q.len() < 4 {
         return None;
     }
@@ -317,7 +322,7 @@ pub fn fit_sphere(points: &[DVec3]) -> Option<PrimitiveFit> {
     if r2 <= 0.0 {
         return None;
     }
-    lm_sphere(&frame, &q, c, r2.sqrt(), points)
+    lm_sphere(&frame, &q, c, r2.sqrt(), points, abandon)
 }
 
 fn lm_sphere(
@@ -326,6 +331,7 @@ fn lm_sphere(
     c: DVec3,
     r: f64,
     points: &[DVec3],
+    abandon: f64,
 ) -> Option<PrimitiveFit> {
     let mut p = [c.x, c.y, c.z, r];
     levenberg_marquardt(
@@ -338,6 +344,7 @@ fn lm_sphere(
             }
         },
         25,
+        abandon,
     );
     finish(
         Primitive::Sphere {
@@ -354,16 +361,25 @@ fn normals_ok(points: &[DVec3], normals: &[DVec3]) -> bool {
 
 /// Best-fit cylinder. `normals` (one per point, any orientation) initialise the axis.
 pub fn fit_cylinder(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+    fit_cylinder_impl(points, normals, f64::INFINITY)
+}
+
+fn fit_cylinder_impl(
+    points: &[DVec3],
+    normals: &[DVec3],
+    abandon_world: f64,
+) -> Option<PrimitiveFit> {
     if !normals_ok(points, normals) || points.len() < 5 {
         return None;
     }
     let (frame, q) = Frame::new(points)?;
+    let abandon = abandon_world / frame.scale;
     let (_, vecs) = sym_eigen3(outer_sum(normals.iter().map(|n| n.normalize_or_zero())));
     let a0 = vecs[0];
     let (e1, e2) = basis(a0);
     let uv: Vec<(f64, f64)> = q.iter().map(|p| (p.dot(e1), p.dot(e2))).collect();
     let ((cu, cv), r) = circle_2d(&uv)?;
-    lm_cylinder(&frame, &q, a0, cu * e1 + cv * e2, r, points)
+    lm_cylinder(&frame, &q, a0, cu * e1 + cv * e2, r, points, abandon)
 }
 
 /// LM on a cylinder in local coordinates, starting from axis direction `a0`, axis point
@@ -375,6 +391,7 @@ fn lm_cylinder(
     c0: DVec3,
     r: f64,
     points: &[DVec3],
+    abandon: f64,
 ) -> Option<PrimitiveFit> {
     if points.len() < 5 {
         return None;
@@ -393,6 +410,7 @@ fn lm_cylinder(
             }
         },
         25,
+        abandon,
     );
     let a = perturbed(a0, e1, e2, p[2], p[3]);
     let c = p[0] * e1 + p[1] * e2;
@@ -412,10 +430,21 @@ fn lm_cylinder(
 
 /// Best-fit cone (one nappe). `normals` initialise the axis and the apex.
 pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+    fit_cone_impl(points, normals, f64::INFINITY, None)
+}
+
+/// `cylinder`: a cylinder fit of the same points if the caller has one (saves a fit).
+fn fit_cone_impl(
+    points: &[DVec3],
+    normals: &[DVec3],
+    abandon_world: f64,
+    cylinder: Option<PrimitiveFit>,
+) -> Option<PrimitiveFit> {
     if !normals_ok(points, normals) || points.len() < 6 {
         return None;
     }
     let (frame, q) = Frame::new(points)?;
+    let abandon = abandon_world / frame.scale;
     let ns: Vec<DVec3> = normals.iter().map(|n| n.normalize_or_zero()).collect();
     let mean = ns.iter().sum::<DVec3>() / ns.len() as f64;
     let (_, vecs) = sym_eigen3(outer_sum(ns.iter().map(|n| *n - mean)));
@@ -443,7 +472,7 @@ pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         })
         .sum::<f64>()
         / q.len() as f64;
-    let mut best = lm_cone(&frame, &q, apex, a0, angle, points);
+    let mut best = lm_cone(&frame, &q, apex, a0, angle, points, abandon);
     // Second start for narrow or nearly cylindrical cones, where the normals' cone is
     // too thin to give the axis: the best cylinder with a small opening either way.
     let good_enough = best.is_some_and(|b| b.residuals.rms <= 1e-7 * frame.scale);
@@ -453,7 +482,7 @@ pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
     if let Some(PrimitiveFit {
         primitive: Primitive::Cylinder { axis, radius },
         ..
-    }) = fit_cylinder(points, normals)
+    }) = cylinder.or_else(|| fit_cylinder_impl(points, normals, abandon_world))
     {
         let a = axis.direction;
         let c = (axis.origin - frame.center) / frame.scale;
@@ -462,7 +491,7 @@ pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         for sign in [1.0, -1.0] {
             let dir = a * sign;
             let apex = c - dir * (r / theta.tan());
-            let cand = lm_cone(&frame, &q, apex, dir, theta, points);
+            let cand = lm_cone(&frame, &q, apex, dir, theta, points, abandon);
             if let Some(c) = cand {
                 if best.is_none_or(|b| c.residuals.rms < b.residuals.rms) {
                     best = Some(c);
@@ -480,6 +509,7 @@ fn lm_cone(
     a0: DVec3,
     angle: f64,
     points: &[DVec3],
+    abandon: f64,
 ) -> Option<PrimitiveFit> {
     if points.len() < 6 {
         return None;
@@ -501,6 +531,7 @@ fn lm_cone(
             }
         },
         25,
+        abandon,
     );
     let a = perturbed(a0, e1, e2, p[3], p[4]);
     // rho cos t - h sin t changes sign under t -> t + pi, so t is defined modulo pi; an
@@ -524,10 +555,15 @@ fn lm_cone(
 
 /// Best-fit torus. `normals` initialise the axis (every normal line meets it).
 pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+    fit_torus_impl(points, normals, f64::INFINITY)
+}
+
+fn fit_torus_impl(points: &[DVec3], normals: &[DVec3], abandon_world: f64) -> Option<PrimitiveFit> {
     if !normals_ok(points, normals) || points.len() < 8 {
         return None;
     }
     let (frame, q) = Frame::new(points)?;
+    let abandon = abandon_world / frame.scale;
     // Axis line (d, m) meets normal line (n, p x n) iff d.(p x n) + m.n = 0.
     let mut mat = vec![0.0; 36];
     for (p, n) in q.iter().zip(normals) {
@@ -558,7 +594,16 @@ pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
         })
         .collect();
     let ((h0, big_r), small_r) = circle_2d(&hr)?;
-    lm_torus(&frame, &q, x0 + h0 * a0, a0, big_r, small_r, points)
+    lm_torus(
+        &frame,
+        &q,
+        x0 + h0 * a0,
+        a0,
+        big_r,
+        small_r,
+        points,
+        abandon,
+    )
 }
 
 fn lm_torus(
@@ -569,6 +614,7 @@ fn lm_torus(
     big_r: f64,
     small_r: f64,
     points: &[DVec3],
+    abandon: f64,
 ) -> Option<PrimitiveFit> {
     if points.len() < 8 {
         return None;
@@ -589,6 +635,7 @@ fn lm_torus(
             }
         },
         25,
+        abandon,
     );
     finish(
         Primitive::Torus {
@@ -608,13 +655,14 @@ fn lm_torus(
 /// Planes are refitted in closed form.
 pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
     let (frame, q) = Frame::new(points)?;
+    let abandon = f64::INFINITY;
     let lp = |p: DVec3| (p - frame.center) / frame.scale;
     let ll = |l: f64| l / frame.scale;
     match *start {
         Primitive::Plane { .. } => fit_plane(points),
         Primitive::Sphere { center, radius } => {
             (q.len() >= 4).then_some(())?;
-            lm_sphere(&frame, &q, lp(center), ll(radius), points)
+            lm_sphere(&frame, &q, lp(center), ll(radius), points, abandon)
         }
         Primitive::Cylinder { axis, radius } => lm_cylinder(
             &frame,
@@ -623,6 +671,7 @@ pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
             lp(axis.origin),
             ll(radius),
             points,
+            abandon,
         ),
         Primitive::Cone { axis, half_angle } => lm_cone(
             &frame,
@@ -631,6 +680,7 @@ pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
             axis.direction,
             half_angle,
             points,
+            abandon,
         ),
         Primitive::Torus {
             axis,
@@ -644,6 +694,7 @@ pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
             ll(major_radius),
             ll(minor_radius),
             points,
+            abandon,
         ),
     }
 }
@@ -656,6 +707,27 @@ pub fn fit_kind(kind: PrimitiveKind, points: &[DVec3], normals: &[DVec3]) -> Opt
         PrimitiveKind::Cylinder => fit_cylinder(points, normals),
         PrimitiveKind::Cone => fit_cone(points, normals),
         PrimitiveKind::Torus => fit_torus(points, normals),
+    }
+}
+
+/// Like [`fit_kind`], for callers that will reject fits whose max residual exceeds
+/// `tolerance`: hopeless fits are abandoned early, and a cylinder fit of the same points
+/// (if any) seeds the cone fit.
+pub(crate) fn fit_kind_within(
+    kind: PrimitiveKind,
+    points: &[DVec3],
+    normals: &[DVec3],
+    tolerance: f64,
+    cylinder: Option<PrimitiveFit>,
+) -> Option<PrimitiveFit> {
+    // RMS <= max, and LM rarely gains a factor 4 after six iterations.
+    let abandon = 4.0 * tolerance;
+    match kind {
+        PrimitiveKind::Plane => fit_plane(points),
+        PrimitiveKind::Sphere => fit_sphere_impl(points, abandon),
+        PrimitiveKind::Cylinder => fit_cylinder_impl(points, normals, abandon),
+        PrimitiveKind::Cone => fit_cone_impl(points, normals, abandon, cylinder),
+        PrimitiveKind::Torus => fit_torus_impl(points, normals, abandon),
     }
 }
 

@@ -25,7 +25,9 @@ use std::collections::{BTreeMap, VecDeque};
 use glam::DVec3;
 
 use super::adjacency::{face_normals_and_areas, EdgeTable};
-use super::primitives::{fit_kind, refine, Primitive, PrimitiveFit, PrimitiveKind, Residuals};
+use super::primitives::{
+    fit_kind_within, refine, Primitive, PrimitiveFit, PrimitiveKind, Residuals,
+};
 use crate::error::{Error, Result};
 use crate::mesh::{Axis, BoundarySurface, ControlMesh, Group, PatchKind};
 
@@ -262,10 +264,14 @@ impl<'a> Segmenter<'a> {
     fn fit_faces(&mut self, faces: &[u32], kinds: &[PrimitiveKind]) -> Option<PrimitiveFit> {
         let (pts, sub_p, sub_n) = self.fit_input(faces);
         let mut fits: Vec<PrimitiveFit> = Vec::new();
+        let mut cylinder: Option<PrimitiveFit> = None;
         for &k in kinds {
-            let Some(fit) = fit_kind(k, &sub_p, &sub_n) else {
+            let Some(fit) = fit_kind_within(k, &sub_p, &sub_n, self.tol, cylinder) else {
                 continue;
             };
+            if k == PrimitiveKind::Cylinder {
+                cylinder = Some(fit);
+            }
             if fit.residuals.max > self.tol {
                 continue;
             }
@@ -971,10 +977,6 @@ mod tests {
         (mesh, [2 * n_plane * m, 2 * n_arc * m, 2 * n_plane * m])
     }
 
-    pub(super) fn fillet_strip_pub() -> (ControlMesh, [usize; 3]) {
-        fillet_strip()
-    }
-
     #[test]
     fn cube_is_six_planes() {
         let m = grid_cube(5);
@@ -1191,6 +1193,36 @@ mod tests {
         }
     }
 
+    /// Timings on the largest corpus mesh (run with `--release --ignored --nocapture`;
+    /// performance is reported, not asserted).
+    #[test]
+    #[ignore = "timing: run in release"]
+    fn timing_large_mesh() {
+        let name = "tess/trj4_pm2-ec-214_fine.obj";
+        let Some(m) = load_corpus(name) else { return };
+        let t = std::time::Instant::now();
+        let (out, rep) = segment(&m, &SegmentOptions::default()).unwrap();
+        let t_seg = t.elapsed();
+        let t = std::time::Instant::now();
+        let net = crate::fit::curves::build_curve_network(&m, &Default::default()).unwrap();
+        let t_curves_true = t.elapsed();
+        let t = std::time::Instant::now();
+        let net2 = crate::fit::curves::build_curve_network(&out, &Default::default()).unwrap();
+        let t_curves_seg = t.elapsed();
+        println!(
+            "{name}: {} triangles; segment {:?} -> {}; curves on true groups {:?} ({} corners, {} chains); curves on segmentation {:?} ({} corners, {} chains)",
+            m.face_count(),
+            t_seg,
+            rep.summary(),
+            t_curves_true,
+            net.corners.len(),
+            net.chains.len(),
+            t_curves_seg,
+            net2.corners.len(),
+            net2.chains.len()
+        );
+    }
+
     #[test]
     #[ignore = "exploration: region counts vs true CAD faces"]
     fn explore_grouped() {
@@ -1216,26 +1248,6 @@ mod tests {
                 rep.smooth_components,
                 rep.summary(),
                 t.elapsed()
-            );
-        }
-    }
-}
-#[cfg(test)]
-mod dbg {
-    #[test]
-    #[ignore]
-    fn dbg_fillet() {
-        let (m, _) = super::tests::fillet_strip_pub();
-        let (out, rep) = super::segment(&m, &super::SegmentOptions::default()).unwrap();
-        for (i, r) in rep.regions.iter().enumerate() {
-            let fs: Vec<usize> = (0..m.face_count())
-                .filter(|&f| out.face_groups[f] == i as u32)
-                .collect();
-            println!(
-                "{i}: {:?} {:?} first faces {:?}",
-                r.kind,
-                r.primitive,
-                &fs[..fs.len().min(12)]
             );
         }
     }
