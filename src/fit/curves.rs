@@ -269,7 +269,7 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
     let mut label_ids: BTreeMap<(Vec<u32>, bool), u32> = BTreeMap::new();
     let mut labels: Vec<(Vec<u32>, bool)> = Vec::new();
     let mut edge_label = vec![u32::MAX; ne];
-    for e in 0..ne {
+    for (e, label) in edge_label.iter_mut().enumerate() {
         let fs = edges.faces(e);
         let mut groups: Vec<u32> = fs
             .iter()
@@ -286,7 +286,7 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             labels.push(key);
             (labels.len() - 1) as u32
         });
-        edge_label[e] = id;
+        *label = id;
     }
     let is_boundary = |e: usize| edge_label[e] != u32::MAX;
 

@@ -606,6 +606,7 @@ fn fit_torus_impl(points: &[DVec3], normals: &[DVec3], abandon_world: f64) -> Op
     )
 }
 
+#[allow(clippy::too_many_arguments)] // the torus has seven parameters to start from
 fn lm_torus(
     frame: &Frame,
     q: &[DVec3],
