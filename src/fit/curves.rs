@@ -618,13 +618,13 @@ fn build_group_loops(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::fit::test_support::{corpus_dir, grid_cube, load_corpus};
     use crate::mesh::PatchKind;
 
     /// Checks the structural invariants of a network against its mesh.
-    fn check_network(mesh: &ControlMesh, net: &CurveNetwork, name: &str) {
+    pub(crate) fn check_network(mesh: &ControlMesh, net: &CurveNetwork, name: &str) {
         let edges = EdgeTable::new(mesh);
         let mut boundary = std::collections::BTreeSet::new();
         for e in 0..edges.len() {

@@ -796,6 +796,50 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
     }
     let mut dirty = vec![false; regions.len()];
     let mut refit = vec![false; regions.len()];
+    // Tiny components bounded by sharp edges whose vertices all lie on an adjacent
+    // region's primitive are slivers with unreliable normals (common in decimated or
+    // exported tessellations): they join that region. Genuine small faces (a chamfer, a
+    // small boss top) are off the neighbours' surfaces and stay.
+    for s in 0..regions.len() {
+        if regions[s].from_split
+            || regions[s].faces.is_empty()
+            || regions[s].faces.len() >= opts.min_region_triangles
+        {
+            continue;
+        }
+        let mut shared: BTreeMap<u32, usize> = BTreeMap::new();
+        for &f in &regions[s].faces {
+            let base = mesh.face_offsets[f as usize] as usize;
+            for k in 0..mesh.face(f as usize).len() {
+                for &(g, _) in edges.faces(edges.face_edge[base + k] as usize) {
+                    let l = label[g as usize];
+                    if l != s as u32 {
+                        *shared.entry(l).or_insert(0) += 1;
+                    }
+                }
+            }
+        }
+        let mut order: Vec<(u32, usize)> = shared.into_iter().collect();
+        order.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        for (t, _) in order {
+            let t = t as usize;
+            let Some(fit) = regions[t].fit else { continue };
+            let on_surface = regions[s].faces.iter().all(|&f| {
+                mesh.face(f as usize)
+                    .iter()
+                    .all(|&v| fit.primitive.distance(mesh.positions[v as usize]) <= tol)
+            });
+            if on_surface {
+                let moved = std::mem::take(&mut regions[s].faces);
+                for &f in &moved {
+                    label[f as usize] = t as u32;
+                }
+                regions[t].faces.extend(moved);
+                dirty[t] = true;
+                break;
+            }
+        }
+    }
     loop {
         let small = regions
             .iter()
@@ -1208,6 +1252,9 @@ mod tests {
                 assert!(res.max <= rep.tolerance * (1.0 + 1e-9));
             }
         }
+        // The segmentation feeds the curve network: its invariants hold.
+        let net = crate::fit::curves::build_curve_network(&out, &Default::default()).unwrap();
+        crate::fit::curves::tests::check_network(&out, &net, "fandisk segmentation");
         // Sharp edges only on group boundaries.
         let edges = EdgeTable::new(&out);
         for &(a, b) in &out.sharp_edges {
@@ -1299,6 +1346,29 @@ mod tests {
             net2.corners.len(),
             net2.chains.len()
         );
+    }
+
+    #[test]
+    fn meshes_without_labels_segment_cleanly() {
+        // Non-manifold (crank) and organic-looking (rocker arm) inputs: no errors, valid
+        // output, every face in a group, curve network builds.
+        for name in [
+            "meshes/block.off",
+            "meshes/crank.off",
+            "meshes/rocker-arm.obj",
+        ] {
+            let Some(m) = load_corpus(name) else { return };
+            let (out, rep) = segment(&m, &SegmentOptions::default()).unwrap();
+            out.validate().unwrap();
+            assert_eq!(out.groups.len(), rep.regions.len());
+            assert_eq!(
+                rep.regions.iter().map(|r| r.triangles).sum::<usize>(),
+                m.face_count()
+            );
+            let net = crate::fit::curves::build_curve_network(&out, &Default::default());
+            assert!(net.is_ok(), "{name}: {:?}", net.err());
+            println!("{name}: {}", rep.summary());
+        }
     }
 
     #[test]
