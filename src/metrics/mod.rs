@@ -243,3 +243,55 @@ mod tests {
         .is_err());
     }
 }
+
+#[cfg(test)]
+mod corpus_tests {
+    use super::*;
+    use crate::fit::test_support::load_corpus;
+
+    /// Coarse vs fine tessellation of the same CAD model: the distance is small relative to
+    /// the size and symmetric-ish; self-distance is zero. Timing printed (run in release).
+    #[test]
+    fn coarse_vs_fine_tessellation() {
+        let (Some(coarse), Some(fine)) = (
+            load_corpus("tess/block_fillet3_coarse.obj"),
+            load_corpus("tess/block_fillet3_fine.obj"),
+        ) else {
+            return;
+        };
+        let opts = DistanceOptions {
+            samples: SampleCount::Total(20_000),
+            ..Default::default()
+        };
+        let r = hausdorff(&coarse, &fine, &opts).unwrap();
+        let rel = r.relative();
+        // Coarse chords of 1/15-diagonal edges on a fillet: sagitta well below 1 %.
+        assert!(rel.max > 0.0 && rel.max < 1e-2, "{rel:?}");
+        assert!(rel.rms <= rel.max && rel.mean <= rel.rms);
+        let same = hausdorff(&fine, &fine, &opts).unwrap();
+        assert!(same.max < 1e-9 * same.diagonal);
+    }
+
+    #[test]
+    #[ignore = "timing: run in release"]
+    fn timing_large_hausdorff() {
+        let (Some(coarse), Some(fine)) = (
+            load_corpus("tess/trj4_pm2-ec-214_coarse.obj"),
+            load_corpus("tess/trj4_pm2-ec-214_fine.obj"),
+        ) else {
+            return;
+        };
+        let t = std::time::Instant::now();
+        let r = hausdorff(&coarse, &fine, &DistanceOptions::default()).unwrap();
+        println!(
+            "trj4 coarse ({} tris) vs fine ({} tris), {} + {} samples: {:?}; relative max {:.3e} rms {:.3e}",
+            coarse.face_count(),
+            fine.face_count(),
+            r.samples_a,
+            r.samples_b,
+            t.elapsed(),
+            r.relative().max,
+            r.relative().rms
+        );
+    }
+}
