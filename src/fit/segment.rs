@@ -6,16 +6,24 @@
 //! 1. Split at sharp edges (dihedral angle above `sharp_angle_deg`), mesh-boundary edges
 //!    and non-manifold edges; flood-fill the rest into smooth components.
 //! 2. A component that one primitive fits within `tolerance` (every vertex) is one region.
-//! 3. Otherwise split it at curvature discontinuities by primitive-driven region growing:
-//!    seeds in order of local flatness; each seed's 2-ring patch picks the simplest
-//!    primitive that fits it; the region grows over faces whose vertices lie within
-//!    `tolerance` of the primitive and whose normal agrees with it; when growth stalls the
-//!    primitive is refitted on the region plus the rejected ring (and may be upgraded to a
-//!    more general kind while the region is young). Faces no primitive region claims form
-//!    freeform regions.
-//! 4. Fragments smaller than `min_region_triangles` (from step 3 only; small components
-//!    bounded by sharp edges are genuine faces) merge into the smooth neighbour sharing
-//!    the most edges.
+//!    The kind is chosen as the simplest one whose max residual is within
+//!    `max(2 * best, 0.05 * tolerance)` (so a coarse cone is not called a plane, and a
+//!    plane is not called a huge cylinder).
+//! 3. Otherwise the component is split at curvature discontinuities by primitive-driven
+//!    region growing: seeds in order of local flatness; the seed's model comes from the
+//!    smallest ring of faces around it that a primitive fits confidently; the region grows
+//!    over faces whose vertices lie within `tolerance` of the primitive and whose normal
+//!    agrees with it; when growth stalls the primitive is refitted (from the current one)
+//!    on the region plus the rejected ring, and may be upgraded to a more general kind
+//!    while the region is young. A model that needs too many refits is following a
+//!    freeform surface and is dropped. Then pieces that are not confident primitives
+//!    (residual above `confident_fraction * tolerance`) join a confident neighbour whose
+//!    primitive fits them, or merge with each other into freeform regions.
+//! 4. Tiny sharp-bounded components lying on an adjacent primitive (slivers) join it;
+//!    fragments from step 3 smaller than `min_region_triangles` merge into the smooth
+//!    neighbour that fits them (else the one sharing the most edges).
+//! 5. Pieces of the same curved kind separated by moderately sharp edges (coarse facets,
+//!    up to `facet_merge_angle_deg`) merge when one primitive fits the union confidently.
 //!
 //! Deterministic: seeds are ordered by (score, face index), adjacency comes from sorting,
 //! and all maps are ordered.
@@ -604,14 +612,6 @@ impl<'a> Segmenter<'a> {
                 continue;
             }
             let grown = self.grow(seed, state);
-            if std::env::var("SCODE_DEBUG").is_ok() {
-                match &grown {
-                    Ok((f, m)) => {
-                        eprintln!("seed {seed}: {} faces {:?}", f.len(), m.primitive.kind())
-                    }
-                    Err(f) => eprintln!("seed {seed}: failed ({} tried)", f.len()),
-                }
-            }
             match grown {
                 Ok((faces, fit)) if faces.len() >= self.opts.min_region_triangles => {
                     for &f in &faces {
