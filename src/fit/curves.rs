@@ -511,7 +511,8 @@ fn build_group_loops(
     };
     let successor = |h: usize| -> Result<usize> {
         let (b, mut cur) = head(h);
-        for _ in 0..1024 {
+        // A vertex is surrounded by at most all faces: bounds the walk on broken input.
+        for _ in 0..=mesh.face_count() {
             let e = edge_of(cur);
             if edge_label[e] != u32::MAX {
                 return Ok(cur);

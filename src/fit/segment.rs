@@ -813,7 +813,7 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
             for k in 0..mesh.face(f as usize).len() {
                 for &(g, _) in edges.faces(edges.face_edge[base + k] as usize) {
                     let l = label[g as usize];
-                    if l != s as u32 {
+                    if l != s as u32 && l != UNLABELLED {
                         *shared.entry(l).or_insert(0) += 1;
                     }
                 }
@@ -854,7 +854,7 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         for &f in &regions[s].faces {
             for &g in seg.neighbours(f) {
                 let l = label[g as usize];
-                if l != s as u32 {
+                if l != s as u32 && l != UNLABELLED {
                     *shared.entry(l).or_insert(0) += 1;
                 }
             }
