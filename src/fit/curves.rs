@@ -96,8 +96,11 @@ pub struct LoopChain {
 }
 
 /// Boundary loops of one group, each oriented like the group's faces (counter-clockwise
-/// seen from outside). The longest loop comes first (the outer loop of a planar face);
-/// a cylinder side face has two loops of similar length.
+/// seen from outside). For a (nearly) planar group the outer loop comes first: it is the
+/// one with the largest signed area about the group normal (holes run clockwise, so their
+/// signed area is negative); otherwise the longest loop comes first. A cylinder side face
+/// has two loops (the corpus tessellations weld the seam, so no seam chain appears);
+/// a closed single-face body (a full sphere) has none.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GroupLoops {
     pub loops: Vec<Vec<LoopChain>>,
@@ -539,6 +542,7 @@ fn build_group_loops(
     };
     let mut out = vec![GroupLoops::default(); ng];
     let mut loops_len: Vec<Vec<f64>> = vec![Vec::new(); ng];
+    let mut loops_area: Vec<Vec<DVec3>> = vec![Vec::new(); ng];
     for h0 in 0..nh {
         if visited[h0] || edge_label[edge_of(h0)] == u32::MAX {
             continue;
@@ -606,13 +610,43 @@ fn build_group_loops(
             });
             i += n;
         }
+        // Vector area of the loop polygon (for outer-loop detection).
+        let mut area = DVec3::ZERO;
+        for &h in &cycle {
+            let (b, _) = head(h);
+            area += mesh.positions[tail(h) as usize].cross(mesh.positions[b as usize]);
+        }
         out[g].loops.push(lp);
         loops_len[g].push(length);
+        loops_area[g].push(0.5 * area);
     }
-    // Longest loop first (stable for equal lengths).
+    // Group normals (area vectors) and total areas, to tell planar groups.
+    let mut normal = vec![DVec3::ZERO; ng];
+    let mut total = vec![0.0; ng];
+    for f in 0..mesh.face_count() {
+        let face = mesh.face(f);
+        let mut n = DVec3::ZERO;
+        for i in 0..face.len() {
+            let p = mesh.positions[face[i] as usize];
+            let q = mesh.positions[face[(i + 1) % face.len()] as usize];
+            n += p.cross(q);
+        }
+        let g = mesh.face_groups[f] as usize;
+        normal[g] += 0.5 * n;
+        total[g] += 0.5 * n.length();
+    }
     for (g, gl) in out.iter_mut().enumerate() {
+        let planar = normal[g].length() >= 0.99 * total[g] && total[g] > 0.0;
+        let axis = normal[g].normalize_or_zero();
+        let key = |i: usize| {
+            if planar {
+                loops_area[g][i].dot(axis)
+            } else {
+                loops_len[g][i]
+            }
+        };
         let mut order: Vec<usize> = (0..gl.loops.len()).collect();
-        order.sort_by(|&a, &b| loops_len[g][b].total_cmp(&loops_len[g][a]).then(a.cmp(&b)));
+        order.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
         gl.loops = order.iter().map(|&i| gl.loops[i].clone()).collect();
     }
     Ok(out)
@@ -788,6 +822,45 @@ pub(crate) mod tests {
         let net = build_curve_network(&one, &CurveOptions::default()).unwrap();
         check_network(&one, &net, "open box");
         assert_eq!(net.corners.len(), 8);
+    }
+
+    #[test]
+    fn planar_face_with_hole_outer_loop_first() {
+        // A 4 x 4 plate without its central 2 x 2 quads: one planar group, two open
+        // boundary loops; the outer loop must come first and run counter-clockwise.
+        let mut m = ControlMesh::new();
+        for j in 0..5 {
+            for i in 0..5 {
+                m.push_vertex(DVec3::new(i as f64, j as f64, 0.0));
+            }
+        }
+        let g = m.push_group("plate", PatchKind::Closed);
+        let id = |i: u32, j: u32| j * 5 + i;
+        for j in 0..4 {
+            for i in 0..4 {
+                if (1..3).contains(&i) && (1..3).contains(&j) {
+                    continue;
+                }
+                m.push_face(&[id(i, j), id(i + 1, j), id(i + 1, j + 1)], g);
+                m.push_face(&[id(i, j), id(i + 1, j + 1), id(i, j + 1)], g);
+            }
+        }
+        let net = build_curve_network(&m, &CurveOptions::default()).unwrap();
+        check_network(&m, &net, "plate");
+        let loops = &net.group_loops[0].loops;
+        assert_eq!(loops.len(), 2);
+        let verts = |lp: &Vec<LoopChain>| -> Vec<u32> {
+            lp.iter()
+                .flat_map(|l| net.chains[l.chain as usize].vertices.clone())
+                .collect()
+        };
+        assert!(verts(&loops[0]).contains(&id(0, 0)));
+        assert!(verts(&loops[1]).contains(&id(1, 1)));
+        // Square corners are sharp turns (90 degrees > 60).
+        assert!(net
+            .corners
+            .iter()
+            .any(|c| c.vertex == id(4, 4) && c.reason == CornerReason::SharpTurn));
     }
 
     #[test]
