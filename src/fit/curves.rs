@@ -894,7 +894,10 @@ pub(crate) mod tests {
         for sub in ["tess", "abc"] {
             for e in std::fs::read_dir(dir.join(sub)).unwrap().flatten() {
                 let n = e.file_name().to_string_lossy().to_string();
-                if n.ends_with("_coarse.obj") || (sub == "abc" && n.ends_with(".obj")) {
+                if n.ends_with("_coarse.obj")
+                    || n.ends_with("_cadexport.obj")
+                    || (sub == "abc" && n.ends_with(".obj"))
+                {
                     names.push(format!("{sub}/{n}"));
                 }
             }
