@@ -731,7 +731,7 @@ pub(crate) mod tests {
         }
         assert_eq!(
             uses.values().sum::<usize>(),
-            net.chains.iter().map(|c| c.groups.len()).sum()
+            net.chains.iter().map(|c| c.groups.len()).sum::<usize>()
         );
     }
 
