@@ -197,7 +197,10 @@ const FLAG_CONTROL_MESH: u64 = 1;
 const FLAG_BOX_F64: u64 = 2;
 const FLAG_ISOLATED: u64 = 4;
 const FLAG_MERGES: u64 = 8;
-const KNOWN_FLAGS: u64 = 15;
+/// The optional sections present, so a file cut at a section boundary is detected.
+const FLAG_PATCHES: u64 = 16;
+const FLAG_NAMES: u64 = 32;
+const KNOWN_FLAGS: u64 = 63;
 
 /// What a file's version allows. All version gating lives here.
 struct Features {
@@ -688,6 +691,13 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     if !merges.is_empty() {
         flags |= FLAG_MERGES;
     }
+    if patches.is_some() {
+        flags |= FLAG_PATCHES;
+    }
+    let store_names = opts.store_group_names && groups_new_order.iter().any(|g| !g.name.is_empty());
+    if store_names {
+        flags |= FLAG_NAMES;
+    }
     let mut header = Vec::new();
     put_varint(&mut header, flags);
     if let Content::ControlMesh { default_level } = opts.content {
@@ -733,7 +743,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         }
         put_section(&mut out, SEC_FIXUPS, &fx, true, false);
     }
-    if opts.store_group_names && groups_new_order.iter().any(|g| !g.name.is_empty()) {
+    if store_names {
         let mut names = Vec::new();
         for g in &groups_new_order {
             put_varint(&mut names, g.name.len() as u64);
@@ -1047,6 +1057,15 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             raw_bytes: s.payload.len(),
         });
         payloads[s.id as usize] = Some(s.payload);
+    }
+    for (id, flag) in [(SEC_PATCHES, FLAG_PATCHES), (SEC_FIXUPS, FLAG_MERGES), (SEC_NAMES, FLAG_NAMES)] {
+        if payloads[id as usize].is_some() != (header.flags & flag != 0) {
+            return Err(Error::format(
+                section_name(id),
+                "section",
+                "section presence does not match the header flags",
+            ));
+        }
     }
     let required = |id: u8| -> Result<&Vec<u8>> {
         payloads[id as usize].as_ref().ok_or_else(|| {

@@ -118,10 +118,24 @@ impl RangeEncoder {
         }
     }
 
-    /// Flushes the state and returns the coded bytes.
+    /// Flushes the state and returns the coded bytes. The final value is the number in
+    /// `[low, low + range)` with the most trailing zero bits, and trailing zero bytes are
+    /// dropped: the decoder reads zeros past the end (spec §4.1).
     pub fn finish(mut self) -> Vec<u8> {
+        let hi = self.low + u64::from(self.range) - 1;
+        for b in (0..=32).rev() {
+            let mask = (1u64 << b) - 1;
+            let v = (self.low + mask) & !mask;
+            if v <= hi {
+                self.low = v;
+                break;
+            }
+        }
         for _ in 0..5 {
             self.shift_low();
+        }
+        while self.out.last() == Some(&0) {
+            self.out.pop();
         }
         self.out
     }
@@ -152,10 +166,11 @@ impl<'a> RangeDecoder<'a> {
         Ok(d)
     }
 
+    /// Next input byte; past the end the stream continues with zeros (the encoder drops
+    /// trailing zero bytes). Termination never depends on the data: callers decode a known
+    /// number of symbols.
     fn next_byte(&mut self) -> Result<u8> {
-        let b = *self.data.get(self.pos).ok_or_else(|| {
-            Error::format(self.section, "range_coded_data", "coded data ends early")
-        })?;
+        let b = self.data.get(self.pos).copied().unwrap_or(0);
         self.pos += 1;
         Ok(b)
     }
@@ -215,7 +230,7 @@ impl<'a> RangeDecoder<'a> {
 
     /// Checks that the whole coded buffer was consumed (no trailing bytes).
     pub fn finish(self) -> Result<()> {
-        if self.pos != self.data.len() {
+        if self.pos < self.data.len() {
             return Err(Error::format(
                 self.section,
                 "range_coded_data",
@@ -555,7 +570,7 @@ mod tests {
     fn empty_stream_and_garbage_terminate() {
         let enc = RangeEncoder::new();
         let bytes = enc.finish();
-        assert_eq!(bytes.len(), 4);
+        assert_eq!(bytes.len(), 0);
         let dec = RangeDecoder::new(&bytes, "t").unwrap();
         dec.finish().unwrap();
         // Garbage: decoding a bounded number of symbols ends with values or an error.
@@ -567,7 +582,14 @@ mod tests {
                 break;
             }
         }
-        assert!(RangeDecoder::new(&[1, 2], "t").is_err());
+        // Unconsumed trailing bytes are an error.
+        let mut enc = RangeEncoder::new();
+        enc.encode_direct(1, 1);
+        let mut bytes = enc.finish();
+        bytes.extend_from_slice(&[1, 2, 3, 4, 5, 6]);
+        let mut dec = RangeDecoder::new(&bytes, "t").unwrap();
+        dec.decode_direct(1).unwrap();
+        assert!(dec.finish().is_err());
     }
 
     #[test]
