@@ -106,28 +106,17 @@ fn f32_round_up(x: f64) -> f64 {
     f64::from(f)
 }
 
-/// Which rule produced a prediction; also the first part of the residual context.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(usize)]
-enum Kind {
-    /// Quad whose other three vertices are known: `a + c - b` inside the face.
-    QuadInFace = 0,
-    /// Triangle across a known face: parallelogram.
-    TriangleAcross = 1,
-    /// Polygon vertex next to the entry edge: reflect the neighbour across the entry vertex.
-    PolygonAcross = 2,
-    /// Polygon vertex after three known ones: `u[i-1] + u[i-3] - u[i-2]`.
-    PolygonChain = 3,
-    /// A known neighbour in the face (delta).
-    Delta = 4,
-    /// No known neighbour: previous vertex in geometry order.
-    Start = 5,
-}
-
-const KINDS: usize = 6;
+/// Prediction classes (first part of the residual context): how many parallelogram-type
+/// predictions were averaged (1, 2, 3+), or a fallback (average of decoded neighbours, or no
+/// decoded neighbour at all).
+const KIND_NEIGHBOURS: usize = 0;
+const KIND_START: usize = 4;
+const KINDS: usize = 5;
 /// Context count: (kind or plane) x magnitude bucket.
 const CONTEXTS: usize = (KINDS + 1) * 3;
 const PLANE_CTX: usize = KINDS;
+/// Vertices are visited by the number of decoded neighbours, capped at this.
+const MAX_LEVEL: usize = 4;
 
 /// Codes (encoder) or recovers (decoder) one quantised coordinate.
 pub trait ResidualCoder {
@@ -280,8 +269,8 @@ fn div_round(num: i128, den: i128) -> i128 {
     sign * ((2 * num.abs() + den.abs()) / (2 * den.abs()))
 }
 
-/// Visits every vertex in geometry order (first appearance walking the mesh faces in encoding
-/// order, then the isolated vertices), predicts it and lets `coder` code the residuals.
+/// Visits every vertex (spec §8.2: highest number of decoded neighbours first, then the
+/// isolated vertices), predicts it and lets `coder` code the residuals.
 ///
 /// `q` has one entry per coded vertex; `face_plane_group[f]` is the group id of face `f` when
 /// that group is a plane patch, else `NONE`.
@@ -294,140 +283,216 @@ pub fn walk(
     coder: &mut impl ResidualCoder,
 ) -> Result<()> {
     let max_q = ((1u32 << bits) - 1) as i32;
+    let nt = rb.vertex_count;
     let mut known = vec![false; q.len()];
+    let mut level = vec![0u8; nt];
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); MAX_LEVEL + 1];
     let mut planes = vec![PlaneState::default(); plane_groups];
     let mut prev_vertex: Option<u32> = None;
     let mut last_class = 0u32;
-    let mut cycle: Vec<u32> = Vec::new();
     let mut incident: Vec<u32> = Vec::new();
-    for (fi, rf) in rb.faces.iter().enumerate() {
-        if rf.hole {
-            continue;
+    let mut out_edges: Vec<u32> = Vec::new();
+    let mut next_seed = 0usize;
+    loop {
+        // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
+        // lowest undecoded vertex (a new component).
+        let mut pick = None;
+        'search: for lv in (1..=MAX_LEVEL).rev() {
+            while let Some(v) = buckets[lv].pop() {
+                if !known[v as usize] && usize::from(level[v as usize]) == lv {
+                    pick = Some(v);
+                    break 'search;
+                }
+            }
         }
-        cycle.clear();
-        cycle.extend(rb.face_vertices(fi));
-        let d = cycle.len();
-        for i in 0..d {
-            let v = cycle[i];
-            if known[v as usize] {
+        let v = match pick {
+            Some(v) => v,
+            None => {
+                while next_seed < nt && known[next_seed] {
+                    next_seed += 1;
+                }
+                if next_seed == nt {
+                    break;
+                }
+                next_seed as u32
+            }
+        };
+        // Outgoing half-edges of v in rotation order.
+        out_edges.clear();
+        let start = rb.vertex_out[v as usize];
+        let mut h = start;
+        loop {
+            out_edges.push(h);
+            h = rb.twin[rb.prev[h as usize] as usize];
+            if h == start || out_edges.len() > rb.next.len() {
+                break;
+            }
+        }
+        let kn = |w: u32| known[w as usize];
+        let p = |w: u32| q[w as usize].map(i64::from);
+        // Parallelogram-type predictions, accumulated as twice their value.
+        let mut sum2 = [0i64; 3];
+        let mut count = 0i64;
+        let mut add2 = |pr2: [i64; 3]| {
+            for c in 0..3 {
+                sum2[c] += pr2[c];
+            }
+            count += 1;
+        };
+        for &h in &out_edges {
+            let f = rb.face[h as usize] as usize;
+            let rf = rb.faces[f];
+            if rf.hole {
                 continue;
             }
-            let at = |k: isize| cycle[(i as isize + k).rem_euclid(d as isize) as usize];
-            let kn = |w: u32| known[w as usize];
-            let p = |w: u32| q[w as usize];
-            let (pred, kind) = if d == 4 && kn(at(-1)) && kn(at(1)) && kn(at(2)) {
-                (add3(p(at(-1)), p(at(1)), p(at(2))), Kind::QuadInFace)
-            } else if i == 2 && !rf.start && !rb.is_hole(rb.twin[rf.first as usize]) {
-                // Across the entry edge: K = face(g) starting at g = twin(t).
-                let g = rb.twin[rf.first as usize];
-                let kf = rb.faces[rb.face[g as usize] as usize];
-                let k2 = rb.vertex[rb.next[rb.next[g as usize] as usize] as usize];
-                let klast = rb.vertex[rb.prev[g as usize] as usize];
-                let (u0, u1) = (p(cycle[0]), p(cycle[1]));
-                if d == 3 {
-                    let pr = if kf.degree == 3 {
-                        add3(u0, u1, p(k2))
-                    } else {
-                        let (a, b) = (p(k2), p(klast));
-                        [0, 1, 2].map(|c| {
-                            (2 * (i64::from(u0[c]) + i64::from(u1[c])) - i64::from(a[c])
-                                - i64::from(b[c]))
-                            .div_euclid(2) as i32
-                        })
-                    };
-                    (pr, Kind::TriangleAcross)
-                } else {
-                    (add3(u1, u1, p(klast)), Kind::PolygonAcross)
+            let vert = |k: u32| {
+                let mut x = h;
+                for _ in 0..k {
+                    x = rb.next[x as usize];
                 }
-            } else if d >= 4 && i >= 1 && kn(at(-1)) && kn(at(-2)) && kn(at(-3)) {
-                (add3(p(at(-1)), p(at(-3)), p(at(-2))), Kind::PolygonChain)
-            } else if kn(at(-1)) {
-                (p(at(-1)), Kind::Delta)
-            } else if let Some(&w) = cycle.iter().find(|&&w| kn(w)) {
-                (p(w), Kind::Delta)
+                rb.vertex[x as usize]
+            };
+            let d = rf.degree;
+            if d == 3 {
+                let (a, b) = (vert(1), vert(2));
+                if !(kn(a) && kn(b)) {
+                    continue;
+                }
+                let tw = rb.twin[rb.next[h as usize] as usize];
+                let kf = rb.faces[rb.face[tw as usize] as usize];
+                if kf.hole {
+                    continue;
+                }
+                let k2 = rb.vertex[rb.next[rb.next[tw as usize] as usize] as usize];
+                let kl = rb.vertex[rb.prev[tw as usize] as usize];
+                if !(kn(k2) && kn(kl)) {
+                    continue;
+                }
+                let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
+                add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
+            } else {
+                let (a, b, c3) = (vert(1), vert(2), vert(3));
+                if kn(a) && kn(b) && kn(c3) {
+                    let (pa, pb, pc) = (p(a), p(b), p(c3));
+                    add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                }
+                if d >= 5 {
+                    let (a, b, c3) = (vert(d - 1), vert(d - 2), vert(d - 3));
+                    if kn(a) && kn(b) && kn(c3) {
+                        let (pa, pb, pc) = (p(a), p(b), p(c3));
+                        add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                    }
+                }
+            }
+        }
+        let (pred, kind) = if count > 0 {
+            (
+                sum2.map(|s| div_round(i128::from(s), i128::from(2 * count)) as i64),
+                count.min(3) as usize,
+            )
+        } else {
+            let mut sum = [0i64; 3];
+            let mut n = 0i64;
+            for &h in &out_edges {
+                let w = rb.vertex[rb.next[h as usize] as usize];
+                if kn(w) {
+                    let pw = p(w);
+                    for c in 0..3 {
+                        sum[c] += pw[c];
+                    }
+                    n += 1;
+                }
+            }
+            if n > 0 {
+                (
+                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64),
+                    KIND_NEIGHBOURS,
+                )
             } else {
                 let pr = match prev_vertex {
                     Some(w) => p(w),
-                    None => [max_q / 2; 3],
+                    None => [i64::from(max_q / 2); 3],
                 };
-                (pr, Kind::Start)
-            };
-            let pred = pred.map(|c| c.clamp(0, max_q));
-            // Plane groups around v (each once, ascending ids) -> best plane.
-            incident.clear();
-            let mut h = rb.vertex_out[v as usize];
-            let start = h;
-            let mut guard = 0usize;
-            loop {
-                let f = rb.face[h as usize] as usize;
-                let pg = face_plane_group.get(f).copied().unwrap_or(NONE);
-                if pg != NONE && !incident.contains(&pg) {
-                    incident.push(pg);
-                }
-                h = rb.twin[rb.prev[h as usize] as usize];
-                guard += 1;
-                if h == start || guard > rb.next.len() {
-                    break;
+                (pr, KIND_START)
+            }
+        };
+        let pred = pred.map(|c| c.clamp(0, i64::from(max_q)) as i32);
+        // Plane groups around v (each once, ascending ids) -> the plane with the largest
+        // defining triangle.
+        incident.clear();
+        for &h in &out_edges {
+            let pg = face_plane_group
+                .get(rb.face[h as usize] as usize)
+                .copied()
+                .unwrap_or(NONE);
+            if pg != NONE && !incident.contains(&pg) {
+                incident.push(pg);
+            }
+        }
+        incident.sort_unstable();
+        let best = incident
+            .iter()
+            .filter(|&&g| planes[g as usize].n == 3)
+            .max_by(|&&a, &&b| {
+                planes[a as usize]
+                    .area
+                    .cmp(&planes[b as usize].area)
+                    .then(b.cmp(&a))
+            })
+            .copied();
+        let mut slot = q[v as usize];
+        match best {
+            None => {
+                for c in 0..3 {
+                    let ctx = kind * 3 + bucket(last_class);
+                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
                 }
             }
-            incident.sort_unstable();
-            let best = incident
-                .iter()
-                .filter(|&&g| planes[g as usize].n == 3)
-                .max_by(|&&a, &&b| {
-                    planes[a as usize]
-                        .area
-                        .cmp(&planes[b as usize].area)
-                        .then(b.cmp(&a))
-                })
-                .copied();
-            let mut slot = q[v as usize];
-            match best {
-                None => {
-                    for c in 0..3 {
-                        let ctx = kind as usize * 3 + bucket(last_class);
-                        last_class = coder.code(ctx, pred[c], &mut slot[c])?;
-                    }
+            Some(g) => {
+                let pl = planes[g as usize];
+                let n = pl.normal;
+                let k = (0..3)
+                    .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
+                    .unwrap_or(0);
+                for c in (0..3).filter(|&c| c != k) {
+                    let ctx = kind * 3 + bucket(last_class);
+                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
                 }
-                Some(g) => {
-                    let pl = planes[g as usize];
-                    let n = pl.normal;
-                    let k = (0..3)
-                        .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
-                        .unwrap_or(0);
-                    for c in (0..3).filter(|&c| c != k) {
-                        let ctx = kind as usize * 3 + bucket(last_class);
-                        last_class = coder.code(ctx, pred[c], &mut slot[c])?;
-                    }
-                    let a = pl.pts[0];
-                    let num: i128 = (0..3)
-                        .filter(|&c| c != k)
-                        .map(|c| i128::from(n[c]) * (i128::from(slot[c]) - i128::from(a[c])))
-                        .sum();
-                    let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
-                    let pk = pk.clamp(0, i128::from(max_q)) as i32;
-                    let ctx = PLANE_CTX * 3 + bucket(last_class.min(1));
-                    coder.code(ctx, pk, &mut slot[k])?;
-                }
+                let a = pl.pts[0];
+                let num: i128 = (0..3)
+                    .filter(|&c| c != k)
+                    .map(|c| i128::from(n[c]) * (i128::from(slot[c]) - i128::from(a[c])))
+                    .sum();
+                let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
+                let pk = pk.clamp(0, i128::from(max_q)) as i32;
+                let ctx = PLANE_CTX * 3 + bucket(last_class);
+                coder.code(ctx, pk, &mut slot[k])?;
             }
-            q[v as usize] = slot;
-            known[v as usize] = true;
-            prev_vertex = Some(v);
-            let pt = slot.map(i64::from);
-            for &g in &incident {
-                planes[g as usize].add(pt);
+        }
+        q[v as usize] = slot;
+        known[v as usize] = true;
+        prev_vertex = Some(v);
+        let pt = slot.map(i64::from);
+        for &g in &incident {
+            planes[g as usize].add(pt);
+        }
+        for &h in &out_edges {
+            let w = rb.vertex[rb.next[h as usize] as usize] as usize;
+            if !known[w] && usize::from(level[w]) < MAX_LEVEL {
+                level[w] += 1;
+                buckets[usize::from(level[w])].push(w as u32);
             }
         }
     }
     // Isolated vertices: delta from the previous vertex.
-    for v in rb.vertex_count..q.len() {
+    for v in nt..q.len() {
         let pred = match prev_vertex {
             Some(w) => q[w as usize],
             None => [max_q / 2; 3],
         };
         let mut slot = q[v];
         for c in 0..3 {
-            let ctx = Kind::Start as usize * 3 + bucket(last_class);
+            let ctx = KIND_START * 3 + bucket(last_class);
             last_class = coder.code(ctx, pred[c], &mut slot[c])?;
         }
         q[v] = slot;
@@ -436,10 +501,6 @@ pub fn walk(
     Ok(())
 }
 
-/// `a + b - c` per component.
-fn add3(a: [i32; 3], b: [i32; 3], c: [i32; 3]) -> [i32; 3] {
-    [0, 1, 2].map(|i| a[i] + b[i] - c[i])
-}
 
 #[cfg(test)]
 mod tests {

@@ -450,7 +450,7 @@ fn make_random_mesh(r: &RandomMesh) -> ControlMesh {
     let mut m = ControlMesh::new();
     let mut bi = 0usize;
     let mut next = |n: u8| -> u8 {
-        let b = r.bits[bi % r.bits.len()].wrapping_add((bi / r.bits.len()) as u8 * 37);
+        let b = r.bits[bi % r.bits.len()].wrapping_add(((bi / r.bits.len()) as u8).wrapping_mul(37));
         bi += 1;
         b % n
     };
