@@ -7,7 +7,7 @@
 use glam::DVec3;
 
 use super::facefixer::Rebuilt;
-use super::rangecoder::{zigzag, unzigzag, IntModel, RangeDecoder, RangeEncoder};
+use super::rangecoder::{unzigzag, zigzag, BitModel, IntModel, RangeDecoder, RangeEncoder};
 use crate::error::{Error, Result};
 use crate::mesh::topology::NONE;
 
@@ -116,14 +116,24 @@ const KINDS: usize = 5;
 const CONTEXTS: usize = (KINDS + 1) * 3;
 const PLANE_CTX: usize = KINDS;
 /// Vertices are visited by the number of decoded neighbours, capped at this.
-const MAX_LEVEL: usize = 4;
+const MAX_LEVEL: usize = 6;
 
 /// Codes (encoder) or recovers (decoder) one quantised coordinate.
 pub trait ResidualCoder {
     /// `slot` holds the actual value when encoding and receives it when decoding. Returns the
     /// magnitude class of the residual (for contexts).
     fn code(&mut self, ctx: usize, pred: i32, slot: &mut i32) -> Result<u32>;
+    /// Codes one "use this parallelogram" flag (`slot` as in `code`).
+    fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()>;
+    /// True for the encoder (which knows the values and makes the choices).
+    fn encoding(&self) -> bool;
 }
+
+/// Contexts of the parallelogram-selection flags: (number of candidates 2, 3, 4+) x
+/// (index 0, 1, 2, 3+).
+const FLAG_CONTEXTS: usize = 12;
+/// At most this many parallelograms are considered per vertex (subset search is 2^n).
+const MAX_CANDIDATES: usize = 4;
 
 fn class_of(r: i32) -> u32 {
     32 - (zigzag(r) + 1).leading_zeros() - 1
@@ -140,6 +150,7 @@ fn bucket(class: u32) -> usize {
 pub struct GeomEncoder<'a> {
     pub enc: &'a mut RangeEncoder,
     models: Vec<IntModel>,
+    flags: Vec<BitModel>,
 }
 
 impl<'a> GeomEncoder<'a> {
@@ -147,6 +158,7 @@ impl<'a> GeomEncoder<'a> {
         GeomEncoder {
             enc,
             models: vec![IntModel::default(); CONTEXTS],
+            flags: vec![BitModel::default(); FLAG_CONTEXTS],
         }
     }
 }
@@ -157,11 +169,21 @@ impl ResidualCoder for GeomEncoder<'_> {
         self.models[ctx].encode(self.enc, zigzag(r));
         Ok(class_of(r))
     }
+
+    fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()> {
+        self.enc.encode_bit(&mut self.flags[ctx], *slot);
+        Ok(())
+    }
+
+    fn encoding(&self) -> bool {
+        true
+    }
 }
 
 pub struct GeomDecoder<'a, 'b> {
     pub dec: &'a mut RangeDecoder<'b>,
     models: Vec<IntModel>,
+    flags: Vec<BitModel>,
     max_q: i32,
 }
 
@@ -170,6 +192,7 @@ impl<'a, 'b> GeomDecoder<'a, 'b> {
         GeomDecoder {
             dec,
             models: vec![IntModel::default(); CONTEXTS],
+            flags: vec![BitModel::default(); FLAG_CONTEXTS],
             max_q,
         }
     }
@@ -189,6 +212,15 @@ impl ResidualCoder for GeomDecoder<'_, '_> {
         }
         *slot = v;
         Ok(class_of(r))
+    }
+
+    fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()> {
+        *slot = self.dec.decode_bit(&mut self.flags[ctx])?;
+        Ok(())
+    }
+
+    fn encoding(&self) -> bool {
+        false
     }
 }
 
@@ -292,6 +324,7 @@ pub fn walk(
     let mut last_class = 0u32;
     let mut incident: Vec<u32> = Vec::new();
     let mut out_edges: Vec<u32> = Vec::new();
+    let mut cands: Vec<[i64; 3]> = Vec::new();
     let mut next_seed = 0usize;
     loop {
         // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
@@ -331,13 +364,12 @@ pub fn walk(
         let kn = |w: u32| known[w as usize];
         let p = |w: u32| q[w as usize].map(i64::from);
         // Parallelogram-type predictions, accumulated as twice their value.
-        let mut sum2 = [0i64; 3];
-        let mut count = 0i64;
+        // Parallelogram-type predictions, each as twice its value, in rotation order.
+        cands.clear();
         let mut add2 = |pr2: [i64; 3]| {
-            for c in 0..3 {
-                sum2[c] += pr2[c];
+            if cands.len() < MAX_CANDIDATES {
+                cands.push(pr2);
             }
-            count += 1;
         };
         for &h in &out_edges {
             let f = rb.face[h as usize] as usize;
@@ -385,11 +417,9 @@ pub fn walk(
                 }
             }
         }
+        let count = cands.len();
         let (pred, kind) = if count > 0 {
-            (
-                sum2.map(|s| div_round(i128::from(s), i128::from(2 * count)) as i64),
-                count.min(3) as usize,
-            )
+            (Vec::new(), count.min(3))
         } else {
             let mut sum = [0i64; 3];
             let mut n = 0i64;
@@ -405,7 +435,7 @@ pub fn walk(
             }
             if n > 0 {
                 (
-                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64),
+                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64).to_vec(),
                     KIND_NEIGHBOURS,
                 )
             } else {
@@ -413,10 +443,9 @@ pub fn walk(
                     Some(w) => p(w),
                     None => [i64::from(max_q / 2); 3],
                 };
-                (pr, KIND_START)
+                (pr.to_vec(), KIND_START)
             }
         };
-        let pred = pred.map(|c| c.clamp(0, i64::from(max_q)) as i32);
         // Plane groups around v (each once, ascending ids) -> the plane with the largest
         // defining triangle.
         incident.clear();
@@ -440,6 +469,75 @@ pub fn walk(
                     .then(b.cmp(&a))
             })
             .copied();
+        // The plane's dominant axis (predicted from the plane, not from the parallelograms).
+        let plane_axis = best.map(|g| {
+            let n = planes[g as usize].normal;
+            (0..3)
+                .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
+                .unwrap_or(0)
+        });
+        let pred: [i32; 3] = if count == 0 {
+            [pred[0], pred[1], pred[2]].map(|c| c.clamp(0, i64::from(max_q)) as i32)
+        } else {
+            // Subset of the parallelograms to average: all of them unless the encoder signals
+            // otherwise with one flag per candidate (spec §8.2); the last flag is implied when
+            // all earlier ones are 0.
+            let average = |mask: usize| -> [i32; 3] {
+                let mut sum = [0i64; 3];
+                let mut n = 0i64;
+                for (i, c) in cands.iter().enumerate() {
+                    if mask & (1 << i) != 0 {
+                        for k in 0..3 {
+                            sum[k] += c[k];
+                        }
+                        n += 1;
+                    }
+                }
+                sum.map(|s| {
+                    (div_round(i128::from(s), i128::from(2 * n)) as i64).clamp(0, i64::from(max_q))
+                        as i32
+                })
+            };
+            let full = (1usize << count) - 1;
+            let mut mask = full;
+            if count >= 2 {
+                if coder.encoding() {
+                    let actual = q[v as usize];
+                    let cost = |m: usize| -> u32 {
+                        let p = average(m);
+                        (0..3)
+                            .filter(|&k| Some(k) != plane_axis)
+                            .map(|k| (actual[k] - p[k]).unsigned_abs())
+                            .sum()
+                    };
+                    let mut best_cost = cost(full);
+                    for m in 1..full {
+                        let c = cost(m);
+                        if c < best_cost {
+                            best_cost = c;
+                            mask = m;
+                        }
+                    }
+                }
+                let base = (count.min(4) - 2) * 4;
+                let mut any = false;
+                for i in 0..count {
+                    if i + 1 == count && !any {
+                        mask |= 1 << i;
+                        break;
+                    }
+                    let mut bit = mask & (1 << i) != 0;
+                    coder.flag(base + i.min(3), &mut bit)?;
+                    if bit {
+                        mask |= 1 << i;
+                        any = true;
+                    } else {
+                        mask &= !(1 << i);
+                    }
+                }
+            }
+            average(mask)
+        };
         let mut slot = q[v as usize];
         match best {
             None => {
@@ -451,9 +549,7 @@ pub fn walk(
             Some(g) => {
                 let pl = planes[g as usize];
                 let n = pl.normal;
-                let k = (0..3)
-                    .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
-                    .unwrap_or(0);
+                let k = plane_axis.unwrap_or(0);
                 for c in (0..3).filter(|&c| c != k) {
                     let ctx = kind * 3 + bucket(last_class);
                     last_class = coder.code(ctx, pred[c], &mut slot[c])?;
