@@ -244,15 +244,21 @@ const SYM_M: usize = 9;
 /// tiny meshes pay less learning cost than with all-ones counts.
 const LABEL_PRIOR: [u32; LABEL_SYMBOLS] = [4, 4, 1, 1, 4, 1, 1, 1, 1, 1];
 
+/// Group of a mesh face, relative to the groups of its already-decoded neighbours
+/// (spec §6.4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum GroupSym {
-    /// Same group as the face across the entry edge (or the previous face).
-    Same,
+    /// The `i`-th distinct group among the candidates (`i < GROUP_CANDIDATES`).
+    Candidate(u8),
     /// The next group id not used so far.
     New,
-    /// An already used group id.
+    /// An already used group id, given explicitly.
     Explicit(u32),
 }
+
+/// Candidate symbols; the alphabet is these plus `New` and `Explicit`.
+const GROUP_CANDIDATES: usize = 3;
+const GROUP_SYMBOLS: usize = GROUP_CANDIDATES + 2;
 
 struct ConnModels {
     labels: Vec<FreqModel>,
@@ -273,9 +279,9 @@ impl ConnModels {
             hole_degree: IntModel::default(),
             m_depth: IntModel::default(),
             m_length: IntModel::default(),
-            groups: vec![FreqModel::new(3); 4],
+            groups: vec![FreqModel::new(GROUP_SYMBOLS); GROUP_SYMBOLS + 1],
             prev: [LABEL_CONTEXT_NONE; 2],
-            prev_group: 3,
+            prev_group: GROUP_SYMBOLS,
         }
     }
 
@@ -353,9 +359,9 @@ impl ConnModels {
 
     fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, seen: u32) {
         let s = match g {
-            GroupSym::Same => 0,
-            GroupSym::New => 1,
-            GroupSym::Explicit(_) => 2,
+            GroupSym::Candidate(i) => usize::from(i),
+            GroupSym::New => GROUP_CANDIDATES,
+            GroupSym::Explicit(_) => GROUP_CANDIDATES + 1,
         };
         self.groups[self.prev_group].encode(enc, s);
         self.prev_group = s;
@@ -370,8 +376,8 @@ impl ConnModels {
         let s = self.groups[self.prev_group].decode(dec)?;
         self.prev_group = s;
         Ok(match s {
-            0 => GroupSym::Same,
-            1 => GroupSym::New,
+            i if i < GROUP_CANDIDATES => GroupSym::Candidate(i as u8),
+            GROUP_CANDIDATES => GroupSym::New,
             _ => {
                 let b = bits_for(u64::from(seen));
                 let hi = dec.decode_direct(b.saturating_sub(16))?;
@@ -390,18 +396,25 @@ impl ConnModels {
     }
 }
 
-/// The group a face is compared with: the face across its entry edge when that is a mesh
-/// face, otherwise the previous mesh face in encoding order.
-fn reference_face(rb: &Rebuilt, f: usize, prev_real: Option<usize>) -> Option<usize> {
+/// Candidate groups of mesh face `f` (spec §6.4): the distinct groups of the mesh faces
+/// across its edges that precede it in encoding order, in the order of its half-edges from
+/// the entry half-edge; when there are none, the group of the previous mesh face.
+fn group_candidates(rb: &Rebuilt, f: usize, face_group: &[u32], prev_real: Option<usize>, out: &mut Vec<u32>) {
+    out.clear();
     let rf = rb.faces[f];
-    if !rf.start {
-        let g = rb.twin[rf.first as usize];
-        let k = rb.face[g as usize] as usize;
-        if !rb.faces[k].hole {
-            return Some(k);
+    let mut h = rf.first;
+    for _ in 0..rf.degree {
+        let k = rb.face[rb.twin[h as usize] as usize] as usize;
+        if k < f && !rb.faces[k].hole && !out.contains(&face_group[k]) {
+            out.push(face_group[k]);
+        }
+        h = rb.next[h as usize];
+    }
+    if out.is_empty() {
+        if let Some(p) = prev_real {
+            out.push(face_group[p]);
         }
     }
-    prev_real
 }
 
 // ------------------------------------------------------------------------------------------
@@ -580,6 +593,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let mut face_group_new = vec![NONE; rb.faces.len()];
     let mut group_syms = Vec::new();
     let mut prev_real = None;
+    let mut cands = Vec::new();
     for (i, rf) in rb.faces.iter().enumerate() {
         if rf.hole {
             continue;
@@ -590,11 +604,10 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             next_group += 1;
             GroupSym::New
         } else {
-            let r = reference_face(&rb, i, prev_real).map(|k| face_group_new[k]);
-            if r == Some(group_new[og]) {
-                GroupSym::Same
-            } else {
-                GroupSym::Explicit(group_new[og])
+            group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
+            match cands.iter().take(GROUP_CANDIDATES).position(|&g| g == group_new[og]) {
+                Some(c) => GroupSym::Candidate(c as u8),
+                None => GroupSym::Explicit(group_new[og]),
             }
         };
         group_syms.push((sym, next_group - u32::from(sym == GroupSym::New)));
@@ -1130,6 +1143,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut next_group = 0u32;
     let mut prev_real = None;
     let mut si = 0;
+    let mut cands = Vec::new();
     for i in 0..rb.faces.len() {
         if rb.faces[i].hole {
             continue;
@@ -1145,12 +1159,19 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
                     next_group - 1
                 }
                 GroupSym::Explicit(id) => id,
-                GroupSym::Same => match reference_face(&rb, i, prev_real) {
-                    Some(k) => face_group[k],
-                    None => {
-                        return Err(Error::format("connectivity", "group", "`same group` for the first face"))
+                GroupSym::Candidate(c) => {
+                    group_candidates(&rb, i, &face_group, prev_real, &mut cands);
+                    match cands.get(usize::from(c)) {
+                        Some(&g) => g,
+                        None => {
+                            return Err(Error::format(
+                                "connectivity",
+                                "group",
+                                format!("face {i} refers to candidate group {c} of {}", cands.len()),
+                            ))
+                        }
                     }
-                },
+                }
             }
         };
         if g as usize >= group_count {
