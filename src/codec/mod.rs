@@ -17,6 +17,7 @@ pub mod bytes;
 pub mod facefixer;
 pub mod geometry;
 pub mod rangecoder;
+pub mod samples;
 
 use std::collections::BTreeSet;
 
