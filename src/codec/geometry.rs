@@ -562,7 +562,7 @@ pub fn walk(
                 let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
                 let pk = pk.clamp(0, i128::from(max_q)) as i32;
                 let ctx = PLANE_CTX * 3 + bucket(last_class);
-                coder.code(ctx, pk, &mut slot[k])?;
+                last_class = coder.code(ctx, pk, &mut slot[k])?;
             }
         }
         q[v as usize] = slot;
