@@ -280,7 +280,7 @@ impl ConnModels {
             hole_degree: IntModel::default(),
             m_depth: IntModel::default(),
             m_length: IntModel::default(),
-            groups: vec![FreqModel::new(GROUP_SYMBOLS); GROUP_SYMBOLS + 1],
+            groups: vec![FreqModel::new(GROUP_SYMBOLS); 3 * (GROUP_SYMBOLS + 1)],
             prev: [LABEL_CONTEXT_NONE; 2],
             prev_group: GROUP_SYMBOLS,
         }
@@ -358,13 +358,19 @@ impl ConnModels {
         })
     }
 
-    fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, seen: u32) {
+    /// Context: number of candidates (0-1, 2, 3+) x previous group symbol.
+    fn group_ctx(&self, candidates: usize) -> usize {
+        (candidates.clamp(1, 3) - 1) * (GROUP_SYMBOLS + 1) + self.prev_group
+    }
+
+    fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, seen: u32, candidates: usize) {
         let s = match g {
             GroupSym::Candidate(i) => usize::from(i),
             GroupSym::New => GROUP_CANDIDATES,
             GroupSym::Explicit(_) => GROUP_CANDIDATES + 1,
         };
-        self.groups[self.prev_group].encode(enc, s);
+        let c = self.group_ctx(candidates);
+        self.groups[c].encode(enc, s);
         self.prev_group = s;
         if let GroupSym::Explicit(id) = g {
             let b = bits_for(u64::from(seen));
@@ -373,8 +379,9 @@ impl ConnModels {
         }
     }
 
-    fn decode_group(&mut self, dec: &mut RangeDecoder, seen: u32) -> Result<GroupSym> {
-        let s = self.groups[self.prev_group].decode(dec)?;
+    fn decode_group(&mut self, dec: &mut RangeDecoder, seen: u32, candidates: usize) -> Result<GroupSym> {
+        let c = self.group_ctx(candidates);
+        let s = self.groups[c].decode(dec)?;
         self.prev_group = s;
         Ok(match s {
             i if i < GROUP_CANDIDATES => GroupSym::Candidate(i as u8),
@@ -600,18 +607,18 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             continue;
         }
         let og = mesh.face_groups[rebuilt_face_source[i] as usize] as usize;
+        group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
         let sym = if group_new[og] == NONE {
             group_new[og] = next_group;
             next_group += 1;
             GroupSym::New
         } else {
-            group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
             match cands.iter().take(GROUP_CANDIDATES).position(|&g| g == group_new[og]) {
                 Some(c) => GroupSym::Candidate(c as u8),
                 None => GroupSym::Explicit(group_new[og]),
             }
         };
-        group_syms.push((sym, next_group - u32::from(sym == GroupSym::New)));
+        group_syms.push((sym, next_group - u32::from(sym == GroupSym::New), cands.len()));
         face_group_new[i] = group_new[og];
         prev_real = Some(i);
     }
@@ -631,15 +638,12 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     {
         let mut enc = RangeEncoder::new();
         let mut models = ConnModels::new();
-        let mut gi = 0;
         for &l in &tr.labels {
             models.encode_label(&mut enc, l);
-            if matches!(l, Label::F(_)) && group_count > 1 {
-                let (sym, seen) = group_syms[gi];
-                models.encode_group(&mut enc, sym, seen);
-            }
-            if matches!(l, Label::F(_)) {
-                gi += 1;
+        }
+        if group_count > 1 {
+            for &(sym, seen, nc) in &group_syms {
+                models.encode_group(&mut enc, sym, seen, nc);
             }
         }
         conn.extend_from_slice(&enc.finish());
@@ -1105,23 +1109,10 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut dec = RangeDecoder::new(cr.rest(), "connectivity")?;
     let mut models = ConnModels::new();
     let mut labels = Vec::new();
-    let mut group_syms = Vec::new();
     let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
-    let mut seen = 0u32;
     for _ in 0..label_count {
-        let l = models.decode_label(&mut dec, max_degree.max(3))?;
-        if let Label::F(_) = l {
-            if group_count > 1 {
-                let g = models.decode_group(&mut dec, seen)?;
-                if g == GroupSym::New {
-                    seen += 1;
-                }
-                group_syms.push(g);
-            }
-        }
-        labels.push(l);
+        labels.push(models.decode_label(&mut dec, max_degree.max(3))?);
     }
-    dec.finish()?;
     let rb = rebuild(&labels)?;
     let real_faces = rb.faces.iter().filter(|f| !f.hole).count();
     let real_corners: u64 = rb.faces.iter().filter(|f| !f.hole).map(|f| u64::from(f.degree)).sum();
@@ -1143,7 +1134,6 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut face_group = vec![NONE; rb.faces.len()];
     let mut next_group = 0u32;
     let mut prev_real = None;
-    let mut si = 0;
     let mut cands = Vec::new();
     for i in 0..rb.faces.len() {
         if rb.faces[i].hole {
@@ -1152,16 +1142,14 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         let g = if group_count <= 1 {
             0
         } else {
-            let sym = group_syms[si];
-            si += 1;
-            match sym {
+            group_candidates(&rb, i, &face_group, prev_real, &mut cands);
+            match models.decode_group(&mut dec, next_group, cands.len())? {
                 GroupSym::New => {
                     next_group += 1;
                     next_group - 1
                 }
                 GroupSym::Explicit(id) => id,
                 GroupSym::Candidate(c) => {
-                    group_candidates(&rb, i, &face_group, prev_real, &mut cands);
                     match cands.get(usize::from(c)) {
                         Some(&g) => g,
                         None => {
@@ -1181,6 +1169,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         face_group[i] = g;
         prev_real = Some(i);
     }
+    dec.finish()?;
 
     // Patches.
     let patch_kinds = match &payloads[SEC_PATCHES as usize] {
