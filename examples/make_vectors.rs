@@ -15,7 +15,9 @@ fn vectors() -> Vec<(&'static str, ControlMesh, EncodeOptions)> {
     let raw = EncodeOptions::default();
     let control = |level, bits| EncodeOptions {
         quantization_bits: bits,
-        content: Content::ControlMesh { default_level: level },
+        content: Content::ControlMesh {
+            default_level: level,
+        },
         store_group_names: true,
     };
     vec![

@@ -88,7 +88,11 @@ fn add_cad_attributes(m: &mut ControlMesh, json: Option<String>) {
         let mut rest = j.as_str();
         while let Some(p) = rest.find("\"tag\":") {
             rest = &rest[p + 6..];
-            let tag: String = rest.trim_start().chars().take_while(|c| c.is_ascii_digit()).collect();
+            let tag: String = rest
+                .trim_start()
+                .chars()
+                .take_while(|c| c.is_ascii_digit())
+                .collect();
             if let Some(t) = rest.find("\"type\":") {
                 let ty = rest[t + 7..].trim_start();
                 if ty.starts_with("\"Plane\"") {
@@ -108,7 +112,10 @@ fn add_cad_attributes(m: &mut ControlMesh, json: Option<String>) {
         let face = m.face(f).to_vec();
         let g = m.face_groups[f];
         for i in 0..face.len() {
-            edge_groups.entry(edge_key(face[i], face[(i + 1) % face.len()])).or_default().push(g);
+            edge_groups
+                .entry(edge_key(face[i], face[(i + 1) % face.len()]))
+                .or_default()
+                .push(g);
             vertex_groups[face[i] as usize].insert(g);
         }
     }
@@ -140,8 +147,14 @@ fn round_trip(name: &str, m: &ControlMesh) -> usize {
     assert_eq!(out.vertex_count(), m.vertex_count(), "{name}");
     for f in 0..m.face_count() {
         let expected: Vec<u32> = m.face(f).iter().map(|&v| map.vertex[v as usize]).collect();
-        assert!(cyclic_eq(&expected, out.face(map.face[f] as usize)), "{name}: face {f}");
-        assert_eq!(out.face_groups[map.face[f] as usize], map.group[m.face_groups[f] as usize]);
+        assert!(
+            cyclic_eq(&expected, out.face(map.face[f] as usize)),
+            "{name}: face {f}"
+        );
+        assert_eq!(
+            out.face_groups[map.face[f] as usize],
+            map.group[m.face_groups[f] as usize]
+        );
     }
     for (g, grp) in m.groups.iter().enumerate() {
         assert_eq!(out.groups[map.group[g] as usize], *grp, "{name}: group {g}");
@@ -156,8 +169,13 @@ fn round_trip(name: &str, m: &ControlMesh) -> usize {
     assert_eq!(corners, out.corners, "{name}");
     let step = d.header.quantization_step();
     for (v, p) in m.positions.iter().enumerate() {
-        let e = (out.positions[map.vertex[v] as usize] - *p).abs().max_element();
-        assert!(e <= step / 2.0 * (1.0 + 1e-9) + 1e-12, "{name}: vertex {v} off by {e}");
+        let e = (out.positions[map.vertex[v] as usize] - *p)
+            .abs()
+            .max_element();
+        assert!(
+            e <= step / 2.0 * (1.0 + 1e-9) + 1e-12,
+            "{name}: vertex {v} off by {e}"
+        );
     }
     let info = inspect(&bytes, &Limits::default()).unwrap();
     let secs: Vec<String> = info
@@ -210,7 +228,11 @@ fn corpus_meshes_round_trip() {
     for p in files {
         let text = std::fs::read_to_string(&p).unwrap();
         let name = p.file_name().unwrap().to_string_lossy().to_string();
-        let mut m = if name.ends_with(".off") { parse_off(&text) } else { parse_obj(&text) };
+        let mut m = if name.ends_with(".off") {
+            parse_off(&text)
+        } else {
+            parse_obj(&text)
+        };
         m.validate().unwrap();
         if std::env::var("STRIP_GROUPS").is_ok() {
             m.groups.truncate(1);

@@ -15,7 +15,12 @@ fn vectors() -> Vec<(String, Vec<u8>, u64, usize, usize)> {
         .map(|l| {
             let f: Vec<&str> = l.split_whitespace().collect();
             let bytes = std::fs::read(dir.join(f[0])).expect("vector file");
-            assert_eq!(bytes.len(), f[4].parse::<usize>().unwrap(), "{}: size", f[0]);
+            assert_eq!(
+                bytes.len(),
+                f[4].parse::<usize>().unwrap(),
+                "{}: size",
+                f[0]
+            );
             (
                 f[0].to_string(),
                 bytes,
@@ -35,7 +40,11 @@ fn vectors_decode_to_expected_meshes() {
         let d = decode(&bytes, &Limits::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(d.mesh.vertex_count(), nv, "{name}");
         assert_eq!(d.mesh.face_count(), nf, "{name}");
-        assert_eq!(canonical_hash(&d.mesh), hash, "{name}: decoded mesh differs");
+        assert_eq!(
+            canonical_hash(&d.mesh),
+            hash,
+            "{name}: decoded mesh differs"
+        );
     }
 }
 
@@ -47,13 +56,19 @@ fn truncations_and_bit_flips_are_errors() {
     };
     for (name, bytes, hash, _, _) in vectors() {
         for n in 0..bytes.len() {
-            assert!(decode(&bytes[..n], &Limits::default()).is_err(), "{name}: prefix {n}");
+            assert!(
+                decode(&bytes[..n], &Limits::default()).is_err(),
+                "{name}: prefix {n}"
+            );
             let _ = decode(&bytes[..n], &lax);
         }
         for i in 0..bytes.len() * 8 {
             let mut c = bytes.clone();
             c[i / 8] ^= 1 << (i % 8);
-            assert!(decode(&c, &Limits::default()).is_err(), "{name}: bit {i} flip accepted");
+            assert!(
+                decode(&c, &Limits::default()).is_err(),
+                "{name}: bit {i} flip accepted"
+            );
             // Without CRCs the flip may decode; it must never panic and must give a valid mesh.
             if let Ok(d) = decode(&c, &lax) {
                 d.mesh.validate().unwrap();

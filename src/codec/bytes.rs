@@ -148,7 +148,13 @@ const MIN_DEFLATE_TRY: usize = 24;
 /// Appends one section: `tag | len | [raw_len] | payload | crc32`. The payload is deflated
 /// when that makes it smaller (and `allow_deflate`). `crc_start` is where the CRC coverage
 /// begins in `out` (the tag byte, or the file start for the header section).
-pub fn put_section(out: &mut Vec<u8>, id: u8, payload: &[u8], allow_deflate: bool, crc_from_file_start: bool) {
+pub fn put_section(
+    out: &mut Vec<u8>,
+    id: u8,
+    payload: &[u8],
+    allow_deflate: bool,
+    crc_from_file_start: bool,
+) {
     let start = if crc_from_file_start { 0 } else { out.len() };
     let mut deflated = None;
     if allow_deflate && payload.len() >= MIN_DEFLATE_TRY {
@@ -226,13 +232,11 @@ pub fn read_section(
     let covered_end = r.pos();
     let crc_bytes = r.bytes(4, "crc32")?;
     let crc = u32::from_le_bytes([crc_bytes[0], crc_bytes[1], crc_bytes[2], crc_bytes[3]]);
-    if verify {
-        if crc32fast::hash(&r.data[crc_from..covered_end]) != crc {
-            return Err(r.err(
-                "crc32",
-                format!("checksum mismatch in section {id} (data corrupted)"),
-            ));
-        }
+    if verify && crc32fast::hash(&r.data[crc_from..covered_end]) != crc {
+        return Err(r.err(
+            "crc32",
+            format!("checksum mismatch in section {id} (data corrupted)"),
+        ));
     }
     let payload = match raw_len {
         None => stored.to_vec(),

@@ -260,7 +260,10 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
     for (j, lab) in labels.iter().enumerate() {
         if open == 0 {
             if !matches!(lab, Label::F(_)) {
-                return Err(bad("labels", format!("label {j} starts a component but is not F")));
+                return Err(bad(
+                    "labels",
+                    format!("label {j} starts a component but is not F"),
+                ));
             }
             start = j;
             open = 1;
@@ -299,10 +302,10 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
     ];
     let mut label_edge = vec![NONE; labels.len()];
     let new_pair = |next: &mut Vec<u32>,
-                        twin: &mut Vec<u32>,
-                        face: &mut Vec<u32>,
-                        a_next: &mut Vec<u32>,
-                        a_prev: &mut Vec<u32>|
+                    twin: &mut Vec<u32>,
+                    face: &mut Vec<u32>,
+                    a_next: &mut Vec<u32>,
+                    a_prev: &mut Vec<u32>|
      -> Result<(u32, u32)> {
         let g = next.len();
         if g + 2 >= NONE as usize {
@@ -342,7 +345,10 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
                 }
                 Label::R | Label::L => {
                     if gate == NONE {
-                        return Err(bad("labels", format!("label {j} ({lab:?}) on an empty boundary")));
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} ({lab:?}) on an empty boundary"),
+                        ));
                     }
                     let (g, t) =
                         new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
@@ -360,7 +366,10 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
                 }
                 Label::S => {
                     let Some((gy, leny)) = stack.pop() else {
-                        return Err(bad("labels", format!("label {j} (S) without a suspended boundary")));
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} (S) without a suspended boundary"),
+                        ));
                     };
                     if gate == NONE {
                         return Err(bad("labels", format!("label {j} (S) on an empty boundary")));
@@ -529,12 +538,12 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
             h = next[h as usize];
         }
     }
-    for h in 0..nh {
+    for (h, vh) in vertex.iter_mut().enumerate() {
         let r = find(&mut parent, h as u32) as usize;
         if id_of_root[r] == NONE {
             return Err(bad("labels", "a vertex lies on hole faces only"));
         }
-        vertex[h] = id_of_root[r];
+        *vh = id_of_root[r];
     }
     Ok(Rebuilt {
         next,
@@ -630,13 +639,19 @@ mod tests {
         let faces = vec![vec![0, 2, 1], vec![0, 1, 3], vec![0, 3, 2], vec![1, 2, 3]];
         let (labels, out) = round_trip(4, &faces);
         assert_eq!(labels, vec![F(3), F(3), F(3), R, F(3), R, E]);
-        assert_eq!(out, vec![vec![0, 1, 2], vec![1, 0, 3], vec![1, 3, 2], vec![2, 3, 0]]);
+        assert_eq!(
+            out,
+            vec![vec![0, 1, 2], vec![1, 0, 3], vec![1, 3, 2], vec![2, 3, 0]]
+        );
     }
 
     #[test]
     fn cube_vector() {
         let (labels, out) = round_trip(8, &cube_faces());
-        assert_eq!(labels, vec![F(4), F(4), F(4), R, F(4), R, F(4), R, R, F(4), R, R, E]);
+        assert_eq!(
+            labels,
+            vec![F(4), F(4), F(4), R, F(4), R, F(4), R, R, F(4), R, R, E]
+        );
         assert_eq!(
             out,
             vec![
@@ -655,7 +670,10 @@ mod tests {
         let mut faces = cube_faces();
         faces.remove(1);
         let (labels, out) = round_trip(8, &faces);
-        assert_eq!(labels, vec![F(4), F(4), F(4), R, F(4), R, F(4), R, R, H(4), R, R, E]);
+        assert_eq!(
+            labels,
+            vec![F(4), F(4), F(4), R, F(4), R, F(4), R, R, H(4), R, R, E]
+        );
         assert_eq!(out.len(), 5);
         assert_eq!(out[4], vec![3, 7, 4, 0]);
     }
@@ -667,8 +685,31 @@ mod tests {
         assert_eq!(
             labels,
             vec![
-                F(4), F(4), F(4), F(4), R, F(4), F(4), R, F(4), F(4), R, F(4), R, S, R, R, F(4),
-                F(4), R, F(4), R, R, m, R, E
+                F(4),
+                F(4),
+                F(4),
+                F(4),
+                R,
+                F(4),
+                F(4),
+                R,
+                F(4),
+                F(4),
+                R,
+                F(4),
+                R,
+                S,
+                R,
+                R,
+                F(4),
+                F(4),
+                R,
+                F(4),
+                R,
+                R,
+                m,
+                R,
+                E
             ]
         );
         let (labels, _) = round_trip(20, &torus(5, 4));
@@ -682,13 +723,47 @@ mod tests {
         let mut faces = Vec::new();
         for i in 0..2u32 {
             for j in 0..6u32 {
-                faces.push(vec![i * 6 + j, i * 6 + (j + 1) % 6, (i + 1) * 6 + (j + 1) % 6, (i + 1) * 6 + j]);
+                faces.push(vec![
+                    i * 6 + j,
+                    i * 6 + (j + 1) % 6,
+                    (i + 1) * 6 + (j + 1) % 6,
+                    (i + 1) * 6 + j,
+                ]);
             }
         }
         let (labels, _) = round_trip(18, &faces);
         let expected = [
-            F(4), H(6), F(4), R, F(4), F(4), R, F(4), F(4), R, R, F(4), R, F(4), R, F(4), R, R,
-            F(4), R, H(6), R, R, R, F(4), R, R, F(4), R, R, E,
+            F(4),
+            H(6),
+            F(4),
+            R,
+            F(4),
+            F(4),
+            R,
+            F(4),
+            F(4),
+            R,
+            R,
+            F(4),
+            R,
+            F(4),
+            R,
+            F(4),
+            R,
+            R,
+            F(4),
+            R,
+            H(6),
+            R,
+            R,
+            R,
+            F(4),
+            R,
+            R,
+            F(4),
+            R,
+            R,
+            E,
         ];
         assert_eq!(labels, expected);
         let house = vec![
@@ -701,7 +776,27 @@ mod tests {
             vec![6, 8, 9, 7],
         ];
         let (labels, _) = round_trip(10, &house);
-        assert_eq!(labels, vec![F(4), F(5), F(4), R, F(5), R, F(4), R, R, F(4), R, F(4), R, R, R, E]);
+        assert_eq!(
+            labels,
+            vec![
+                F(4),
+                F(5),
+                F(4),
+                R,
+                F(5),
+                R,
+                F(4),
+                R,
+                R,
+                F(4),
+                R,
+                F(4),
+                R,
+                R,
+                R,
+                E
+            ]
+        );
     }
 
     #[test]
@@ -713,7 +808,7 @@ mod tests {
         // Second torus: vertices 20..40, but its removed face's loop is identified with the
         // first torus's loop (reversed orientation).
         let hole = &t[0]; // (0, 4, 5, 1)
-        // The second torus is reversed, so its boundary runs opposite to the first one's.
+                          // The second torus is reversed, so its boundary runs opposite to the first one's.
         let map2 = |v: u32| -> u32 {
             if hole.contains(&v) {
                 v

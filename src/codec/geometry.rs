@@ -39,9 +39,7 @@ impl Quantizer {
         let extent64 = (hi - lo).max_element();
         // f32 candidate: min rounded down, extent rounded up so the box still covers everything.
         let min32: [f64; 3] = [0, 1, 2].map(|i| f32_round_down(lo[i]));
-        let need = (0..3)
-            .map(|i| hi[i] - min32[i])
-            .fold(0.0f64, f64::max);
+        let need = (0..3).map(|i| hi[i] - min32[i]).fold(0.0f64, f64::max);
         let extent32 = f32_round_up(need);
         let ok32 = min32.iter().all(|v| v.is_finite())
             && extent32.is_finite()
@@ -94,16 +92,41 @@ impl Quantizer {
     }
 }
 
+/// Largest f32 <= x (x finite and within the f32 range, else the result is not finite).
 fn f32_round_down(x: f64) -> f64 {
     let f = x as f32;
-    let f = if f64::from(f) > x { f.next_down() } else { f };
+    let f = if f64::from(f) > x {
+        f32_step(f, false)
+    } else {
+        f
+    };
     f64::from(f)
 }
 
+/// Smallest f32 >= x.
 fn f32_round_up(x: f64) -> f64 {
     let f = x as f32;
-    let f = if f64::from(f) < x { f.next_up() } else { f };
+    let f = if f64::from(f) < x {
+        f32_step(f, true)
+    } else {
+        f
+    };
     f64::from(f)
+}
+
+/// The next representable f32 above (`up`) or below a finite `f`.
+fn f32_step(f: f32, up: bool) -> f32 {
+    if f == 0.0 {
+        let tiny = f32::from_bits(1);
+        return if up { tiny } else { -tiny };
+    }
+    let bits = f.to_bits();
+    // Moving away from zero increments the magnitude bits.
+    if (f > 0.0) == up {
+        f32::from_bits(bits + 1)
+    } else {
+        f32::from_bits(bits - 1)
+    }
 }
 
 /// Prediction classes (first part of the residual context): how many parallelogram-type
@@ -435,7 +458,8 @@ pub fn walk(
             }
             if n > 0 {
                 (
-                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64).to_vec(),
+                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64)
+                        .to_vec(),
                     KIND_NEIGHBOURS,
                 )
             } else {
@@ -597,7 +621,6 @@ pub fn walk(
     Ok(())
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -614,6 +637,17 @@ mod tests {
         assert_eq!(q.quantize(DVec3::splat(0.3)), [307; 3]);
         assert!((q.dequantize([307; 3]).x - 0.300098).abs() < 1e-6);
         assert_eq!(q.quantize(DVec3::ONE), [1023; 3]);
+    }
+
+    #[test]
+    fn f32_rounding_brackets_the_value() {
+        for x in [0.1f64, -0.1, 1e-30, -1e-30, 0.0, 123456.789, -7.25, 1e30] {
+            let (lo, hi) = (f32_round_down(x), f32_round_up(x));
+            assert!(lo <= x && x <= hi, "{x}: {lo} {hi}");
+            assert_eq!(lo as f32 as f64, lo);
+            assert_eq!(hi as f32 as f64, hi);
+        }
+        assert_eq!(f32_round_down(-7.25), -7.25);
     }
 
     #[test]

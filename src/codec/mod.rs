@@ -379,7 +379,12 @@ impl ConnModels {
         }
     }
 
-    fn decode_group(&mut self, dec: &mut RangeDecoder, seen: u32, candidates: usize) -> Result<GroupSym> {
+    fn decode_group(
+        &mut self,
+        dec: &mut RangeDecoder,
+        seen: u32,
+        candidates: usize,
+    ) -> Result<GroupSym> {
         let c = self.group_ctx(candidates);
         let s = self.groups[c].decode(dec)?;
         self.prev_group = s;
@@ -407,7 +412,13 @@ impl ConnModels {
 /// Candidate groups of mesh face `f` (spec §6.4): the distinct groups of the mesh faces
 /// across its edges that precede it in encoding order, in the order of its half-edges from
 /// the entry half-edge; when there are none, the group of the previous mesh face.
-fn group_candidates(rb: &Rebuilt, f: usize, face_group: &[u32], prev_real: Option<usize>, out: &mut Vec<u32>) {
+fn group_candidates(
+    rb: &Rebuilt,
+    f: usize,
+    face_group: &[u32],
+    prev_real: Option<usize>,
+    out: &mut Vec<u32>,
+) {
     out.clear();
     let rf = rb.faces[f];
     let mut h = rf.first;
@@ -460,14 +471,18 @@ fn code_creases(
     let mut count = vec![0u8; corner.len()];
     for (j, &h) in edges.iter().enumerate() {
         let t = rb.twin[h as usize];
-        let (a, b) = (rb.vertex[h as usize] as usize, rb.vertex[t as usize] as usize);
+        let (a, b) = (
+            rb.vertex[h as usize] as usize,
+            rb.vertex[t as usize] as usize,
+        );
         let ctx = if rb.is_hole(h) || rb.is_hole(t) {
             12
         } else {
             let (ca, cb) = (count[a].min(2) as usize, count[b].min(2) as usize);
             let (lo, hi) = (ca.min(cb), ca.max(cb));
             let pair = lo * 3 + hi - lo * (lo + 1) / 2;
-            let same = face_group[rb.face[h as usize] as usize] == face_group[rb.face[t as usize] as usize];
+            let same = face_group[rb.face[h as usize] as usize]
+                == face_group[rb.face[t as usize] as usize];
             pair * 2 + usize::from(same)
         };
         coder.bit(&mut sharp_models[ctx], &mut sharp[j])?;
@@ -569,9 +584,9 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let traversal_vertices = rb.vertex_count;
     let mut isolated = 0u64;
     let mut next_coded = traversal_vertices as u32;
-    for w in 0..nw {
-        if work_to_coded[w] == NONE {
-            work_to_coded[w] = next_coded;
+    for (w, wc) in work_to_coded.iter_mut().enumerate() {
+        if *wc == NONE {
+            *wc = next_coded;
             coded_to_work[next_coded as usize] = w as u32;
             next_coded += 1;
             isolated += 1;
@@ -613,12 +628,20 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             next_group += 1;
             GroupSym::New
         } else {
-            match cands.iter().take(GROUP_CANDIDATES).position(|&g| g == group_new[og]) {
+            match cands
+                .iter()
+                .take(GROUP_CANDIDATES)
+                .position(|&g| g == group_new[og])
+            {
                 Some(c) => GroupSym::Candidate(c as u8),
                 None => GroupSym::Explicit(group_new[og]),
             }
         };
-        group_syms.push((sym, next_group - u32::from(sym == GroupSym::New), cands.len()));
+        group_syms.push((
+            sym,
+            next_group - u32::from(sym == GroupSym::New),
+            cands.len(),
+        ));
         face_group_new[i] = group_new[og];
         prev_real = Some(i);
     }
@@ -654,7 +677,12 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let patches = encode_patches(&groups_new_order, &quant)?;
 
     // Creases section.
-    let edges: Vec<u32> = rb.label_edge.iter().copied().filter(|&h| h != NONE).collect();
+    let edges: Vec<u32> = rb
+        .label_edge
+        .iter()
+        .copied()
+        .filter(|&h| h != NONE)
+        .collect();
     let mut sharp = vec![false; edges.len()];
     let mut matched = BTreeSet::new();
     for (j, &h) in edges.iter().enumerate() {
@@ -679,7 +707,14 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         .map(|o| mesh.corners.contains(o))
         .collect();
     let mut creases_enc = RangeEncoder::new();
-    code_creases(&rb, &edges, &face_group_new, &mut sharp, &mut corner, &mut creases_enc)?;
+    code_creases(
+        &rb,
+        &edges,
+        &face_group_new,
+        &mut sharp,
+        &mut corner,
+        &mut creases_enc,
+    )?;
     let creases = creases_enc.finish();
 
     // Geometry section.
@@ -691,7 +726,14 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let mut geom_enc = RangeEncoder::new();
     {
         let mut ge = GeomEncoder::new(&mut geom_enc);
-        geometry::walk(&rb, &face_plane_group, groups_new_order.len(), bits, &mut q, &mut ge)?;
+        geometry::walk(
+            &rb,
+            &face_plane_group,
+            groups_new_order.len(),
+            bits,
+            &mut q,
+            &mut ge,
+        )?;
     }
     let geometry = geom_enc.finish();
 
@@ -944,12 +986,20 @@ fn limit(what: &'static str, value: u64, max: u64) -> Result<()> {
     Ok(())
 }
 
-fn parse_header(payload: &[u8], major: u8, minor: u8, limits: &Limits) -> Result<(Header, Quantizer)> {
+fn parse_header(
+    payload: &[u8],
+    major: u8,
+    minor: u8,
+    limits: &Limits,
+) -> Result<(Header, Quantizer)> {
     let features = features_for(major, minor)?;
     let mut r = Reader::new(payload, "header");
     let flags = r.varint("flags")?;
     if flags & !features.known_flags != 0 {
-        return Err(r.err("flags", format!("unknown flag bits {:#x}", flags & !features.known_flags)));
+        return Err(r.err(
+            "flags",
+            format!("unknown flag bits {:#x}", flags & !features.known_flags),
+        ));
     }
     let content = if flags & FLAG_CONTROL_MESH != 0 {
         Content::ControlMesh {
@@ -998,7 +1048,10 @@ fn parse_header(payload: &[u8], major: u8, minor: u8, limits: &Limits) -> Result
         };
     }
     if vals.iter().any(|v| !v.is_finite()) || vals[3] < 0.0 {
-        return Err(r.err("bbox", "bounding box is not finite or has a negative extent"));
+        return Err(r.err(
+            "bbox",
+            "bounding box is not finite or has a negative extent",
+        ));
     }
     r.expect_end()?;
     let header = Header {
@@ -1030,7 +1083,11 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut r = Reader::new(bytes, "file");
     let magic = r.bytes(4, "magic")?;
     if magic != MAGIC {
-        return Err(Error::format("file", "magic", "not an .scode file (bad magic bytes)"));
+        return Err(Error::format(
+            "file",
+            "magic",
+            "not an .scode file (bad magic bytes)",
+        ));
     }
     let major = r.u8("version_major")?;
     let minor = r.u8("version_minor")?;
@@ -1041,7 +1098,11 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut sections_info = Vec::new();
     let hs = read_section(&mut r, Some(0), verify, max_raw)?;
     if hs.id != SEC_HEADER {
-        return Err(Error::format("file", "section", "the first section must be the header"));
+        return Err(Error::format(
+            "file",
+            "section",
+            "the first section must be the header",
+        ));
     }
     sections_info.push(SectionInfo {
         name: "header",
@@ -1067,7 +1128,11 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             if s.skippable {
                 continue;
             }
-            return Err(Error::format("file", "section", format!("unknown section id {}", s.id)));
+            return Err(Error::format(
+                "file",
+                "section",
+                format!("unknown section id {}", s.id),
+            ));
         }
         sections_info.push(SectionInfo {
             name: section_name(s.id),
@@ -1076,7 +1141,11 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         });
         payloads[s.id as usize] = Some(s.payload);
     }
-    for (id, flag) in [(SEC_PATCHES, FLAG_PATCHES), (SEC_FIXUPS, FLAG_MERGES), (SEC_NAMES, FLAG_NAMES)] {
+    for (id, flag) in [
+        (SEC_PATCHES, FLAG_PATCHES),
+        (SEC_FIXUPS, FLAG_MERGES),
+        (SEC_NAMES, FLAG_NAMES),
+    ] {
         if payloads[id as usize].is_some() != (header.flags & flag != 0) {
             return Err(Error::format(
                 section_name(id),
@@ -1099,7 +1168,13 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         as usize;
     let traversal_vertices = coded_count
         .checked_sub(header.isolated_vertex_count as usize)
-        .ok_or_else(|| Error::format("header", "isolated_vertex_count", "exceeds the vertex count"))?;
+        .ok_or_else(|| {
+            Error::format(
+                "header",
+                "isolated_vertex_count",
+                "exceeds the vertex count",
+            )
+        })?;
     let group_count = header.group_count as usize;
 
     // Connectivity.
@@ -1115,19 +1190,30 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
     let rb = rebuild(&labels)?;
     let real_faces = rb.faces.iter().filter(|f| !f.hole).count();
-    let real_corners: u64 = rb.faces.iter().filter(|f| !f.hole).map(|f| u64::from(f.degree)).sum();
+    let real_corners: u64 = rb
+        .faces
+        .iter()
+        .filter(|f| !f.hole)
+        .map(|f| u64::from(f.degree))
+        .sum();
     if real_faces != nf || real_corners != header.face_corner_count {
         return Err(Error::format(
             "connectivity",
             "labels",
-            format!("labels give {real_faces} faces / {real_corners} corners, header says {nf} / {}", header.face_corner_count),
+            format!(
+                "labels give {real_faces} faces / {real_corners} corners, header says {nf} / {}",
+                header.face_corner_count
+            ),
         ));
     }
     if rb.vertex_count != traversal_vertices {
         return Err(Error::format(
             "connectivity",
             "labels",
-            format!("labels give {} vertices, header implies {traversal_vertices}", rb.vertex_count),
+            format!(
+                "labels give {} vertices, header implies {traversal_vertices}",
+                rb.vertex_count
+            ),
         ));
     }
     // Resolve groups in encoding order.
@@ -1149,22 +1235,24 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
                     next_group - 1
                 }
                 GroupSym::Explicit(id) => id,
-                GroupSym::Candidate(c) => {
-                    match cands.get(usize::from(c)) {
-                        Some(&g) => g,
-                        None => {
-                            return Err(Error::format(
-                                "connectivity",
-                                "group",
-                                format!("face {i} refers to candidate group {c} of {}", cands.len()),
-                            ))
-                        }
+                GroupSym::Candidate(c) => match cands.get(usize::from(c)) {
+                    Some(&g) => g,
+                    None => {
+                        return Err(Error::format(
+                            "connectivity",
+                            "group",
+                            format!("face {i} refers to candidate group {c} of {}", cands.len()),
+                        ))
                     }
-                }
+                },
             }
         };
         if g as usize >= group_count {
-            return Err(Error::format("connectivity", "group", format!("group {g} of {group_count}")));
+            return Err(Error::format(
+                "connectivity",
+                "group",
+                format!("group {g} of {group_count}"),
+            ));
         }
         face_group[i] = g;
         prev_real = Some(i);
@@ -1178,7 +1266,12 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     };
 
     // Creases.
-    let edges: Vec<u32> = rb.label_edge.iter().copied().filter(|&h| h != NONE).collect();
+    let edges: Vec<u32> = rb
+        .label_edge
+        .iter()
+        .copied()
+        .filter(|&h| h != NONE)
+        .collect();
     let mut sharp = vec![false; edges.len()];
     let mut corner = vec![false; coded_count];
     {
@@ -1200,7 +1293,14 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
         let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
         let mut gd = GeomDecoder::new(&mut d, quant.max_q());
-        geometry::walk(&rb, &face_plane_group, group_count, quant.bits, &mut q, &mut gd)?;
+        geometry::walk(
+            &rb,
+            &face_plane_group,
+            group_count,
+            quant.bits,
+            &mut q,
+            &mut gd,
+        )?;
         d.finish()?;
     }
 
@@ -1214,7 +1314,11 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             let mut is_copy = vec![false; coded_count];
             for i in 0..m {
                 let gap = fr.varint("copy")?;
-                let d = if i == 0 { gap } else { prev.saturating_add(gap).saturating_add(1) };
+                let d = if i == 0 {
+                    gap
+                } else {
+                    prev.saturating_add(gap).saturating_add(1)
+                };
                 if d >= coded_count as u64 {
                     return Err(fr.err("copy", format!("vertex {d} does not exist")));
                 }
@@ -1261,7 +1365,8 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     for c in 0..coded_count {
         mesh.positions[final_of_coded[c] as usize] = quant.dequantize(q[c]);
     }
-    mesh.face_vertices.reserve(header.face_corner_count as usize);
+    mesh.face_vertices
+        .reserve(header.face_corner_count as usize);
     let mut buf = Vec::new();
     for (i, rf) in rb.faces.iter().enumerate() {
         if rf.hole {

@@ -310,7 +310,7 @@ impl FreqModel {
         if self.total > FREQ_LIMIT {
             self.total = 0;
             for c in &mut self.counts {
-                *c = (*c + 1) / 2;
+                *c = c.div_ceil(2);
                 self.total += *c;
             }
         }
@@ -563,7 +563,11 @@ mod tests {
         }
         let out = enc.finish();
         // Shift-5 adaptation costs a few percent over the static entropy on a stationary source.
-        assert!(((out.len() * 8) as f64) < entropy * 1.10, "{} vs {entropy}", out.len() * 8);
+        assert!(
+            ((out.len() * 8) as f64) < entropy * 1.10,
+            "{} vs {entropy}",
+            out.len() * 8
+        );
     }
 
     #[test]

@@ -51,7 +51,10 @@ pub fn open_box() -> ControlMesh {
         .filter(|(i, _)| *i != 1)
         .map(|(_, f)| f.to_vec())
         .collect();
-    from_faces(&c.positions.iter().map(|p| p.to_array()).collect::<Vec<_>>(), &faces)
+    from_faces(
+        &c.positions.iter().map(|p| p.to_array()).collect::<Vec<_>>(),
+        &faces,
+    )
 }
 
 /// Quad torus with `n` x `m` vertices (major radius 2, minor 0.7).
@@ -135,7 +138,10 @@ pub fn cad_part() -> ControlMesh {
         origin: DVec3::new(2.0, 1.5, 1.0),
         direction: DVec3::Z,
     };
-    let g_side = m.push_group("boss_side", PatchKind::Boundary(BoundarySurface::Cylinder { axis }));
+    let g_side = m.push_group(
+        "boss_side",
+        PatchKind::Boundary(BoundarySurface::Cylinder { axis }),
+    );
     let g_cap = m.push_group("boss_cap", plane);
     // Boss circles: bottom ring on the top face, top ring at z = 1.8.
     let ring = |m: &mut ControlMesh, z: f64| -> Vec<u32> {
@@ -169,13 +175,31 @@ pub fn cad_part() -> ControlMesh {
     for k in 0..segs {
         let k1 = (k + 1) % segs;
         m.push_face(
-            &[low[k as usize], low[k1 as usize], high[k1 as usize], high[k as usize]],
+            &[
+                low[k as usize],
+                low[k1 as usize],
+                high[k1 as usize],
+                high[k as usize],
+            ],
             g_side,
         );
     }
     m.push_face(&high, g_cap);
     // Sharp edges: all box edges, both rings.
-    for (a, b) in [(0, 1), (1, 3), (3, 2), (2, 0), (4, 5), (5, 7), (7, 6), (6, 4), (0, 4), (1, 5), (2, 6), (3, 7)] {
+    for (a, b) in [
+        (0, 1),
+        (1, 3),
+        (3, 2),
+        (2, 0),
+        (4, 5),
+        (5, 7),
+        (7, 6),
+        (6, 4),
+        (0, 4),
+        (1, 5),
+        (2, 6),
+        (3, 7),
+    ] {
         m.set_sharp(a, b);
     }
     for k in 0..segs as usize {
@@ -223,7 +247,12 @@ pub fn canonical_hash(m: &ControlMesh) -> u64 {
         };
         h.bytes(&[kind]);
         if let Some(a) = axis {
-            for c in a.origin.to_array().into_iter().chain(a.direction.to_array()) {
+            for c in a
+                .origin
+                .to_array()
+                .into_iter()
+                .chain(a.direction.to_array())
+            {
                 h.u64(c.to_bits());
             }
         }

@@ -20,7 +20,11 @@ pub(crate) fn check_round_trip(m: &ControlMesh, opts: &EncodeOptions) -> Vec<u8>
     for f in 0..m.face_count() {
         let nf = map.face[f] as usize;
         let expected: Vec<u32> = m.face(f).iter().map(|&v| map.vertex[v as usize]).collect();
-        assert!(cyclic_eq(&expected, out.face(nf)), "face {f}: {expected:?} vs {:?}", out.face(nf));
+        assert!(
+            cyclic_eq(&expected, out.face(nf)),
+            "face {f}: {expected:?} vs {:?}",
+            out.face(nf)
+        );
         assert_eq!(out.face_groups[nf], map.group[m.face_groups[f] as usize]);
     }
     let step = d.header.quantization_step();
@@ -31,7 +35,10 @@ pub(crate) fn check_round_trip(m: &ControlMesh, opts: &EncodeOptions) -> Vec<u8>
         }
         match (grp.patch, og.patch) {
             (PatchKind::Closed, PatchKind::Closed) => {}
-            (PatchKind::Boundary(BoundarySurface::Plane), PatchKind::Boundary(BoundarySurface::Plane)) => {}
+            (
+                PatchKind::Boundary(BoundarySurface::Plane),
+                PatchKind::Boundary(BoundarySurface::Plane),
+            ) => {}
             (
                 PatchKind::Boundary(BoundarySurface::Cylinder { axis: a }),
                 PatchKind::Boundary(BoundarySurface::Cylinder { axis: b }),
@@ -55,8 +62,13 @@ pub(crate) fn check_round_trip(m: &ControlMesh, opts: &EncodeOptions) -> Vec<u8>
     let corners: BTreeSet<u32> = m.corners.iter().map(|&c| map.vertex[c as usize]).collect();
     assert_eq!(corners, out.corners);
     for (v, p) in m.positions.iter().enumerate() {
-        let e = (out.positions[map.vertex[v] as usize] - *p).abs().max_element();
-        assert!(e <= step / 2.0 * (1.0 + 1e-9) + 1e-12, "vertex {v} off by {e}, step {step}");
+        let e = (out.positions[map.vertex[v] as usize] - *p)
+            .abs()
+            .max_element();
+        assert!(
+            e <= step / 2.0 * (1.0 + 1e-9) + 1e-12,
+            "vertex {v} off by {e}, step {step}"
+        );
     }
     // Determinism.
     assert_eq!(encode(m, opts).unwrap(), bytes);
@@ -72,7 +84,15 @@ fn opts() -> EncodeOptions {
 
 #[test]
 fn small_meshes_round_trip() {
-    for m in [tetrahedron(), cube(), open_box(), torus(4, 3), torus(9, 7), multi_group(), cad_part()] {
+    for m in [
+        tetrahedron(),
+        cube(),
+        open_box(),
+        torus(4, 3),
+        torus(9, 7),
+        multi_group(),
+        cad_part(),
+    ] {
         let b = check_round_trip(&m, &opts());
         let c = check_round_trip(
             &m,
@@ -93,7 +113,10 @@ fn sizes_of_small_meshes_are_small() {
     assert!(b.len() <= 76, "tetrahedron takes {} bytes", b.len());
     let info = inspect(&b, &Limits::default()).unwrap();
     assert_eq!(info.total_bytes, b.len());
-    assert_eq!(info.sections.iter().map(|s| s.stored_bytes).sum::<usize>(), b.len());
+    assert_eq!(
+        info.sections.iter().map(|s| s.stored_bytes).sum::<usize>(),
+        b.len()
+    );
     assert_eq!(info.label_count, 7);
     assert_eq!(info.component_count, 1);
 }
@@ -111,7 +134,10 @@ fn content_and_header_fields() {
     )
     .unwrap();
     let info = inspect(&b, &Limits::default()).unwrap();
-    assert_eq!(info.header.content, Content::ControlMesh { default_level: 4 });
+    assert_eq!(
+        info.header.content,
+        Content::ControlMesh { default_level: 4 }
+    );
     assert_eq!(info.header.quantization_bits, 12);
     assert_eq!(info.header.vertex_count, m.vertex_count() as u64);
     assert_eq!(info.header.face_count, m.face_count() as u64);
@@ -144,8 +170,19 @@ fn isolated_vertices_and_empty_mesh() {
 #[test]
 fn non_manifold_raw_meshes_are_cut_and_restored() {
     // Three triangles on one edge, and a bow-tie vertex.
-    let pos = [[0., 0., 0.], [1., 0., 0.], [0.5, 1., 0.], [0.5, -1., 0.], [0.5, 0., 1.], [2., 1., 0.], [2., -1., 0.]];
-    let mut m = from_faces(&pos, &[vec![0, 1, 2], vec![1, 0, 3], vec![0, 1, 4], vec![1, 5, 6]]);
+    let pos = [
+        [0., 0., 0.],
+        [1., 0., 0.],
+        [0.5, 1., 0.],
+        [0.5, -1., 0.],
+        [0.5, 0., 1.],
+        [2., 1., 0.],
+        [2., -1., 0.],
+    ];
+    let mut m = from_faces(
+        &pos,
+        &[vec![0, 1, 2], vec![1, 0, 3], vec![0, 1, 4], vec![1, 5, 6]],
+    );
     m.set_sharp(0, 1);
     m.corners.insert(1);
     let b = check_round_trip(&m, &opts());
@@ -168,11 +205,23 @@ fn non_manifold_raw_meshes_are_cut_and_restored() {
 fn encoder_rejects_bad_input() {
     let m = cube();
     assert!(matches!(
-        encode(&m, &EncodeOptions { quantization_bits: 3, ..opts() }),
+        encode(
+            &m,
+            &EncodeOptions {
+                quantization_bits: 3,
+                ..opts()
+            }
+        ),
         Err(Error::Parameter(_))
     ));
     assert!(matches!(
-        encode(&m, &EncodeOptions { quantization_bits: 25, ..opts() }),
+        encode(
+            &m,
+            &EncodeOptions {
+                quantization_bits: 25,
+                ..opts()
+            }
+        ),
         Err(Error::Parameter(_))
     ));
     let mut bad = cube();
@@ -200,19 +249,28 @@ fn decoder_rejects_versions_trailing_bytes_and_limits() {
         max_vertices: 7,
         ..Limits::default()
     };
-    assert!(matches!(decode(&b, &small), Err(Error::LimitsExceeded { .. })));
+    assert!(matches!(
+        decode(&b, &small),
+        Err(Error::LimitsExceeded { .. })
+    ));
     let small = Limits {
         max_input_bytes: 10,
         ..Limits::default()
     };
-    assert!(matches!(decode(&b, &small), Err(Error::LimitsExceeded { .. })));
+    assert!(matches!(
+        decode(&b, &small),
+        Err(Error::LimitsExceeded { .. })
+    ));
 }
 
 /// Every prefix errors; every single-bit flip errors (CRC on) or at least never panics
 /// (CRC off). Shared with the spec-vector test.
 pub(crate) fn check_corruptions(b: &[u8]) {
     for n in 0..b.len() {
-        assert!(decode(&b[..n], &Limits::default()).is_err(), "prefix {n} decoded");
+        assert!(
+            decode(&b[..n], &Limits::default()).is_err(),
+            "prefix {n} decoded"
+        );
     }
     let original = decode(b, &Limits::default()).unwrap();
     let lax = Limits {
@@ -222,7 +280,10 @@ pub(crate) fn check_corruptions(b: &[u8]) {
     for i in 0..b.len() * 8 {
         let mut c = b.to_vec();
         c[i / 8] ^= 1 << (i % 8);
-        assert!(decode(&c, &Limits::default()).is_err(), "bit flip {i} not detected");
+        assert!(
+            decode(&c, &Limits::default()).is_err(),
+            "bit flip {i} not detected"
+        );
         if let Ok(d) = decode(&c, &lax) {
             // Without CRCs a flip may decode; it must then still be a valid mesh.
             d.mesh.validate().unwrap();
@@ -265,7 +326,8 @@ fn make_random_mesh(r: &RandomMesh) -> ControlMesh {
     let mut m = ControlMesh::new();
     let mut bi = 0usize;
     let mut next = |n: u8| -> u8 {
-        let b = r.bits[bi % r.bits.len()].wrapping_add(((bi / r.bits.len()) as u8).wrapping_mul(37));
+        let b =
+            r.bits[bi % r.bits.len()].wrapping_add(((bi / r.bits.len()) as u8).wrapping_mul(37));
         bi += 1;
         b % n
     };

@@ -69,7 +69,9 @@ impl HalfEdgeMesh {
         let nc = mesh.face_vertices.len();
         let nf = mesh.face_count();
         if nc >= NONE as usize / 2 || mesh.vertex_count() >= NONE as usize {
-            return Err(Error::Mesh("mesh too large for 32-bit half-edge ids".into()));
+            return Err(Error::Mesh(
+                "mesh too large for 32-bit half-edge ids".into(),
+            ));
         }
         let mut he = HalfEdgeMesh {
             vertex_count: mesh.vertex_count(),
@@ -99,7 +101,9 @@ impl HalfEdgeMesh {
                 he.face[h as usize] = f as u32;
                 let v = he.origin[h as usize] as usize;
                 if v >= he.vertex_count {
-                    return Err(Error::Mesh(format!("face {f} references missing vertex {v}")));
+                    return Err(Error::Mesh(format!(
+                        "face {f} references missing vertex {v}"
+                    )));
                 }
                 if he.vertex_out[v] == NONE {
                     he.vertex_out[v] = h;
@@ -340,7 +344,7 @@ impl HalfEdgeMesh {
         for &v in &self.origin {
             out_degree[v as usize] += 1;
         }
-        for v in 0..self.vertex_count {
+        for (v, &degree) in out_degree.iter().enumerate() {
             let start = self.vertex_out[v];
             if start == NONE {
                 continue;
@@ -350,11 +354,11 @@ impl HalfEdgeMesh {
             loop {
                 n += 1;
                 h = self.twin[self.prev[h as usize] as usize];
-                if h == start || n > out_degree[v] {
+                if h == start || n > degree {
                     break;
                 }
             }
-            if n != out_degree[v] {
+            if n != degree {
                 return Err(Error::Mesh(format!(
                     "non-manifold vertex {v}: its faces form more than one fan \
                      (surface sheets touch at this vertex)"
