@@ -1181,7 +1181,17 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let conn = required(SEC_CONNECTIVITY)?;
     let mut cr = Reader::new(conn, "connectivity");
     let label_count = cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
-    let mut dec = RangeDecoder::new(cr.rest(), "connectivity")?;
+    // Each label is one frequency-model symbol: at least log2(8216 / 8207) bits (9 other
+    // symbols keep a count >= 1 out of a total <= 8192 + 24), i.e. < 6,400 labels per byte.
+    let coded = cr.rest();
+    if label_count > (coded.len() as u64 + 5) * 6_400 {
+        return Err(Error::format(
+            "connectivity",
+            "label_count",
+            format!("{label_count} labels cannot fit in {} coded bytes", coded.len()),
+        ));
+    }
+    let mut dec = RangeDecoder::new(coded, "connectivity")?;
     let mut models = ConnModels::new();
     let mut labels = Vec::new();
     let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
@@ -1258,6 +1268,20 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         prev_real = Some(i);
     }
     dec.finish()?;
+
+    // Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
+    // their number by its size before allocating per-vertex arrays.
+    let geometry_len = required(SEC_GEOMETRY)?.len();
+    if header.isolated_vertex_count.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
+        return Err(Error::format(
+            "geometry",
+            "isolated_vertex_count",
+            format!(
+                "{} isolated vertices cannot fit in {geometry_len} coded bytes",
+                header.isolated_vertex_count
+            ),
+        ));
+    }
 
     // Patches.
     let patch_kinds = match &payloads[SEC_PATCHES as usize] {

@@ -134,12 +134,19 @@ impl RangeEncoder {
         for _ in 0..5 {
             self.shift_low();
         }
-        while self.out.last() == Some(&0) {
+        for _ in 0..MAX_VIRTUAL_BYTES {
+            if self.out.last() != Some(&0) {
+                break;
+            }
             self.out.pop();
         }
         self.out
     }
 }
+
+/// The encoder drops at most this many trailing zero bytes, so a decoder that needs more bytes
+/// than that past the end is reading a truncated or corrupt stream.
+pub const MAX_VIRTUAL_BYTES: usize = 4;
 
 /// Decoder over a byte slice.
 pub struct RangeDecoder<'a> {
@@ -166,11 +173,21 @@ impl<'a> RangeDecoder<'a> {
         Ok(d)
     }
 
-    /// Next input byte; past the end the stream continues with zeros (the encoder drops
-    /// trailing zero bytes). Termination never depends on the data: callers decode a known
-    /// number of symbols.
+    /// Next input byte; past the end the stream continues with up to `MAX_VIRTUAL_BYTES`
+    /// zeros (the encoder drops that many trailing zero bytes at most). Termination never
+    /// depends on the data: callers decode a known number of symbols.
     fn next_byte(&mut self) -> Result<u8> {
-        let b = self.data.get(self.pos).copied().unwrap_or(0);
+        let b = match self.data.get(self.pos) {
+            Some(&b) => b,
+            None if self.pos < self.data.len() + MAX_VIRTUAL_BYTES => 0,
+            None => {
+                return Err(Error::format(
+                    self.section,
+                    "range_coded_data",
+                    "coded data ends early",
+                ))
+            }
+        };
         self.pos += 1;
         Ok(b)
     }
@@ -239,6 +256,14 @@ impl<'a> RangeDecoder<'a> {
         }
         Ok(())
     }
+}
+
+/// Upper bound on the number of symbols a stream of `bytes` coded bytes can hold: every
+/// adaptive symbol shrinks the range by at least a factor 65535/65536 (about 2.2e-5 bits), so
+/// one byte holds at most ~363,000 symbols. Decoders compare claimed counts with this before
+/// allocating.
+pub fn max_symbols(bytes: usize) -> u64 {
+    (bytes as u64 + MAX_VIRTUAL_BYTES as u64 + 1).saturating_mul(363_000)
 }
 
 /// Adaptive binary model: P(0) in 16-bit fixed point plus an observation count that selects
