@@ -540,19 +540,19 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         return Err(Error::Mesh("faces but no groups".into()));
     }
     let raw = opts.content == Content::RawMesh;
-    let (cut, source): (Option<ControlMesh>, Vec<u32>) = match HalfEdgeMesh::build(mesh) {
-        Ok(_) => (None, (0..mesh.vertex_count() as u32).collect()),
-        Err(e) if raw => {
-            let (c, s) = cut_non_manifold(mesh)?;
-            HalfEdgeMesh::build(&c).map_err(|e2| {
-                Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
-            })?;
-            (Some(c), s)
-        }
-        Err(e) => return Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
-    };
+    let (cut, source, he): (Option<ControlMesh>, Vec<u32>, HalfEdgeMesh) =
+        match HalfEdgeMesh::build(mesh) {
+            Ok(he) => (None, (0..mesh.vertex_count() as u32).collect(), he),
+            Err(e) if raw => {
+                let (c, s) = cut_non_manifold(mesh)?;
+                let he = HalfEdgeMesh::build(&c).map_err(|e2| {
+                    Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
+                })?;
+                (Some(c), s, he)
+            }
+            Err(e) => return Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
+        };
     let work = cut.as_ref().unwrap_or(mesh);
-    let he = HalfEdgeMesh::build(work)?;
     let tr = encode_traversal(&he);
     let internal = |what: &str| Error::Mesh(format!("internal encoder error: {what}"));
     let rb = rebuild(&tr.labels).map_err(|e| internal(&e.to_string()))?;
@@ -1188,7 +1188,10 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         return Err(Error::format(
             "connectivity",
             "label_count",
-            format!("{label_count} labels cannot fit in {} coded bytes", coded.len()),
+            format!(
+                "{label_count} labels cannot fit in {} coded bytes",
+                coded.len()
+            ),
         ));
     }
     let mut dec = RangeDecoder::new(coded, "connectivity")?;
