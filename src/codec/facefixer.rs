@@ -851,4 +851,33 @@ mod tests {
             assert!(rebuild(&c).is_err(), "{c:?}");
         }
     }
+
+    fn label_strategy() -> impl proptest::strategy::Strategy<Value = Label> {
+        use proptest::prelude::*;
+        prop_oneof![
+            (3u32..7).prop_map(F),
+            (3u32..7).prop_map(H),
+            Just(R),
+            Just(L),
+            Just(S),
+            Just(E),
+            (0u32..3, 0u32..6, 0u32..7).prop_map(|(i, k, l)| M { i, k, l }),
+        ]
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 2000, ..Default::default() })]
+        /// Arbitrary label sequences never panic; whatever rebuilds is a consistent closed
+        /// half-edge structure.
+        #[test]
+        fn random_labels_never_panic(labels in proptest::collection::vec(label_strategy(), 0..60)) {
+            if let Ok(rb) = rebuild(&labels) {
+                for h in 0..rb.next.len() {
+                    assert_eq!(rb.twin[rb.twin[h] as usize] as usize, h);
+                    assert_eq!(rb.prev[rb.next[h] as usize] as usize, h);
+                    assert_eq!(rb.face[rb.next[h] as usize], rb.face[h]);
+                }
+            }
+        }
+    }
 }
