@@ -1,1 +1,1322 @@
-//! TODO: codec layer (being built).
+//! The `.scode` v1 bitstream: encoder, decoder and inspector. The byte-exact definition is
+//! `spec/format.md`; this module follows it section by section.
+//!
+//! Layout of a file: 4-byte magic `SCOD`, major and minor version bytes, then sections
+//! (`header`, `connectivity`, optional `patches`, `creases`, `geometry`, optional `fixups`,
+//! optional `names`), each framed as tag, length, payload (stored or zlib) and CRC-32.
+//!
+//! Connectivity is Face Fixer ([`facefixer`]) under an adaptive range coder ([`rangecoder`]);
+//! face groups ride along with the F labels; sharp edges and corner tags are context-coded in
+//! label / geometry order; positions are quantised to a cube and predicted ([`geometry`]).
+//!
+//! Decoded meshes are renumbered: vertices in geometry order, faces in traversal order (each
+//! face's cycle may start at a different corner), groups by first appearance. [`encode_with_map`]
+//! returns the renumbering so callers and tests can compare exactly.
+
+pub mod bytes;
+pub mod facefixer;
+pub mod geometry;
+pub mod rangecoder;
+pub mod samples;
+
+use std::collections::BTreeSet;
+
+use glam::DVec3;
+
+use self::bytes::{put_section, put_varint, read_section, Reader};
+use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
+use self::geometry::{GeomDecoder, GeomEncoder, Quantizer};
+use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
+use crate::error::{Error, Result};
+use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
+use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, Group, PatchKind};
+
+pub const FORMAT_VERSION_MAJOR: u8 = 1;
+pub const FORMAT_VERSION_MINOR: u8 = 0;
+/// First four bytes of every `.scode` file.
+pub const MAGIC: [u8; 4] = *b"SCOD";
+
+/// What the stored mesh is: the final surface (raw mode) or a control mesh to subdivide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Content {
+    RawMesh,
+    ControlMesh { default_level: u8 },
+}
+
+/// Encoder settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncodeOptions {
+    /// Bits per coordinate of the position grid, 4..=24 (default 10).
+    pub quantization_bits: u8,
+    pub content: Content,
+    /// Store group names (OBJ `g` names) in the optional `names` section (default true).
+    pub store_group_names: bool,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions {
+            quantization_bits: 10,
+            content: Content::RawMesh,
+            store_group_names: true,
+        }
+    }
+}
+
+/// Decoder resource limits. Every count read from a file is checked against these before
+/// anything is allocated for it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Limits {
+    /// Largest accepted file, and largest inflated section (default 1 GiB).
+    pub max_input_bytes: u64,
+    /// Default 50 million.
+    pub max_vertices: u64,
+    /// Default 100 million.
+    pub max_faces: u64,
+    /// Sum of face degrees (default 400 million).
+    pub max_face_corners: u64,
+    /// Default 1 million.
+    pub max_groups: u64,
+    /// Faces after subdivision (used by the subdivision code; default 200 million).
+    pub max_subdivided_faces: u64,
+    /// Verify section CRCs (default true; the fuzz target turns it off).
+    pub verify_checksums: bool,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_input_bytes: 1 << 30,
+            max_vertices: 50_000_000,
+            max_faces: 100_000_000,
+            max_face_corners: 400_000_000,
+            max_groups: 1_000_000,
+            max_subdivided_faces: 200_000_000,
+            verify_checksums: true,
+        }
+    }
+}
+
+/// The decoded `header` section.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Header {
+    pub version_major: u8,
+    pub version_minor: u8,
+    /// Raw flag bits (`spec/format.md` §5).
+    pub flags: u64,
+    pub content: Content,
+    pub quantization_bits: u8,
+    /// Minimum corner of the quantisation cube.
+    pub bbox_min: [f64; 3],
+    /// Edge length of the quantisation cube.
+    pub bbox_extent: f64,
+    /// Vertices of the decoded mesh.
+    pub vertex_count: u64,
+    pub face_count: u64,
+    /// Sum of the face degrees.
+    pub face_corner_count: u64,
+    pub group_count: u64,
+    /// Vertices used by no face (stored after the others).
+    pub isolated_vertex_count: u64,
+    /// Vertex copies the encoder made to cut non-manifold places apart, re-merged on decode.
+    pub merged_vertex_count: u64,
+}
+
+impl Header {
+    /// Grid step of the position quantisation (0 for a degenerate box).
+    pub fn quantization_step(&self) -> f64 {
+        self.bbox_extent / ((1u64 << self.quantization_bits) - 1) as f64
+    }
+}
+
+/// Size of one section in a file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SectionInfo {
+    pub name: &'static str,
+    /// Bytes in the file, framing (tag, lengths, CRC) included.
+    pub stored_bytes: usize,
+    /// Payload bytes after inflation.
+    pub raw_bytes: usize,
+}
+
+/// What `inspect` reports about a file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FileInfo {
+    pub header: Header,
+    pub sections: Vec<SectionInfo>,
+    pub total_bytes: usize,
+    pub sharp_edge_count: usize,
+    /// Number of corner vertices.
+    pub corner_count: usize,
+    pub group_names: Vec<String>,
+    pub patch_kinds: Vec<PatchKind>,
+    pub component_count: usize,
+    pub label_count: usize,
+}
+
+/// A decoded file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decoded {
+    pub header: Header,
+    pub mesh: ControlMesh,
+}
+
+/// How the encoder renumbered the mesh: the decoded mesh has vertex `vertex[v]` where the
+/// input had `v`, face `face[f]` for input face `f` (its cycle possibly rotated), and group
+/// `group[g]` for input group `g`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncodeMap {
+    pub vertex: Vec<u32>,
+    pub face: Vec<u32>,
+    pub group: Vec<u32>,
+}
+
+// Section ids, in the order they must appear.
+const SEC_HEADER: u8 = 0;
+const SEC_CONNECTIVITY: u8 = 1;
+const SEC_PATCHES: u8 = 2;
+const SEC_CREASES: u8 = 3;
+const SEC_GEOMETRY: u8 = 4;
+const SEC_FIXUPS: u8 = 5;
+const SEC_NAMES: u8 = 6;
+
+fn section_name(id: u8) -> &'static str {
+    match id {
+        SEC_HEADER => "header",
+        SEC_CONNECTIVITY => "connectivity",
+        SEC_PATCHES => "patches",
+        SEC_CREASES => "creases",
+        SEC_GEOMETRY => "geometry",
+        SEC_FIXUPS => "fixups",
+        SEC_NAMES => "names",
+        _ => "unknown",
+    }
+}
+
+// Header flag bits.
+const FLAG_CONTROL_MESH: u64 = 1;
+const FLAG_BOX_F64: u64 = 2;
+const FLAG_ISOLATED: u64 = 4;
+const FLAG_MERGES: u64 = 8;
+/// The optional sections present, so a file cut at a section boundary is detected.
+const FLAG_PATCHES: u64 = 16;
+const FLAG_NAMES: u64 = 32;
+const KNOWN_FLAGS: u64 = 63;
+
+/// What a file's version allows. All version gating lives here.
+struct Features {
+    /// Known header flag bits.
+    known_flags: u64,
+}
+
+fn features_for(major: u8, _minor: u8) -> Result<Features> {
+    if major != FORMAT_VERSION_MAJOR {
+        return Err(Error::format(
+            "header",
+            "version",
+            format!("unsupported major version {major} (this decoder reads version {FORMAT_VERSION_MAJOR}.x)"),
+        ));
+    }
+    // Minor versions of major 1 may only add skippable sections; every v1 decoder reads the
+    // flags it knows and rejects the others.
+    Ok(Features {
+        known_flags: KNOWN_FLAGS,
+    })
+}
+
+// ------------------------------------------------------------------------------------------
+// Label and group-symbol models (spec §6.3)
+
+const LABEL_SYMBOLS: usize = 10;
+const LABEL_CONTEXT_NONE: usize = LABEL_SYMBOLS;
+const LABEL_CONTEXTS: usize = (LABEL_SYMBOLS + 1) * (LABEL_SYMBOLS + 1);
+const SYM_F3: usize = 0;
+const SYM_F4: usize = 1;
+const SYM_F5: usize = 2;
+const SYM_FX: usize = 3;
+const SYM_R: usize = 4;
+const SYM_L: usize = 5;
+const SYM_S: usize = 6;
+const SYM_E: usize = 7;
+const SYM_H: usize = 8;
+const SYM_M: usize = 9;
+
+/// Initial counts of every label context (a fixed prior: F3/F4/R common, the rest rare), so
+/// tiny meshes pay less learning cost than with all-ones counts.
+const LABEL_PRIOR: [u32; LABEL_SYMBOLS] = [4, 4, 1, 1, 4, 1, 1, 1, 1, 1];
+
+/// Group of a mesh face, relative to the groups of its already-decoded neighbours
+/// (spec §6.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GroupSym {
+    /// The `i`-th distinct group among the candidates (`i < GROUP_CANDIDATES`).
+    Candidate(u8),
+    /// The next group id not used so far.
+    New,
+    /// An already used group id, given explicitly.
+    Explicit(u32),
+}
+
+/// Candidate symbols; the alphabet is these plus `New` and `Explicit`.
+const GROUP_CANDIDATES: usize = 3;
+const GROUP_SYMBOLS: usize = GROUP_CANDIDATES + 2;
+
+struct ConnModels {
+    labels: Vec<FreqModel>,
+    face_degree: IntModel,
+    hole_degree: IntModel,
+    m_depth: IntModel,
+    m_length: IntModel,
+    groups: Vec<FreqModel>,
+    prev: [usize; 2],
+    prev_group: usize,
+}
+
+impl ConnModels {
+    fn new() -> Self {
+        ConnModels {
+            labels: vec![FreqModel::with_counts(&LABEL_PRIOR); LABEL_CONTEXTS],
+            face_degree: IntModel::default(),
+            hole_degree: IntModel::default(),
+            m_depth: IntModel::default(),
+            m_length: IntModel::default(),
+            groups: vec![FreqModel::new(GROUP_SYMBOLS); GROUP_SYMBOLS + 1],
+            prev: [LABEL_CONTEXT_NONE; 2],
+            prev_group: GROUP_SYMBOLS,
+        }
+    }
+
+    fn ctx(&self) -> usize {
+        self.prev[0] * (LABEL_SYMBOLS + 1) + self.prev[1]
+    }
+
+    fn push(&mut self, s: usize) {
+        self.prev = [self.prev[1], s];
+    }
+
+    fn encode_label(&mut self, enc: &mut RangeEncoder, l: Label) {
+        let s = match l {
+            Label::F(3) => SYM_F3,
+            Label::F(4) => SYM_F4,
+            Label::F(5) => SYM_F5,
+            Label::F(_) => SYM_FX,
+            Label::R => SYM_R,
+            Label::L => SYM_L,
+            Label::S => SYM_S,
+            Label::E => SYM_E,
+            Label::H(_) => SYM_H,
+            Label::M { .. } => SYM_M,
+        };
+        let c = self.ctx();
+        self.labels[c].encode(enc, s);
+        self.push(s);
+        match l {
+            Label::F(d) if d >= 6 => self.face_degree.encode(enc, d - 6),
+            Label::H(d) => self.hole_degree.encode(enc, d - 3),
+            Label::M { i, k, l } => {
+                self.m_depth.encode(enc, i);
+                self.m_length.encode(enc, l - 2);
+                let b = bits_for(u64::from(l));
+                enc.encode_direct(k >> 16.min(b), b.saturating_sub(16));
+                enc.encode_direct(k & 0xFFFF, b.min(16));
+            }
+            _ => {}
+        }
+    }
+
+    fn decode_label(&mut self, dec: &mut RangeDecoder, max_degree: u32) -> Result<Label> {
+        let c = self.ctx();
+        let s = self.labels[c].decode(dec)?;
+        self.push(s);
+        let max_extra = max_degree.saturating_sub(3);
+        Ok(match s {
+            SYM_F3 => Label::F(3),
+            SYM_F4 => Label::F(4),
+            SYM_F5 => Label::F(5),
+            SYM_FX => Label::F(6 + self.face_degree.decode(dec, max_extra, "face_degree")?),
+            SYM_R => Label::R,
+            SYM_L => Label::L,
+            SYM_S => Label::S,
+            SYM_E => Label::E,
+            SYM_H => Label::H(3 + self.hole_degree.decode(dec, max_extra, "hole_degree")?),
+            _ => {
+                let i = self.m_depth.decode(dec, max_degree, "merge_depth")?;
+                let l = 2 + self.m_length.decode(dec, max_extra, "merge_length")?;
+                let b = bits_for(u64::from(l));
+                let hi = dec.decode_direct(b.saturating_sub(16))?;
+                let lo = dec.decode_direct(b.min(16))?;
+                let k = (hi << 16.min(b)) | lo;
+                if k >= l {
+                    return Err(Error::format(
+                        "connectivity",
+                        "merge_offset",
+                        format!("offset {k} not below the boundary length {l}"),
+                    ));
+                }
+                Label::M { i, k, l }
+            }
+        })
+    }
+
+    fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, seen: u32) {
+        let s = match g {
+            GroupSym::Candidate(i) => usize::from(i),
+            GroupSym::New => GROUP_CANDIDATES,
+            GroupSym::Explicit(_) => GROUP_CANDIDATES + 1,
+        };
+        self.groups[self.prev_group].encode(enc, s);
+        self.prev_group = s;
+        if let GroupSym::Explicit(id) = g {
+            let b = bits_for(u64::from(seen));
+            enc.encode_direct(id >> 16.min(b), b.saturating_sub(16));
+            enc.encode_direct(id & 0xFFFF, b.min(16));
+        }
+    }
+
+    fn decode_group(&mut self, dec: &mut RangeDecoder, seen: u32) -> Result<GroupSym> {
+        let s = self.groups[self.prev_group].decode(dec)?;
+        self.prev_group = s;
+        Ok(match s {
+            i if i < GROUP_CANDIDATES => GroupSym::Candidate(i as u8),
+            GROUP_CANDIDATES => GroupSym::New,
+            _ => {
+                let b = bits_for(u64::from(seen));
+                let hi = dec.decode_direct(b.saturating_sub(16))?;
+                let lo = dec.decode_direct(b.min(16))?;
+                let id = (hi << 16.min(b)) | lo;
+                if id >= seen {
+                    return Err(Error::format(
+                        "connectivity",
+                        "group_id",
+                        format!("explicit group {id} but only {seen} groups seen so far"),
+                    ));
+                }
+                GroupSym::Explicit(id)
+            }
+        })
+    }
+}
+
+/// Candidate groups of mesh face `f` (spec §6.4): the distinct groups of the mesh faces
+/// across its edges that precede it in encoding order, in the order of its half-edges from
+/// the entry half-edge; when there are none, the group of the previous mesh face.
+fn group_candidates(rb: &Rebuilt, f: usize, face_group: &[u32], prev_real: Option<usize>, out: &mut Vec<u32>) {
+    out.clear();
+    let rf = rb.faces[f];
+    let mut h = rf.first;
+    for _ in 0..rf.degree {
+        let k = rb.face[rb.twin[h as usize] as usize] as usize;
+        if k < f && !rb.faces[k].hole && !out.contains(&face_group[k]) {
+            out.push(face_group[k]);
+        }
+        h = rb.next[h as usize];
+    }
+    if out.is_empty() {
+        if let Some(p) = prev_real {
+            out.push(face_group[p]);
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Crease coding (spec §7)
+
+trait BitCoder {
+    fn bit(&mut self, model: &mut BitModel, slot: &mut bool) -> Result<()>;
+}
+
+impl BitCoder for RangeEncoder {
+    fn bit(&mut self, model: &mut BitModel, slot: &mut bool) -> Result<()> {
+        self.encode_bit(model, *slot);
+        Ok(())
+    }
+}
+
+impl BitCoder for RangeDecoder<'_> {
+    fn bit(&mut self, model: &mut BitModel, slot: &mut bool) -> Result<()> {
+        *slot = self.decode_bit(model)?;
+        Ok(())
+    }
+}
+
+/// Codes the sharp flag of every edge (label order) and the corner flag of every coded
+/// vertex. `sharp[j]` is indexed by edge number (label order), `corner` by coded vertex.
+fn code_creases(
+    rb: &Rebuilt,
+    edges: &[u32],
+    face_group: &[u32],
+    sharp: &mut [bool],
+    corner: &mut [bool],
+    coder: &mut impl BitCoder,
+) -> Result<()> {
+    let mut sharp_models = [BitModel::default(); 13];
+    let mut count = vec![0u8; corner.len()];
+    for (j, &h) in edges.iter().enumerate() {
+        let t = rb.twin[h as usize];
+        let (a, b) = (rb.vertex[h as usize] as usize, rb.vertex[t as usize] as usize);
+        let ctx = if rb.is_hole(h) || rb.is_hole(t) {
+            12
+        } else {
+            let (ca, cb) = (count[a].min(2) as usize, count[b].min(2) as usize);
+            let (lo, hi) = (ca.min(cb), ca.max(cb));
+            let pair = lo * 3 + hi - lo * (lo + 1) / 2;
+            let same = face_group[rb.face[h as usize] as usize] == face_group[rb.face[t as usize] as usize];
+            pair * 2 + usize::from(same)
+        };
+        coder.bit(&mut sharp_models[ctx], &mut sharp[j])?;
+        if sharp[j] {
+            count[a] = count[a].saturating_add(1);
+            count[b] = count[b].saturating_add(1);
+        }
+    }
+    let mut crease_degree = vec![0u8; corner.len()];
+    for (j, &h) in edges.iter().enumerate() {
+        let t = rb.twin[h as usize];
+        if sharp[j] || rb.is_hole(h) || rb.is_hole(t) {
+            for v in [rb.vertex[h as usize], rb.vertex[t as usize]] {
+                crease_degree[v as usize] = crease_degree[v as usize].saturating_add(1);
+            }
+        }
+    }
+    let mut corner_models = [BitModel::default(); 4];
+    for (v, c) in corner.iter_mut().enumerate() {
+        coder.bit(&mut corner_models[crease_degree[v].min(3) as usize], c)?;
+    }
+    Ok(())
+}
+
+fn zigzag64(v: i64) -> u64 {
+    ((v << 1) ^ (v >> 63)) as u64
+}
+
+fn unzigzag64(u: u64) -> i64 {
+    ((u >> 1) as i64) ^ -((u & 1) as i64)
+}
+
+// ------------------------------------------------------------------------------------------
+// Encoder
+
+/// Encodes a mesh. See [`encode_with_map`].
+pub fn encode(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Vec<u8>> {
+    encode_with_map(mesh, opts).map(|(b, _)| b)
+}
+
+/// Encodes a mesh and returns the bytes plus the renumbering the decoder will see.
+///
+/// Raw meshes (`Content::RawMesh`) with non-manifold edges or vertices are cut apart and
+/// re-merged by the decoder (`fixups` section); a non-manifold control mesh is an error.
+/// Every sharp edge must be an edge of the mesh.
+pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<u8>, EncodeMap)> {
+    let bits = opts.quantization_bits;
+    if !(4..=24).contains(&bits) {
+        return Err(Error::Parameter(format!(
+            "quantization bits must be in 4..=24, got {bits}"
+        )));
+    }
+    mesh.validate()?;
+    if mesh.face_count() > 0 && mesh.groups.is_empty() {
+        return Err(Error::Mesh("faces but no groups".into()));
+    }
+    let raw = opts.content == Content::RawMesh;
+    let (cut, source): (Option<ControlMesh>, Vec<u32>) = match HalfEdgeMesh::build(mesh) {
+        Ok(_) => (None, (0..mesh.vertex_count() as u32).collect()),
+        Err(e) if raw => {
+            let (c, s) = cut_non_manifold(mesh)?;
+            HalfEdgeMesh::build(&c).map_err(|e2| {
+                Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
+            })?;
+            (Some(c), s)
+        }
+        Err(e) => return Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
+    };
+    let work = cut.as_ref().unwrap_or(mesh);
+    let he = HalfEdgeMesh::build(work)?;
+    let tr = encode_traversal(&he);
+    let internal = |what: &str| Error::Mesh(format!("internal encoder error: {what}"));
+    let rb = rebuild(&tr.labels).map_err(|e| internal(&e.to_string()))?;
+    if rb.faces.len() != tr.faces.len() {
+        return Err(internal("face count mismatch"));
+    }
+
+    // Map rebuilt (coded) vertices to work-mesh vertices.
+    let nw = work.vertex_count();
+    let mut coded_to_work = vec![NONE; nw];
+    let mut work_to_coded = vec![NONE; nw];
+    let mut rebuilt_face_source = vec![NONE; rb.faces.len()];
+    for (i, rf) in rb.faces.iter().enumerate() {
+        let (f, entry) = tr.faces[i];
+        rebuilt_face_source[i] = f;
+        let (mut hr, mut ho) = (rf.first, entry);
+        for _ in 0..rf.degree {
+            let (c, w) = (rb.vertex[hr as usize], he.origin[ho as usize]);
+            if coded_to_work[c as usize] == NONE && work_to_coded[w as usize] == NONE {
+                coded_to_work[c as usize] = w;
+                work_to_coded[w as usize] = c;
+            } else if coded_to_work[c as usize] != w {
+                return Err(internal("vertex mapping mismatch"));
+            }
+            hr = rb.next[hr as usize];
+            ho = he.next[ho as usize];
+        }
+    }
+    let traversal_vertices = rb.vertex_count;
+    let mut isolated = 0u64;
+    let mut next_coded = traversal_vertices as u32;
+    for w in 0..nw {
+        if work_to_coded[w] == NONE {
+            work_to_coded[w] = next_coded;
+            coded_to_work[next_coded as usize] = w as u32;
+            next_coded += 1;
+            isolated += 1;
+        }
+    }
+    let coded_count = nw;
+    let orig_of_coded: Vec<u32> = coded_to_work.iter().map(|&w| source[w as usize]).collect();
+
+    // Merges: every coded copy of an input vertex merges into the lowest coded copy.
+    let mut rep_of_orig = vec![NONE; mesh.vertex_count()];
+    for (c, &o) in orig_of_coded.iter().enumerate() {
+        if rep_of_orig[o as usize] == NONE {
+            rep_of_orig[o as usize] = c as u32;
+        }
+    }
+    let merges: Vec<(u32, u32)> = orig_of_coded
+        .iter()
+        .enumerate()
+        .filter(|&(c, &o)| rep_of_orig[o as usize] != c as u32)
+        .map(|(c, &o)| (c as u32, rep_of_orig[o as usize]))
+        .collect();
+    let final_of_coded = final_numbering(coded_count, &merges);
+
+    // Groups: renumbered by first appearance in encoding order; unused groups at the end.
+    let mut group_new = vec![NONE; mesh.groups.len()];
+    let mut next_group = 0u32;
+    let mut face_group_new = vec![NONE; rb.faces.len()];
+    let mut group_syms = Vec::new();
+    let mut prev_real = None;
+    let mut cands = Vec::new();
+    for (i, rf) in rb.faces.iter().enumerate() {
+        if rf.hole {
+            continue;
+        }
+        let og = mesh.face_groups[rebuilt_face_source[i] as usize] as usize;
+        let sym = if group_new[og] == NONE {
+            group_new[og] = next_group;
+            next_group += 1;
+            GroupSym::New
+        } else {
+            group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
+            match cands.iter().take(GROUP_CANDIDATES).position(|&g| g == group_new[og]) {
+                Some(c) => GroupSym::Candidate(c as u8),
+                None => GroupSym::Explicit(group_new[og]),
+            }
+        };
+        group_syms.push((sym, next_group - u32::from(sym == GroupSym::New)));
+        face_group_new[i] = group_new[og];
+        prev_real = Some(i);
+    }
+    for g in group_new.iter_mut().filter(|g| **g == NONE) {
+        *g = next_group;
+        next_group += 1;
+    }
+    let mut groups_new_order = vec![Group::default(); mesh.groups.len()];
+    for (og, &ng) in group_new.iter().enumerate() {
+        groups_new_order[ng as usize] = mesh.groups[og].clone();
+    }
+    let group_count = mesh.groups.len() as u64;
+
+    // Connectivity section.
+    let mut conn = Vec::new();
+    put_varint(&mut conn, tr.labels.len() as u64);
+    {
+        let mut enc = RangeEncoder::new();
+        let mut models = ConnModels::new();
+        let mut gi = 0;
+        for &l in &tr.labels {
+            models.encode_label(&mut enc, l);
+            if matches!(l, Label::F(_)) && group_count > 1 {
+                let (sym, seen) = group_syms[gi];
+                models.encode_group(&mut enc, sym, seen);
+            }
+            if matches!(l, Label::F(_)) {
+                gi += 1;
+            }
+        }
+        conn.extend_from_slice(&enc.finish());
+    }
+
+    // Patches section.
+    let quant = Quantizer::for_positions(&mesh.positions, bits);
+    let patches = encode_patches(&groups_new_order, &quant)?;
+
+    // Creases section.
+    let edges: Vec<u32> = rb.label_edge.iter().copied().filter(|&h| h != NONE).collect();
+    let mut sharp = vec![false; edges.len()];
+    let mut matched = BTreeSet::new();
+    for (j, &h) in edges.iter().enumerate() {
+        let t = rb.twin[h as usize];
+        let key = edge_key(
+            orig_of_coded[rb.vertex[h as usize] as usize],
+            orig_of_coded[rb.vertex[t as usize] as usize],
+        );
+        if mesh.sharp_edges.contains(&key) {
+            sharp[j] = true;
+            matched.insert(key);
+        }
+    }
+    if matched.len() != mesh.sharp_edges.len() {
+        let missing = mesh.sharp_edges.iter().find(|k| !matched.contains(k));
+        return Err(Error::Mesh(format!(
+            "sharp edge {missing:?} is not an edge of the mesh"
+        )));
+    }
+    let mut corner: Vec<bool> = orig_of_coded
+        .iter()
+        .map(|o| mesh.corners.contains(o))
+        .collect();
+    let mut creases_enc = RangeEncoder::new();
+    code_creases(&rb, &edges, &face_group_new, &mut sharp, &mut corner, &mut creases_enc)?;
+    let creases = creases_enc.finish();
+
+    // Geometry section.
+    let mut q: Vec<[i32; 3]> = coded_to_work
+        .iter()
+        .map(|&w| quant.quantize(work.positions[w as usize]))
+        .collect();
+    let face_plane_group = plane_groups_of_faces(&face_group_new, &groups_new_order);
+    let mut geom_enc = RangeEncoder::new();
+    {
+        let mut ge = GeomEncoder::new(&mut geom_enc);
+        geometry::walk(&rb, &face_plane_group, groups_new_order.len(), bits, &mut q, &mut ge)?;
+    }
+    let geometry = geom_enc.finish();
+
+    // Header.
+    let mut flags = 0u64;
+    if let Content::ControlMesh { .. } = opts.content {
+        flags |= FLAG_CONTROL_MESH;
+    }
+    if !quant.as_f32 {
+        flags |= FLAG_BOX_F64;
+    }
+    if isolated > 0 {
+        flags |= FLAG_ISOLATED;
+    }
+    if !merges.is_empty() {
+        flags |= FLAG_MERGES;
+    }
+    if patches.is_some() {
+        flags |= FLAG_PATCHES;
+    }
+    let store_names = opts.store_group_names && groups_new_order.iter().any(|g| !g.name.is_empty());
+    if store_names {
+        flags |= FLAG_NAMES;
+    }
+    let mut header = Vec::new();
+    put_varint(&mut header, flags);
+    if let Content::ControlMesh { default_level } = opts.content {
+        header.push(default_level);
+    }
+    header.push(bits);
+    put_varint(&mut header, mesh.vertex_count() as u64);
+    put_varint(&mut header, mesh.face_count() as u64);
+    put_varint(&mut header, mesh.face_vertices.len() as u64);
+    put_varint(&mut header, group_count);
+    if isolated > 0 {
+        put_varint(&mut header, isolated);
+    }
+    if !merges.is_empty() {
+        put_varint(&mut header, merges.len() as u64);
+    }
+    for v in quant.min.iter().chain(std::iter::once(&quant.extent)) {
+        if quant.as_f32 {
+            header.extend_from_slice(&(*v as f32).to_le_bytes());
+        } else {
+            header.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+
+    let mut out = Vec::new();
+    out.extend_from_slice(&MAGIC);
+    out.push(FORMAT_VERSION_MAJOR);
+    out.push(FORMAT_VERSION_MINOR);
+    put_section(&mut out, SEC_HEADER, &header, false, true);
+    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
+    if let Some(p) = patches {
+        put_section(&mut out, SEC_PATCHES, &p, true, false);
+    }
+    put_section(&mut out, SEC_CREASES, &creases, true, false);
+    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
+    if !merges.is_empty() {
+        let mut fx = Vec::new();
+        let mut prev: i64 = -1;
+        for &(d, r) in &merges {
+            put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
+            put_varint(&mut fx, u64::from(d - r - 1));
+            prev = i64::from(d);
+        }
+        put_section(&mut out, SEC_FIXUPS, &fx, true, false);
+    }
+    if store_names {
+        let mut names = Vec::new();
+        for g in &groups_new_order {
+            put_varint(&mut names, g.name.len() as u64);
+            names.extend_from_slice(g.name.as_bytes());
+        }
+        put_section(&mut out, SEC_NAMES, &names, true, false);
+    }
+
+    let vertex: Vec<u32> = (0..mesh.vertex_count())
+        .map(|v| final_of_coded[rep_of_orig[v] as usize])
+        .collect();
+    let mut face = vec![NONE; mesh.face_count()];
+    let mut next_face = 0u32;
+    for (i, rf) in rb.faces.iter().enumerate() {
+        if !rf.hole {
+            face[rebuilt_face_source[i] as usize] = next_face;
+            next_face += 1;
+        }
+    }
+    Ok((
+        out,
+        EncodeMap {
+            vertex,
+            face,
+            group: group_new,
+        },
+    ))
+}
+
+/// Final vertex id of every coded vertex after the merges (`(copy, representative)` pairs,
+/// copies ascending, representatives not themselves copies).
+fn final_numbering(coded_count: usize, merges: &[(u32, u32)]) -> Vec<u32> {
+    let mut removed = vec![NONE; coded_count];
+    for &(d, r) in merges {
+        removed[d as usize] = r;
+    }
+    let mut fin = vec![NONE; coded_count];
+    let mut next = 0u32;
+    for c in 0..coded_count {
+        if removed[c] == NONE {
+            fin[c] = next;
+            next += 1;
+        }
+    }
+    for c in 0..coded_count {
+        if removed[c] != NONE {
+            fin[c] = fin[removed[c] as usize];
+        }
+    }
+    fin
+}
+
+fn plane_groups_of_faces(face_group: &[u32], groups: &[Group]) -> Vec<u32> {
+    face_group
+        .iter()
+        .map(|&g| match groups.get(g as usize).map(|g| g.patch) {
+            Some(PatchKind::Boundary(BoundarySurface::Plane)) => g,
+            _ => NONE,
+        })
+        .collect()
+}
+
+const PATCH_CLOSED: u8 = 0;
+const PATCH_PLANE: u8 = 1;
+const PATCH_CYLINDER: u8 = 2;
+const PATCH_CONE: u8 = 3;
+/// Axis directions are stored as three i16 components scaled by this.
+const DIRECTION_SCALE: f64 = 32767.0;
+
+fn encode_patches(groups: &[Group], quant: &Quantizer) -> Result<Option<Vec<u8>>> {
+    if groups.iter().all(|g| g.patch == PatchKind::Closed) {
+        return Ok(None);
+    }
+    let mut p = Vec::new();
+    for g in groups {
+        let (kind, axis) = match g.patch {
+            PatchKind::Closed => (PATCH_CLOSED, None),
+            PatchKind::Boundary(BoundarySurface::Plane) => (PATCH_PLANE, None),
+            PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => (PATCH_CYLINDER, Some(axis)),
+            PatchKind::Boundary(BoundarySurface::Cone { axis }) => (PATCH_CONE, Some(axis)),
+        };
+        p.push(kind);
+        if let Some(axis) = axis {
+            let step = quant.step();
+            for i in 0..3 {
+                let q = if step > 0.0 {
+                    ((axis.origin[i] - quant.min[i]) / step).round()
+                } else {
+                    0.0
+                };
+                if !q.is_finite() || q.abs() > 2f64.powi(52) {
+                    return Err(Error::Mesh(format!(
+                        "group `{}`: axis origin is too far from the mesh to quantise",
+                        g.name
+                    )));
+                }
+                put_varint(&mut p, zigzag64(q as i64));
+            }
+            let d = axis.direction;
+            let len = d.length();
+            if !len.is_finite() || len == 0.0 {
+                return Err(Error::Mesh(format!(
+                    "group `{}`: axis direction must be a finite non-zero vector",
+                    g.name
+                )));
+            }
+            for i in 0..3 {
+                let c = (d[i] / len * DIRECTION_SCALE).round() as i16;
+                p.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    Ok(Some(p))
+}
+
+fn decode_patches(payload: &[u8], group_count: usize, quant: &Quantizer) -> Result<Vec<PatchKind>> {
+    let mut r = Reader::new(payload, "patches");
+    let mut out = Vec::with_capacity(group_count.min(payload.len()));
+    for _ in 0..group_count {
+        let kind = r.u8("kind")?;
+        let patch = match kind {
+            PATCH_CLOSED => PatchKind::Closed,
+            PATCH_PLANE => PatchKind::Boundary(BoundarySurface::Plane),
+            PATCH_CYLINDER | PATCH_CONE => {
+                let mut origin = [0.0; 3];
+                for (i, o) in origin.iter_mut().enumerate() {
+                    let q = unzigzag64(r.varint("axis_origin")?);
+                    if q.unsigned_abs() > 1 << 52 {
+                        return Err(r.err("axis_origin", "out of range"));
+                    }
+                    *o = quant.min[i] + q as f64 * quant.step();
+                }
+                let mut d = [0.0; 3];
+                for c in &mut d {
+                    *c = f64::from(r.i16("axis_direction")?);
+                }
+                let d = DVec3::from(d);
+                if d == DVec3::ZERO {
+                    return Err(r.err("axis_direction", "zero direction"));
+                }
+                let axis = Axis {
+                    origin: DVec3::from(origin),
+                    direction: d.normalize(),
+                };
+                PatchKind::Boundary(if kind == PATCH_CYLINDER {
+                    BoundarySurface::Cylinder { axis }
+                } else {
+                    BoundarySurface::Cone { axis }
+                })
+            }
+            k => return Err(r.err("kind", format!("unknown patch kind {k}"))),
+        };
+        out.push(patch);
+    }
+    r.expect_end()?;
+    Ok(out)
+}
+
+// ------------------------------------------------------------------------------------------
+// Decoder
+
+/// Decodes a file. Every malformed input gives `Error::Format` or `Error::LimitsExceeded`.
+pub fn decode(bytes: &[u8], limits: &Limits) -> Result<Decoded> {
+    decode_full(bytes, limits).map(|(d, _)| d)
+}
+
+/// Header, section sizes and summary counts of a file (decodes it fully).
+pub fn inspect(bytes: &[u8], limits: &Limits) -> Result<FileInfo> {
+    decode_full(bytes, limits).map(|(_, i)| i)
+}
+
+fn limit(what: &'static str, value: u64, max: u64) -> Result<()> {
+    if value > max {
+        return Err(Error::LimitsExceeded {
+            what,
+            value,
+            limit: max,
+        });
+    }
+    Ok(())
+}
+
+fn parse_header(payload: &[u8], major: u8, minor: u8, limits: &Limits) -> Result<(Header, Quantizer)> {
+    let features = features_for(major, minor)?;
+    let mut r = Reader::new(payload, "header");
+    let flags = r.varint("flags")?;
+    if flags & !features.known_flags != 0 {
+        return Err(r.err("flags", format!("unknown flag bits {:#x}", flags & !features.known_flags)));
+    }
+    let content = if flags & FLAG_CONTROL_MESH != 0 {
+        Content::ControlMesh {
+            default_level: r.u8("default_level")?,
+        }
+    } else {
+        Content::RawMesh
+    };
+    let bits = r.u8("quantization_bits")?;
+    if !(4..=24).contains(&bits) {
+        return Err(r.err("quantization_bits", format!("{bits} is outside 4..=24")));
+    }
+    let vertex_count = r.varint("vertex_count")?;
+    limit("vertex count", vertex_count, limits.max_vertices)?;
+    let face_count = r.varint("face_count")?;
+    limit("face count", face_count, limits.max_faces)?;
+    let corners = r.varint("face_corner_count")?;
+    limit("face corner count", corners, limits.max_face_corners)?;
+    if corners < 3 * face_count || corners > u64::from(u32::MAX / 4) {
+        return Err(r.err(
+            "face_corner_count",
+            format!("{corners} corners cannot form {face_count} faces"),
+        ));
+    }
+    let group_count = r.varint("group_count")?;
+    limit("group count", group_count, limits.max_groups)?;
+    if face_count > 0 && group_count == 0 {
+        return Err(r.err("group_count", "faces without groups"));
+    }
+    let isolated = if flags & FLAG_ISOLATED != 0 {
+        r.varint_max("isolated_vertex_count", vertex_count)?
+    } else {
+        0
+    };
+    let merges = if flags & FLAG_MERGES != 0 {
+        r.varint_max("merged_vertex_count", corners)?
+    } else {
+        0
+    };
+    let mut vals = [0.0f64; 4];
+    for v in &mut vals {
+        *v = if flags & FLAG_BOX_F64 != 0 {
+            r.f64("bbox")?
+        } else {
+            f64::from(r.f32("bbox")?)
+        };
+    }
+    if vals.iter().any(|v| !v.is_finite()) || vals[3] < 0.0 {
+        return Err(r.err("bbox", "bounding box is not finite or has a negative extent"));
+    }
+    r.expect_end()?;
+    let header = Header {
+        version_major: major,
+        version_minor: minor,
+        flags,
+        content,
+        quantization_bits: bits,
+        bbox_min: [vals[0], vals[1], vals[2]],
+        bbox_extent: vals[3],
+        vertex_count,
+        face_count,
+        face_corner_count: corners,
+        group_count,
+        isolated_vertex_count: isolated,
+        merged_vertex_count: merges,
+    };
+    let quant = Quantizer {
+        min: header.bbox_min,
+        extent: header.bbox_extent,
+        bits,
+        as_f32: flags & FLAG_BOX_F64 == 0,
+    };
+    Ok((header, quant))
+}
+
+fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
+    limit("input bytes", bytes.len() as u64, limits.max_input_bytes)?;
+    let mut r = Reader::new(bytes, "file");
+    let magic = r.bytes(4, "magic")?;
+    if magic != MAGIC {
+        return Err(Error::format("file", "magic", "not an .scode file (bad magic bytes)"));
+    }
+    let major = r.u8("version_major")?;
+    let minor = r.u8("version_minor")?;
+    features_for(major, minor)?;
+    let max_raw = limits.max_input_bytes;
+    let verify = limits.verify_checksums;
+
+    let mut sections_info = Vec::new();
+    let hs = read_section(&mut r, Some(0), verify, max_raw)?;
+    if hs.id != SEC_HEADER {
+        return Err(Error::format("file", "section", "the first section must be the header"));
+    }
+    sections_info.push(SectionInfo {
+        name: "header",
+        stored_bytes: hs.stored_bytes + 6,
+        raw_bytes: hs.payload.len(),
+    });
+    let (header, quant) = parse_header(&hs.payload, major, minor, limits)?;
+
+    // Remaining sections, in increasing id order; unknown skippable ones are ignored.
+    let mut payloads: [Option<Vec<u8>>; 7] = Default::default();
+    let mut last_id = SEC_HEADER;
+    while !r.is_empty() {
+        let s = read_section(&mut r, None, verify, max_raw)?;
+        if s.id <= last_id {
+            return Err(Error::format(
+                "file",
+                "section",
+                format!("section {} out of order or repeated", s.id),
+            ));
+        }
+        last_id = s.id;
+        if s.id as usize >= payloads.len() {
+            if s.skippable {
+                continue;
+            }
+            return Err(Error::format("file", "section", format!("unknown section id {}", s.id)));
+        }
+        sections_info.push(SectionInfo {
+            name: section_name(s.id),
+            stored_bytes: s.stored_bytes,
+            raw_bytes: s.payload.len(),
+        });
+        payloads[s.id as usize] = Some(s.payload);
+    }
+    for (id, flag) in [(SEC_PATCHES, FLAG_PATCHES), (SEC_FIXUPS, FLAG_MERGES), (SEC_NAMES, FLAG_NAMES)] {
+        if payloads[id as usize].is_some() != (header.flags & flag != 0) {
+            return Err(Error::format(
+                section_name(id),
+                "section",
+                "section presence does not match the header flags",
+            ));
+        }
+    }
+    let required = |id: u8| -> Result<&Vec<u8>> {
+        payloads[id as usize].as_ref().ok_or_else(|| {
+            Error::format(section_name(id), "section", "required section is missing")
+        })
+    };
+
+    let nf = header.face_count as usize;
+    let coded_count = header
+        .vertex_count
+        .checked_add(header.merged_vertex_count)
+        .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
+        as usize;
+    let traversal_vertices = coded_count
+        .checked_sub(header.isolated_vertex_count as usize)
+        .ok_or_else(|| Error::format("header", "isolated_vertex_count", "exceeds the vertex count"))?;
+    let group_count = header.group_count as usize;
+
+    // Connectivity.
+    let conn = required(SEC_CONNECTIVITY)?;
+    let mut cr = Reader::new(conn, "connectivity");
+    let label_count = cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
+    let mut dec = RangeDecoder::new(cr.rest(), "connectivity")?;
+    let mut models = ConnModels::new();
+    let mut labels = Vec::new();
+    let mut group_syms = Vec::new();
+    let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
+    let mut seen = 0u32;
+    for _ in 0..label_count {
+        let l = models.decode_label(&mut dec, max_degree.max(3))?;
+        if let Label::F(_) = l {
+            if group_count > 1 {
+                let g = models.decode_group(&mut dec, seen)?;
+                if g == GroupSym::New {
+                    seen += 1;
+                }
+                group_syms.push(g);
+            }
+        }
+        labels.push(l);
+    }
+    dec.finish()?;
+    let rb = rebuild(&labels)?;
+    let real_faces = rb.faces.iter().filter(|f| !f.hole).count();
+    let real_corners: u64 = rb.faces.iter().filter(|f| !f.hole).map(|f| u64::from(f.degree)).sum();
+    if real_faces != nf || real_corners != header.face_corner_count {
+        return Err(Error::format(
+            "connectivity",
+            "labels",
+            format!("labels give {real_faces} faces / {real_corners} corners, header says {nf} / {}", header.face_corner_count),
+        ));
+    }
+    if rb.vertex_count != traversal_vertices {
+        return Err(Error::format(
+            "connectivity",
+            "labels",
+            format!("labels give {} vertices, header implies {traversal_vertices}", rb.vertex_count),
+        ));
+    }
+    // Resolve groups in encoding order.
+    let mut face_group = vec![NONE; rb.faces.len()];
+    let mut next_group = 0u32;
+    let mut prev_real = None;
+    let mut si = 0;
+    let mut cands = Vec::new();
+    for i in 0..rb.faces.len() {
+        if rb.faces[i].hole {
+            continue;
+        }
+        let g = if group_count <= 1 {
+            0
+        } else {
+            let sym = group_syms[si];
+            si += 1;
+            match sym {
+                GroupSym::New => {
+                    next_group += 1;
+                    next_group - 1
+                }
+                GroupSym::Explicit(id) => id,
+                GroupSym::Candidate(c) => {
+                    group_candidates(&rb, i, &face_group, prev_real, &mut cands);
+                    match cands.get(usize::from(c)) {
+                        Some(&g) => g,
+                        None => {
+                            return Err(Error::format(
+                                "connectivity",
+                                "group",
+                                format!("face {i} refers to candidate group {c} of {}", cands.len()),
+                            ))
+                        }
+                    }
+                }
+            }
+        };
+        if g as usize >= group_count {
+            return Err(Error::format("connectivity", "group", format!("group {g} of {group_count}")));
+        }
+        face_group[i] = g;
+        prev_real = Some(i);
+    }
+
+    // Patches.
+    let patch_kinds = match &payloads[SEC_PATCHES as usize] {
+        Some(p) => decode_patches(p, group_count, &quant)?,
+        None => vec![PatchKind::Closed; group_count],
+    };
+
+    // Creases.
+    let edges: Vec<u32> = rb.label_edge.iter().copied().filter(|&h| h != NONE).collect();
+    let mut sharp = vec![false; edges.len()];
+    let mut corner = vec![false; coded_count];
+    {
+        let mut d = RangeDecoder::new(required(SEC_CREASES)?, "creases")?;
+        code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
+        d.finish()?;
+    }
+
+    // Geometry.
+    let mut q = vec![[0i32; 3]; coded_count];
+    {
+        let groups_tmp: Vec<Group> = patch_kinds
+            .iter()
+            .map(|&patch| Group {
+                name: String::new(),
+                patch,
+            })
+            .collect();
+        let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
+        let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
+        let mut gd = GeomDecoder::new(&mut d, quant.max_q());
+        geometry::walk(&rb, &face_plane_group, group_count, quant.bits, &mut q, &mut gd)?;
+        d.finish()?;
+    }
+
+    // Fixups.
+    let mut merges = Vec::new();
+    match (&payloads[SEC_FIXUPS as usize], header.merged_vertex_count) {
+        (None, 0) => {}
+        (Some(p), m) if m > 0 => {
+            let mut fr = Reader::new(p, "fixups");
+            let mut prev: u64 = 0;
+            let mut is_copy = vec![false; coded_count];
+            for i in 0..m {
+                let gap = fr.varint("copy")?;
+                let d = if i == 0 { gap } else { prev.saturating_add(gap).saturating_add(1) };
+                if d >= coded_count as u64 {
+                    return Err(fr.err("copy", format!("vertex {d} does not exist")));
+                }
+                let back = fr.varint("representative")?;
+                if back >= d {
+                    return Err(fr.err("representative", "must precede the copy"));
+                }
+                let rep = d - back - 1;
+                if is_copy[rep as usize] {
+                    return Err(fr.err("representative", "is itself a copy"));
+                }
+                is_copy[d as usize] = true;
+                merges.push((d as u32, rep as u32));
+                prev = d;
+            }
+            fr.expect_end()?;
+        }
+        _ => {
+            return Err(Error::format(
+                "fixups",
+                "section",
+                "section presence does not match the header's merged vertex count",
+            ))
+        }
+    }
+    let final_of_coded = final_numbering(coded_count, &merges);
+
+    // Names.
+    let mut names = vec![String::new(); group_count];
+    if let Some(p) = &payloads[SEC_NAMES as usize] {
+        let mut nr = Reader::new(p, "names");
+        for n in names.iter_mut() {
+            let len = nr.varint_max("name_length", nr.remaining() as u64)?;
+            let b = nr.bytes(len as usize, "name")?;
+            *n = String::from_utf8(b.to_vec()).map_err(|_| nr.err("name", "not UTF-8"))?;
+        }
+        nr.expect_end()?;
+    }
+
+    // Assemble.
+    let mut mesh = ControlMesh::new();
+    let final_count = header.vertex_count as usize;
+    mesh.positions = vec![DVec3::ZERO; final_count];
+    for c in 0..coded_count {
+        mesh.positions[final_of_coded[c] as usize] = quant.dequantize(q[c]);
+    }
+    mesh.face_vertices.reserve(header.face_corner_count as usize);
+    let mut buf = Vec::new();
+    for (i, rf) in rb.faces.iter().enumerate() {
+        if rf.hole {
+            continue;
+        }
+        buf.clear();
+        buf.extend(rb.face_vertices(i).map(|v| final_of_coded[v as usize]));
+        mesh.push_face(&buf, face_group[i]);
+    }
+    mesh.groups = names
+        .into_iter()
+        .zip(&patch_kinds)
+        .map(|(name, &patch)| Group { name, patch })
+        .collect();
+    for (j, &h) in edges.iter().enumerate() {
+        if sharp[j] {
+            let t = rb.twin[h as usize];
+            mesh.sharp_edges.insert(edge_key(
+                final_of_coded[rb.vertex[h as usize] as usize],
+                final_of_coded[rb.vertex[t as usize] as usize],
+            ));
+        }
+    }
+    for (c, &is) in corner.iter().enumerate() {
+        if is {
+            mesh.corners.insert(final_of_coded[c]);
+        }
+    }
+    mesh.validate()
+        .map_err(|e| Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}")))?;
+
+    let info = FileInfo {
+        header: header.clone(),
+        sections: sections_info,
+        total_bytes: bytes.len(),
+        sharp_edge_count: mesh.sharp_edges.len(),
+        corner_count: mesh.corners.len(),
+        group_names: mesh.groups.iter().map(|g| g.name.clone()).collect(),
+        patch_kinds,
+        component_count: rb.faces.iter().filter(|f| f.start).count(),
+        label_count: labels.len(),
+    };
+    Ok((Decoded { header, mesh }, info))
+}
+
+#[cfg(test)]
+mod tests;

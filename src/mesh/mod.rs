@@ -5,6 +5,8 @@
 //! else. The same type also carries input tessellations (raw mode stores the input mesh
 //! itself as the control mesh), so readers, the codec, subdivision and fitting all speak it.
 
+pub mod topology;
+
 use std::collections::BTreeSet;
 
 use glam::DVec3;

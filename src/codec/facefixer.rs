@@ -1,0 +1,759 @@
+//! Face Fixer connectivity coding (Isenburg & Snoeyink 2000), the variant fully specified in
+//! `face-fixer.md` §3-§4 and `spec/format.md` §6: the encoder walks the mesh and emits one label
+//! per edge (+1 per component); the decoder rebuilds the half-edge structure by undoing the
+//! labels in reverse order.
+//!
+//! The encoder does not compute the decoder-side numbering itself: it runs [`rebuild`] on its own
+//! labels and maps the result back, so encoder and decoder cannot disagree about face order,
+//! vertex order or which label owns which edge.
+
+use crate::error::{Error, Result};
+use crate::mesh::topology::{HalfEdgeMesh, NONE};
+
+/// One Face Fixer label. `F(l)`/`H(l)`: a face / hole of degree `l` is fixed to the gate;
+/// `R`, `L`, `S`, `E`: the gate is zipped with its right / left neighbour / an element
+/// elsewhere in the active boundary / its only partner; `M`: zipped with an element of a
+/// suspended boundary (depth `i` in the stack, offset `k` from its gate, length `l`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Label {
+    F(u32),
+    H(u32),
+    R,
+    L,
+    S,
+    E,
+    M { i: u32, k: u32, l: u32 },
+}
+
+/// Result of the encoder's traversal.
+pub struct Traversal {
+    pub labels: Vec<Label>,
+    /// Faces of the half-edge mesh (mesh and hole faces) in encoding order, each with the
+    /// half-edge it was entered by (`t` in face-fixer.md; the start corner for start faces).
+    pub faces: Vec<(u32, u32)>,
+}
+
+/// Runs the Face Fixer encoder over every connected component (start face: the lowest
+/// unprocessed mesh face, start corner: its first corner).
+pub fn encode_traversal(he: &HalfEdgeMesh) -> Traversal {
+    let nh = he.origin.len();
+    let mut a_next = vec![NONE; nh];
+    let mut a_prev = vec![NONE; nh];
+    let mut loop_of = vec![NONE; nh];
+    let mut processed = vec![false; he.face_count()];
+    let mut labels = Vec::with_capacity(nh / 2 + 16);
+    let mut faces = Vec::with_capacity(he.face_count());
+    let mut next_id = 0u32;
+    let mut stack: Vec<(u32, u32)> = Vec::new();
+
+    for f0 in 0..he.real_face_count as u32 {
+        if processed[f0 as usize] {
+            continue;
+        }
+        processed[f0 as usize] = true;
+        let first = he.face_first[f0 as usize];
+        faces.push((f0, first));
+        labels.push(Label::F(he.face_degree[f0 as usize]));
+        let mut cur = next_id;
+        next_id += 1;
+        for h in he.face_half_edges(f0) {
+            let n = he.next[h as usize];
+            a_next[h as usize] = n;
+            a_prev[n as usize] = h;
+            loop_of[h as usize] = cur;
+        }
+        let mut gate = first;
+        stack.clear();
+        loop {
+            let g = gate;
+            let t = he.twin[g as usize];
+            let u = he.face[t as usize];
+            if !processed[u as usize] {
+                processed[u as usize] = true;
+                faces.push((u, t));
+                let l = he.face_degree[u as usize];
+                let (p, n) = (a_prev[g as usize], a_next[g as usize]);
+                let mut last = p;
+                let mut x = he.next[t as usize];
+                for _ in 0..l - 1 {
+                    a_next[last as usize] = x;
+                    a_prev[x as usize] = last;
+                    loop_of[x as usize] = cur;
+                    last = x;
+                    x = he.next[x as usize];
+                }
+                a_next[last as usize] = n;
+                a_prev[n as usize] = last;
+                loop_of[g as usize] = NONE;
+                gate = last;
+                labels.push(if he.is_hole_face(u) {
+                    Label::H(l)
+                } else {
+                    Label::F(l)
+                });
+                continue;
+            }
+            let lt = loop_of[t as usize];
+            debug_assert_ne!(lt, NONE, "twin of the gate must be on a boundary");
+            loop_of[g as usize] = NONE;
+            loop_of[t as usize] = NONE;
+            if lt == cur {
+                let x_empty = a_next[g as usize] == t;
+                let y_empty = a_next[t as usize] == g;
+                if x_empty && y_empty {
+                    labels.push(Label::E);
+                    match stack.pop() {
+                        None => break,
+                        Some((id, gt)) => {
+                            cur = id;
+                            gate = gt;
+                        }
+                    }
+                } else if x_empty {
+                    let (p, n) = (a_prev[g as usize], a_next[t as usize]);
+                    a_next[p as usize] = n;
+                    a_prev[n as usize] = p;
+                    gate = p;
+                    labels.push(Label::R);
+                } else if y_empty {
+                    let (p, n) = (a_prev[t as usize], a_next[g as usize]);
+                    a_next[p as usize] = n;
+                    a_prev[n as usize] = p;
+                    gate = p;
+                    labels.push(Label::L);
+                } else {
+                    let (xf, xl) = (a_next[g as usize], a_prev[t as usize]);
+                    let (yf, yl) = (a_next[t as usize], a_prev[g as usize]);
+                    a_next[xl as usize] = xf;
+                    a_prev[xf as usize] = xl;
+                    a_next[yl as usize] = yf;
+                    a_prev[yf as usize] = yl;
+                    // Relabel the smaller part (walk both in lockstep) so the total work is
+                    // O(n log n).
+                    let (mut px, mut py) = (xf, yf);
+                    let x_smaller = loop {
+                        px = a_next[px as usize];
+                        if px == xf {
+                            break true;
+                        }
+                        py = a_next[py as usize];
+                        if py == yf {
+                            break false;
+                        }
+                    };
+                    let id = next_id;
+                    next_id += 1;
+                    let relabel_from = if x_smaller { xf } else { yf };
+                    let mut x = relabel_from;
+                    loop {
+                        loop_of[x as usize] = id;
+                        x = a_next[x as usize];
+                        if x == relabel_from {
+                            break;
+                        }
+                    }
+                    if x_smaller {
+                        stack.push((cur, yl));
+                        cur = id;
+                    } else {
+                        stack.push((id, yl));
+                    }
+                    gate = xl;
+                    labels.push(Label::S);
+                }
+            } else {
+                let idx = stack
+                    .iter()
+                    .rposition(|&(id, _)| id == lt)
+                    .expect("boundary of the gate's twin is on the stack");
+                let i = (stack.len() - 1 - idx) as u32;
+                let (_, bgate) = stack.remove(idx);
+                let mut x = bgate;
+                let mut pos = 0u32;
+                let mut k = 0u32;
+                loop {
+                    if x == t {
+                        k = pos;
+                    }
+                    loop_of[x as usize] = cur;
+                    pos += 1;
+                    x = a_next[x as usize];
+                    if x == bgate {
+                        break;
+                    }
+                }
+                loop_of[t as usize] = NONE;
+                let l = pos;
+                let (pg, ng) = (a_prev[g as usize], a_next[g as usize]);
+                let (pt, nt) = (a_prev[t as usize], a_next[t as usize]);
+                a_next[pg as usize] = nt;
+                a_prev[nt as usize] = pg;
+                a_next[pt as usize] = ng;
+                a_prev[ng as usize] = pt;
+                gate = pg;
+                labels.push(Label::M { i, k, l });
+            }
+        }
+    }
+    Traversal { labels, faces }
+}
+
+/// One face of the rebuilt structure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RebuiltFace {
+    /// Entry half-edge `t` (start faces: the start corner); the face's vertex cycle starts at
+    /// its tail.
+    pub first: u32,
+    pub degree: u32,
+    pub hole: bool,
+    /// True for the first face of a connected component.
+    pub start: bool,
+}
+
+/// Connectivity rebuilt from labels. Half-edges are numbered in creation order; faces and
+/// vertices in encoding order (vertices by first appearance walking the mesh faces).
+pub struct Rebuilt {
+    pub next: Vec<u32>,
+    pub prev: Vec<u32>,
+    pub twin: Vec<u32>,
+    pub face: Vec<u32>,
+    /// Tail vertex of every half-edge.
+    pub vertex: Vec<u32>,
+    pub faces: Vec<RebuiltFace>,
+    /// For every label, the half-edge of the edge it owns (`NONE` for start labels).
+    pub label_edge: Vec<u32>,
+    pub vertex_count: usize,
+    /// One outgoing half-edge per vertex.
+    pub vertex_out: Vec<u32>,
+}
+
+impl Rebuilt {
+    /// Vertex ids of face `f` starting at its first half-edge.
+    pub fn face_vertices(&self, f: usize) -> impl Iterator<Item = u32> + '_ {
+        let rf = self.faces[f];
+        let mut h = rf.first;
+        (0..rf.degree).map(move |_| {
+            let v = self.vertex[h as usize];
+            h = self.next[h as usize];
+            v
+        })
+    }
+
+    pub fn is_hole(&self, h: u32) -> bool {
+        self.faces[self.face[h as usize] as usize].hole
+    }
+}
+
+fn bad(field: &'static str, detail: impl Into<String>) -> Error {
+    Error::format("connectivity", field, detail)
+}
+
+/// Undoes the labels (face-fixer.md §4). Every precondition is checked, so arbitrary label
+/// sequences give an error, never a panic.
+pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
+    // Forward pass: split into components by counting open boundaries, and number faces.
+    let mut comps = Vec::new();
+    let mut open = 0u64;
+    let mut start = 0usize;
+    let mut face_of_label = vec![NONE; labels.len()];
+    let mut nfaces = 0u32;
+    for (j, lab) in labels.iter().enumerate() {
+        if open == 0 {
+            if !matches!(lab, Label::F(_)) {
+                return Err(bad("labels", format!("label {j} starts a component but is not F")));
+            }
+            start = j;
+            open = 1;
+        } else {
+            match lab {
+                Label::S => open += 1,
+                Label::M { .. } | Label::E => open -= 1,
+                _ => {}
+            }
+        }
+        if matches!(lab, Label::F(_) | Label::H(_)) {
+            face_of_label[j] = nfaces;
+            nfaces += 1;
+        }
+        if open == 0 {
+            comps.push((start, j + 1));
+        }
+    }
+    if open != 0 {
+        return Err(bad("labels", "the last component does not end with E"));
+    }
+
+    let mut next: Vec<u32> = Vec::new();
+    let mut twin: Vec<u32> = Vec::new();
+    let mut face: Vec<u32> = Vec::new();
+    let mut a_next: Vec<u32> = Vec::new();
+    let mut a_prev: Vec<u32> = Vec::new();
+    let mut faces = vec![
+        RebuiltFace {
+            first: NONE,
+            degree: 0,
+            hole: false,
+            start: false
+        };
+        nfaces as usize
+    ];
+    let mut label_edge = vec![NONE; labels.len()];
+    let new_pair = |next: &mut Vec<u32>,
+                        twin: &mut Vec<u32>,
+                        face: &mut Vec<u32>,
+                        a_next: &mut Vec<u32>,
+                        a_prev: &mut Vec<u32>|
+     -> Result<(u32, u32)> {
+        let g = next.len();
+        if g + 2 >= NONE as usize {
+            return Err(bad("labels", "too many half-edges"));
+        }
+        for _ in 0..2 {
+            next.push(NONE);
+            face.push(NONE);
+            a_next.push(NONE);
+            a_prev.push(NONE);
+        }
+        twin.push(g as u32 + 1);
+        twin.push(g as u32);
+        Ok((g as u32, g as u32 + 1))
+    };
+
+    for &(s, e) in &comps {
+        let mut gate = NONE;
+        let mut len = 0u64;
+        let mut stack: Vec<(u32, u64)> = Vec::new();
+        for j in (s + 1..e).rev() {
+            let lab = labels[j];
+            match lab {
+                Label::E => {
+                    if gate != NONE {
+                        stack.push((gate, len));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    a_next[g as usize] = t;
+                    a_prev[t as usize] = g;
+                    a_next[t as usize] = g;
+                    a_prev[g as usize] = t;
+                    gate = g;
+                    len = 2;
+                    label_edge[j] = g;
+                }
+                Label::R | Label::L => {
+                    if gate == NONE {
+                        return Err(bad("labels", format!("label {j} ({lab:?}) on an empty boundary")));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    let (first, second) = if lab == Label::R { (g, t) } else { (t, g) };
+                    let n = a_next[gate as usize];
+                    a_next[gate as usize] = first;
+                    a_prev[first as usize] = gate;
+                    a_next[first as usize] = second;
+                    a_prev[second as usize] = first;
+                    a_next[second as usize] = n;
+                    a_prev[n as usize] = second;
+                    gate = g;
+                    len += 2;
+                    label_edge[j] = g;
+                }
+                Label::S => {
+                    let Some((gy, leny)) = stack.pop() else {
+                        return Err(bad("labels", format!("label {j} (S) without a suspended boundary")));
+                    };
+                    if gate == NONE {
+                        return Err(bad("labels", format!("label {j} (S) on an empty boundary")));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    let xf = a_next[gate as usize];
+                    let yf = a_next[gy as usize];
+                    a_next[g as usize] = xf;
+                    a_prev[xf as usize] = g;
+                    a_next[gate as usize] = t;
+                    a_prev[t as usize] = gate;
+                    a_next[t as usize] = yf;
+                    a_prev[yf as usize] = t;
+                    a_next[gy as usize] = g;
+                    a_prev[g as usize] = gy;
+                    gate = g;
+                    len += leny + 2;
+                    label_edge[j] = g;
+                }
+                Label::M { i, k, l } => {
+                    if gate == NONE
+                        || l < 2
+                        || k >= l
+                        || u64::from(l) > len.saturating_sub(1) + 1
+                        || len < u64::from(l)
+                        || i as usize > stack.len()
+                    {
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {len}, stack depth {})", stack.len()),
+                        ));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the gate.
+                    let b1 = a_next[gate as usize];
+                    let mut blast = gate;
+                    for _ in 0..l - 1 {
+                        blast = a_next[blast as usize];
+                    }
+                    let a_first = a_next[blast as usize];
+                    // B = [t, b1 .. blast]
+                    a_next[t as usize] = b1;
+                    a_prev[b1 as usize] = t;
+                    a_next[blast as usize] = t;
+                    a_prev[t as usize] = blast;
+                    // A = [g, a_first .. gate]
+                    a_next[g as usize] = a_first;
+                    a_prev[a_first as usize] = g;
+                    a_next[gate as usize] = g;
+                    a_prev[g as usize] = gate;
+                    let mut bgate = t;
+                    for _ in 0..(l - k) % l {
+                        bgate = a_next[bgate as usize];
+                    }
+                    let at = stack.len() - i as usize;
+                    stack.insert(at, (bgate, u64::from(l)));
+                    gate = g;
+                    len = len - u64::from(l - 1) + 1;
+                    label_edge[j] = g;
+                }
+                Label::F(l) | Label::H(l) => {
+                    if gate == NONE || l < 3 || len < u64::from(l) {
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} ({lab:?}) does not fit the boundary (length {len})"),
+                        ));
+                    }
+                    let f = face_of_label[j];
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    let mut u1 = gate;
+                    for _ in 0..l - 2 {
+                        u1 = a_prev[u1 as usize];
+                    }
+                    let (p, n) = (a_prev[u1 as usize], a_next[gate as usize]);
+                    // Face cycle t -> u1 -> ... -> gate -> t.
+                    next[t as usize] = u1;
+                    face[t as usize] = f;
+                    let mut x = u1;
+                    loop {
+                        face[x as usize] = f;
+                        if x == gate {
+                            next[x as usize] = t;
+                            break;
+                        }
+                        next[x as usize] = a_next[x as usize];
+                        x = a_next[x as usize];
+                    }
+                    a_next[p as usize] = g;
+                    a_prev[g as usize] = p;
+                    a_next[g as usize] = n;
+                    a_prev[n as usize] = g;
+                    faces[f as usize] = RebuiltFace {
+                        first: t,
+                        degree: l,
+                        hole: matches!(lab, Label::H(_)),
+                        start: false,
+                    };
+                    gate = g;
+                    len = len - u64::from(l - 1) + 1;
+                    label_edge[j] = g;
+                }
+            }
+        }
+        let Label::F(l0) = labels[s] else {
+            unreachable!("component start checked above")
+        };
+        if !stack.is_empty() || len != u64::from(l0) || l0 < 3 {
+            return Err(bad(
+                "labels",
+                format!("component starting at label {s}: boundary of length {len} (stack {}) does not match the start face F{l0}", stack.len()),
+            ));
+        }
+        let f = face_of_label[s];
+        let mut x = gate;
+        for _ in 0..l0 {
+            face[x as usize] = f;
+            next[x as usize] = a_next[x as usize];
+            x = a_next[x as usize];
+        }
+        faces[f as usize] = RebuiltFace {
+            first: gate,
+            degree: l0,
+            hole: false,
+            start: true,
+        };
+    }
+    let nh = next.len();
+    if let Some(h) = next.iter().position(|&n| n == NONE) {
+        return Err(bad("labels", format!("half-edge {h} ends up in no face")));
+    }
+    let mut prev = vec![NONE; nh];
+    for h in 0..nh {
+        prev[next[h] as usize] = h as u32;
+    }
+    // Vertices: union-find over half-edge tails; next(h) and twin(h) both start at head(h).
+    let mut parent: Vec<u32> = (0..nh as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for h in 0..nh {
+        let (a, b) = (find(&mut parent, next[h]), find(&mut parent, twin[h]));
+        if a != b {
+            parent[a.max(b) as usize] = a.min(b);
+        }
+    }
+    let mut id_of_root = vec![NONE; nh];
+    let mut vertex = vec![NONE; nh];
+    let mut vertex_count = 0u32;
+    let mut vertex_out = Vec::new();
+    for rf in faces.iter().filter(|f| !f.hole) {
+        let mut h = rf.first;
+        for _ in 0..rf.degree {
+            let r = find(&mut parent, h) as usize;
+            if id_of_root[r] == NONE {
+                id_of_root[r] = vertex_count;
+                vertex_count += 1;
+                vertex_out.push(h);
+            }
+            h = next[h as usize];
+        }
+    }
+    for h in 0..nh {
+        let r = find(&mut parent, h as u32) as usize;
+        if id_of_root[r] == NONE {
+            return Err(bad("labels", "a vertex lies on hole faces only"));
+        }
+        vertex[h] = id_of_root[r];
+    }
+    Ok(Rebuilt {
+        next,
+        prev,
+        twin,
+        face,
+        vertex,
+        faces,
+        label_edge,
+        vertex_count: vertex_count as usize,
+        vertex_out,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::ControlMesh;
+    use glam::DVec3;
+    use Label::*;
+
+    pub fn mesh_from(nv: usize, faces: &[Vec<u32>]) -> ControlMesh {
+        let mut m = ControlMesh::new();
+        for i in 0..nv {
+            m.push_vertex(DVec3::new(i as f64, 0.0, 0.0));
+        }
+        let g = m.push_group("", Default::default());
+        for f in faces {
+            m.push_face(f, g);
+        }
+        m
+    }
+
+    fn cube_faces() -> Vec<Vec<u32>> {
+        vec![
+            vec![0, 2, 3, 1],
+            vec![4, 5, 7, 6],
+            vec![0, 1, 5, 4],
+            vec![2, 6, 7, 3],
+            vec![0, 4, 6, 2],
+            vec![1, 3, 7, 5],
+        ]
+    }
+
+    fn torus(n: u32, m: u32) -> Vec<Vec<u32>> {
+        let mut f = Vec::new();
+        for i in 0..n {
+            for j in 0..m {
+                f.push(vec![
+                    i * m + j,
+                    ((i + 1) % n) * m + j,
+                    ((i + 1) % n) * m + (j + 1) % m,
+                    i * m + (j + 1) % m,
+                ]);
+            }
+        }
+        f
+    }
+
+    /// Encodes, rebuilds, and checks the rebuilt faces against the input (through the
+    /// vertex mapping the traversal implies). Returns the labels and the rebuilt mesh faces.
+    fn round_trip(nv: usize, faces: &[Vec<u32>]) -> (Vec<Label>, Vec<Vec<u32>>) {
+        let m = mesh_from(nv, faces);
+        let he = HalfEdgeMesh::build(&m).unwrap();
+        let tr = encode_traversal(&he);
+        let rb = rebuild(&tr.labels).unwrap();
+        assert_eq!(rb.faces.len(), tr.faces.len());
+        let mut map = vec![NONE; rb.vertex_count];
+        let mut out = Vec::new();
+        for (i, rf) in rb.faces.iter().enumerate() {
+            let (f, entry) = tr.faces[i];
+            assert_eq!(rf.hole, he.is_hole_face(f));
+            assert_eq!(rf.degree, he.face_degree[f as usize]);
+            let mut h = entry;
+            let verts: Vec<u32> = rb.face_vertices(i).collect();
+            for &v in &verts {
+                let orig = he.origin[h as usize];
+                if map[v as usize] == NONE {
+                    map[v as usize] = orig;
+                }
+                assert_eq!(map[v as usize], orig, "vertex mapping inconsistent");
+                h = he.next[h as usize];
+            }
+            if !rf.hole {
+                out.push(verts);
+            }
+        }
+        (tr.labels, out)
+    }
+
+    #[test]
+    fn tetrahedron_vector() {
+        let faces = vec![vec![0, 2, 1], vec![0, 1, 3], vec![0, 3, 2], vec![1, 2, 3]];
+        let (labels, out) = round_trip(4, &faces);
+        assert_eq!(labels, vec![F(3), F(3), F(3), R, F(3), R, E]);
+        assert_eq!(out, vec![vec![0, 1, 2], vec![1, 0, 3], vec![1, 3, 2], vec![2, 3, 0]]);
+    }
+
+    #[test]
+    fn cube_vector() {
+        let (labels, out) = round_trip(8, &cube_faces());
+        assert_eq!(labels, vec![F(4), F(4), F(4), R, F(4), R, F(4), R, R, F(4), R, R, E]);
+        assert_eq!(
+            out,
+            vec![
+                vec![0, 1, 2, 3],
+                vec![1, 0, 4, 5],
+                vec![1, 5, 6, 2],
+                vec![2, 6, 7, 3],
+                vec![3, 7, 4, 0],
+                vec![4, 7, 6, 5]
+            ]
+        );
+    }
+
+    #[test]
+    fn open_box_vector() {
+        let mut faces = cube_faces();
+        faces.remove(1);
+        let (labels, out) = round_trip(8, &faces);
+        assert_eq!(labels, vec![F(4), F(4), F(4), R, F(4), R, F(4), R, R, H(4), R, R, E]);
+        assert_eq!(out.len(), 5);
+        assert_eq!(out[4], vec![3, 7, 4, 0]);
+    }
+
+    #[test]
+    fn torus_vectors() {
+        let (labels, _) = round_trip(12, &torus(4, 3));
+        let m = M { i: 0, k: 2, l: 3 };
+        assert_eq!(
+            labels,
+            vec![
+                F(4), F(4), F(4), F(4), R, F(4), F(4), R, F(4), F(4), R, F(4), R, S, R, R, F(4),
+                F(4), R, F(4), R, R, m, R, E
+            ]
+        );
+        let (labels, _) = round_trip(20, &torus(5, 4));
+        assert_eq!(labels.len(), 41);
+        assert_eq!(labels.iter().filter(|l| **l == S).count(), 1);
+        assert!(labels.contains(&M { i: 0, k: 2, l: 4 }));
+    }
+
+    #[test]
+    fn open_cylinder_and_house_vectors() {
+        let mut faces = Vec::new();
+        for i in 0..2u32 {
+            for j in 0..6u32 {
+                faces.push(vec![i * 6 + j, i * 6 + (j + 1) % 6, (i + 1) * 6 + (j + 1) % 6, (i + 1) * 6 + j]);
+            }
+        }
+        let (labels, _) = round_trip(18, &faces);
+        let expected = [
+            F(4), H(6), F(4), R, F(4), F(4), R, F(4), F(4), R, R, F(4), R, F(4), R, F(4), R, R,
+            F(4), R, H(6), R, R, R, F(4), R, R, F(4), R, R, E,
+        ];
+        assert_eq!(labels, expected);
+        let house = vec![
+            vec![0, 2, 3, 1],
+            vec![0, 1, 5, 4],
+            vec![2, 6, 7, 3],
+            vec![0, 4, 8, 6, 2],
+            vec![1, 3, 7, 9, 5],
+            vec![4, 5, 9, 8],
+            vec![6, 8, 9, 7],
+        ];
+        let (labels, _) = round_trip(10, &house);
+        assert_eq!(labels, vec![F(4), F(5), F(4), R, F(5), R, F(4), R, R, F(4), R, F(4), R, R, R, E]);
+    }
+
+    #[test]
+    fn genus_two_and_components() {
+        // Two 5x4 tori glued along one removed face each: remove face 0 of each, and identify
+        // the boundary loops.
+        let t = torus(5, 4);
+        let mut faces: Vec<Vec<u32>> = t[1..].to_vec();
+        // Second torus: vertices 20..40, but its removed face's loop is identified with the
+        // first torus's loop (reversed orientation).
+        let hole = &t[0]; // (0, 4, 5, 1)
+        // The second torus is reversed, so its boundary runs opposite to the first one's.
+        let map2 = |v: u32| -> u32 {
+            if hole.contains(&v) {
+                v
+            } else {
+                v + 20
+            }
+        };
+        for f in &t[1..] {
+            let mut g: Vec<u32> = f.iter().map(|&v| map2(v)).collect();
+            g.reverse();
+            faces.push(g);
+        }
+        let (labels, _) = round_trip(40, &faces);
+        assert_eq!(labels.iter().filter(|l| matches!(l, M { .. })).count(), 2);
+        // Plus a separate tetrahedron component.
+        faces.push(vec![40, 42, 41]);
+        faces.push(vec![40, 41, 43]);
+        faces.push(vec![40, 43, 42]);
+        faces.push(vec![41, 42, 43]);
+        let (labels, out) = round_trip(44, &faces);
+        assert_eq!(labels.iter().filter(|l| **l == E).count(), 2 + 1);
+        assert_eq!(out.len(), faces.len());
+    }
+
+    #[test]
+    fn garbage_labels_error_not_panic() {
+        let cases: Vec<Vec<Label>> = vec![
+            vec![R],
+            vec![F(3), R],
+            vec![F(3), E, E],
+            vec![F(3), S, E],
+            vec![F(4), F(3), E],
+            vec![F(3), M { i: 3, k: 0, l: 2 }, E],
+            vec![F(3), M { i: 0, k: 5, l: 2 }, E, E],
+            vec![F(3), F(100), E],
+            vec![F(2), E],
+            vec![F(3), H(3), R, R, E],
+        ];
+        for c in cases {
+            assert!(rebuild(&c).is_err(), "{c:?}");
+        }
+    }
+}

@@ -1,0 +1,649 @@
+//! Quantisation and predictive coding of vertex positions (`spec/format.md` §8).
+//!
+//! Everything after quantisation is integer arithmetic, so encoder and decoder compute the same
+//! predictions on every platform. One routine ([`walk`]) drives both directions through the
+//! [`ResidualCoder`] trait, so the two sides cannot drift apart.
+
+use glam::DVec3;
+
+use super::facefixer::Rebuilt;
+use super::rangecoder::{unzigzag, zigzag, BitModel, IntModel, RangeDecoder, RangeEncoder};
+use crate::error::{Error, Result};
+use crate::mesh::topology::NONE;
+
+/// Node-convention quantiser over a cube: `q = round((x - min) / step)`, `x = min + q * step`,
+/// `step = extent / (2^bits - 1)` (geometry-coding.md §1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quantizer {
+    pub min: [f64; 3],
+    pub extent: f64,
+    pub bits: u8,
+    /// Whether min/extent are stored as f32 (exactly representable) or f64.
+    pub as_f32: bool,
+}
+
+impl Quantizer {
+    /// Chooses the box for `positions`: f32 storage when that loses (almost) nothing.
+    pub fn for_positions(positions: &[DVec3], bits: u8) -> Self {
+        let Some(first) = positions.first() else {
+            return Quantizer {
+                min: [0.0; 3],
+                extent: 0.0,
+                bits,
+                as_f32: true,
+            };
+        };
+        let (lo, hi) = positions
+            .iter()
+            .fold((*first, *first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let extent64 = (hi - lo).max_element();
+        // f32 candidate: min rounded down, extent rounded up so the box still covers everything.
+        let min32: [f64; 3] = [0, 1, 2].map(|i| f32_round_down(lo[i]));
+        let need = (0..3)
+            .map(|i| hi[i] - min32[i])
+            .fold(0.0f64, f64::max);
+        let extent32 = f32_round_up(need);
+        let ok32 = min32.iter().all(|v| v.is_finite())
+            && extent32.is_finite()
+            && extent32 <= extent64 * (1.0 + 1e-4) + f64::MIN_POSITIVE;
+        if ok32 {
+            Quantizer {
+                min: min32,
+                extent: extent32,
+                bits,
+                as_f32: true,
+            }
+        } else {
+            Quantizer {
+                min: lo.to_array(),
+                extent: extent64,
+                bits,
+                as_f32: false,
+            }
+        }
+    }
+
+    pub fn max_q(&self) -> i32 {
+        ((1u32 << self.bits) - 1) as i32
+    }
+
+    /// Grid step (0 for a degenerate box).
+    pub fn step(&self) -> f64 {
+        self.extent / f64::from(self.max_q())
+    }
+
+    pub fn quantize(&self, p: DVec3) -> [i32; 3] {
+        let step = self.step();
+        [0, 1, 2].map(|i| {
+            if step > 0.0 {
+                let q = ((p[i] - self.min[i]) / step).round();
+                q.clamp(0.0, f64::from(self.max_q())) as i32
+            } else {
+                0
+            }
+        })
+    }
+
+    pub fn dequantize(&self, q: [i32; 3]) -> DVec3 {
+        let step = self.step();
+        DVec3::new(
+            self.min[0] + f64::from(q[0]) * step,
+            self.min[1] + f64::from(q[1]) * step,
+            self.min[2] + f64::from(q[2]) * step,
+        )
+    }
+}
+
+fn f32_round_down(x: f64) -> f64 {
+    let f = x as f32;
+    let f = if f64::from(f) > x { f.next_down() } else { f };
+    f64::from(f)
+}
+
+fn f32_round_up(x: f64) -> f64 {
+    let f = x as f32;
+    let f = if f64::from(f) < x { f.next_up() } else { f };
+    f64::from(f)
+}
+
+/// Prediction classes (first part of the residual context): how many parallelogram-type
+/// predictions were averaged (1, 2, 3+), or a fallback (average of decoded neighbours, or no
+/// decoded neighbour at all).
+const KIND_NEIGHBOURS: usize = 0;
+const KIND_START: usize = 4;
+const KINDS: usize = 5;
+/// Context count: (kind or plane) x magnitude bucket.
+const CONTEXTS: usize = (KINDS + 1) * 3;
+const PLANE_CTX: usize = KINDS;
+/// Vertices are visited by the number of decoded neighbours, capped at this.
+const MAX_LEVEL: usize = 6;
+
+/// Codes (encoder) or recovers (decoder) one quantised coordinate.
+pub trait ResidualCoder {
+    /// `slot` holds the actual value when encoding and receives it when decoding. Returns the
+    /// magnitude class of the residual (for contexts).
+    fn code(&mut self, ctx: usize, pred: i32, slot: &mut i32) -> Result<u32>;
+    /// Codes one "use this parallelogram" flag (`slot` as in `code`).
+    fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()>;
+    /// True for the encoder (which knows the values and makes the choices).
+    fn encoding(&self) -> bool;
+}
+
+/// Contexts of the parallelogram-selection flags: (number of candidates 2, 3, 4+) x
+/// (index 0, 1, 2, 3+).
+const FLAG_CONTEXTS: usize = 12;
+/// At most this many parallelograms are considered per vertex (subset search is 2^n).
+const MAX_CANDIDATES: usize = 4;
+
+fn class_of(r: i32) -> u32 {
+    32 - (zigzag(r) + 1).leading_zeros() - 1
+}
+
+fn bucket(class: u32) -> usize {
+    match class {
+        0..=1 => 0,
+        2..=4 => 1,
+        _ => 2,
+    }
+}
+
+pub struct GeomEncoder<'a> {
+    pub enc: &'a mut RangeEncoder,
+    models: Vec<IntModel>,
+    flags: Vec<BitModel>,
+}
+
+impl<'a> GeomEncoder<'a> {
+    pub fn new(enc: &'a mut RangeEncoder) -> Self {
+        GeomEncoder {
+            enc,
+            models: vec![IntModel::default(); CONTEXTS],
+            flags: vec![BitModel::default(); FLAG_CONTEXTS],
+        }
+    }
+}
+
+impl ResidualCoder for GeomEncoder<'_> {
+    fn code(&mut self, ctx: usize, pred: i32, slot: &mut i32) -> Result<u32> {
+        let r = *slot - pred;
+        self.models[ctx].encode(self.enc, zigzag(r));
+        Ok(class_of(r))
+    }
+
+    fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()> {
+        self.enc.encode_bit(&mut self.flags[ctx], *slot);
+        Ok(())
+    }
+
+    fn encoding(&self) -> bool {
+        true
+    }
+}
+
+pub struct GeomDecoder<'a, 'b> {
+    pub dec: &'a mut RangeDecoder<'b>,
+    models: Vec<IntModel>,
+    flags: Vec<BitModel>,
+    max_q: i32,
+}
+
+impl<'a, 'b> GeomDecoder<'a, 'b> {
+    pub fn new(dec: &'a mut RangeDecoder<'b>, max_q: i32) -> Self {
+        GeomDecoder {
+            dec,
+            models: vec![IntModel::default(); CONTEXTS],
+            flags: vec![BitModel::default(); FLAG_CONTEXTS],
+            max_q,
+        }
+    }
+}
+
+impl ResidualCoder for GeomDecoder<'_, '_> {
+    fn code(&mut self, ctx: usize, pred: i32, slot: &mut i32) -> Result<u32> {
+        let z = self.models[ctx].decode(self.dec, 2 * self.max_q as u32, "residual")?;
+        let r = unzigzag(z);
+        let v = pred + r;
+        if v < 0 || v > self.max_q {
+            return Err(Error::format(
+                "geometry",
+                "residual",
+                format!("coordinate {v} outside the grid 0..={}", self.max_q),
+            ));
+        }
+        *slot = v;
+        Ok(class_of(r))
+    }
+
+    fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()> {
+        *slot = self.dec.decode_bit(&mut self.flags[ctx])?;
+        Ok(())
+    }
+
+    fn encoding(&self) -> bool {
+        false
+    }
+}
+
+/// Integer plane through three grid points, kept per planar group (`spec/format.md` §8.3).
+#[derive(Clone, Copy, Debug, Default)]
+struct PlaneState {
+    pts: [[i64; 3]; 3],
+    n: u8,
+    /// Normal `(b - a) x (c - a)` and its L1 norm (twice the L1 "area").
+    normal: [i64; 3],
+    area: i64,
+}
+
+fn sub(a: [i64; 3], b: [i64; 3]) -> [i64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [i64; 3], b: [i64; 3]) -> [i64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn l1(v: [i64; 3]) -> i64 {
+    v[0].abs() + v[1].abs() + v[2].abs()
+}
+
+fn dot(a: [i64; 3], b: [i64; 3]) -> i64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl PlaneState {
+    fn add(&mut self, p: [i64; 3]) {
+        match self.n {
+            0 => {
+                self.pts[0] = p;
+                self.n = 1;
+            }
+            1 => {
+                if p != self.pts[0] {
+                    self.pts[1] = p;
+                    self.n = 2;
+                }
+            }
+            2 => {
+                let (a, b) = (self.pts[0], self.pts[1]);
+                let n = cross(sub(b, a), sub(p, a));
+                if n != [0, 0, 0] {
+                    self.pts[2] = p;
+                    self.normal = n;
+                    self.area = l1(n);
+                    self.n = 3;
+                } else if dot(sub(p, a), sub(p, a)) > dot(sub(b, a), sub(b, a)) {
+                    self.pts[1] = p;
+                }
+            }
+            _ => {
+                let [a, b, c] = self.pts;
+                for cand in [[a, b, p], [a, p, c], [p, b, c]] {
+                    let n = cross(sub(cand[1], cand[0]), sub(cand[2], cand[0]));
+                    let area = l1(n);
+                    if area > self.area {
+                        self.pts = cand;
+                        self.normal = n;
+                        self.area = area;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Rounds `num / den` to the nearest integer, ties away from zero (den != 0).
+fn div_round(num: i128, den: i128) -> i128 {
+    let sign = if (num < 0) != (den < 0) { -1 } else { 1 };
+    sign * ((2 * num.abs() + den.abs()) / (2 * den.abs()))
+}
+
+/// Visits every vertex (spec §8.2: highest number of decoded neighbours first, then the
+/// isolated vertices), predicts it and lets `coder` code the residuals.
+///
+/// `q` has one entry per coded vertex; `face_plane_group[f]` is the group id of face `f` when
+/// that group is a plane patch, else `NONE`.
+pub fn walk(
+    rb: &Rebuilt,
+    face_plane_group: &[u32],
+    plane_groups: usize,
+    bits: u8,
+    q: &mut [[i32; 3]],
+    coder: &mut impl ResidualCoder,
+) -> Result<()> {
+    let max_q = ((1u32 << bits) - 1) as i32;
+    let nt = rb.vertex_count;
+    let mut known = vec![false; q.len()];
+    let mut level = vec![0u8; nt];
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); MAX_LEVEL + 1];
+    let mut planes = vec![PlaneState::default(); plane_groups];
+    let mut prev_vertex: Option<u32> = None;
+    let mut last_class = 0u32;
+    let mut incident: Vec<u32> = Vec::new();
+    let mut out_edges: Vec<u32> = Vec::new();
+    let mut cands: Vec<[i64; 3]> = Vec::new();
+    let mut next_seed = 0usize;
+    loop {
+        // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
+        // lowest undecoded vertex (a new component).
+        let mut pick = None;
+        'search: for lv in (1..=MAX_LEVEL).rev() {
+            while let Some(v) = buckets[lv].pop() {
+                if !known[v as usize] && usize::from(level[v as usize]) == lv {
+                    pick = Some(v);
+                    break 'search;
+                }
+            }
+        }
+        let v = match pick {
+            Some(v) => v,
+            None => {
+                while next_seed < nt && known[next_seed] {
+                    next_seed += 1;
+                }
+                if next_seed == nt {
+                    break;
+                }
+                next_seed as u32
+            }
+        };
+        // Outgoing half-edges of v in rotation order.
+        out_edges.clear();
+        let start = rb.vertex_out[v as usize];
+        let mut h = start;
+        loop {
+            out_edges.push(h);
+            h = rb.twin[rb.prev[h as usize] as usize];
+            if h == start || out_edges.len() > rb.next.len() {
+                break;
+            }
+        }
+        let kn = |w: u32| known[w as usize];
+        let p = |w: u32| q[w as usize].map(i64::from);
+        // Parallelogram-type predictions, accumulated as twice their value.
+        // Parallelogram-type predictions, each as twice its value, in rotation order.
+        cands.clear();
+        let mut add2 = |pr2: [i64; 3]| {
+            if cands.len() < MAX_CANDIDATES {
+                cands.push(pr2);
+            }
+        };
+        for &h in &out_edges {
+            let f = rb.face[h as usize] as usize;
+            let rf = rb.faces[f];
+            if rf.hole {
+                continue;
+            }
+            let vert = |k: u32| {
+                let mut x = h;
+                for _ in 0..k {
+                    x = rb.next[x as usize];
+                }
+                rb.vertex[x as usize]
+            };
+            let d = rf.degree;
+            if d == 3 {
+                let (a, b) = (vert(1), vert(2));
+                if !(kn(a) && kn(b)) {
+                    continue;
+                }
+                let tw = rb.twin[rb.next[h as usize] as usize];
+                let kf = rb.faces[rb.face[tw as usize] as usize];
+                if kf.hole {
+                    continue;
+                }
+                let k2 = rb.vertex[rb.next[rb.next[tw as usize] as usize] as usize];
+                let kl = rb.vertex[rb.prev[tw as usize] as usize];
+                if !(kn(k2) && kn(kl)) {
+                    continue;
+                }
+                let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
+                add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
+            } else {
+                let (a, b, c3) = (vert(1), vert(2), vert(3));
+                if kn(a) && kn(b) && kn(c3) {
+                    let (pa, pb, pc) = (p(a), p(b), p(c3));
+                    add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                }
+                if d >= 5 {
+                    let (a, b, c3) = (vert(d - 1), vert(d - 2), vert(d - 3));
+                    if kn(a) && kn(b) && kn(c3) {
+                        let (pa, pb, pc) = (p(a), p(b), p(c3));
+                        add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                    }
+                }
+            }
+        }
+        let count = cands.len();
+        let (pred, kind) = if count > 0 {
+            (Vec::new(), count.min(3))
+        } else {
+            let mut sum = [0i64; 3];
+            let mut n = 0i64;
+            for &h in &out_edges {
+                let w = rb.vertex[rb.next[h as usize] as usize];
+                if kn(w) {
+                    let pw = p(w);
+                    for c in 0..3 {
+                        sum[c] += pw[c];
+                    }
+                    n += 1;
+                }
+            }
+            if n > 0 {
+                (
+                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64).to_vec(),
+                    KIND_NEIGHBOURS,
+                )
+            } else {
+                let pr = match prev_vertex {
+                    Some(w) => p(w),
+                    None => [i64::from(max_q / 2); 3],
+                };
+                (pr.to_vec(), KIND_START)
+            }
+        };
+        // Plane groups around v (each once, ascending ids) -> the plane with the largest
+        // defining triangle.
+        incident.clear();
+        for &h in &out_edges {
+            let pg = face_plane_group
+                .get(rb.face[h as usize] as usize)
+                .copied()
+                .unwrap_or(NONE);
+            if pg != NONE && !incident.contains(&pg) {
+                incident.push(pg);
+            }
+        }
+        incident.sort_unstable();
+        let best = incident
+            .iter()
+            .filter(|&&g| planes[g as usize].n == 3)
+            .max_by(|&&a, &&b| {
+                planes[a as usize]
+                    .area
+                    .cmp(&planes[b as usize].area)
+                    .then(b.cmp(&a))
+            })
+            .copied();
+        // The plane's dominant axis (predicted from the plane, not from the parallelograms).
+        let plane_axis = best.map(|g| {
+            let n = planes[g as usize].normal;
+            (0..3)
+                .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
+                .unwrap_or(0)
+        });
+        let pred: [i32; 3] = if count == 0 {
+            [pred[0], pred[1], pred[2]].map(|c| c.clamp(0, i64::from(max_q)) as i32)
+        } else {
+            // Subset of the parallelograms to average: all of them unless the encoder signals
+            // otherwise with one flag per candidate (spec §8.2); the last flag is implied when
+            // all earlier ones are 0.
+            let average = |mask: usize| -> [i32; 3] {
+                let mut sum = [0i64; 3];
+                let mut n = 0i64;
+                for (i, c) in cands.iter().enumerate() {
+                    if mask & (1 << i) != 0 {
+                        for k in 0..3 {
+                            sum[k] += c[k];
+                        }
+                        n += 1;
+                    }
+                }
+                sum.map(|s| {
+                    (div_round(i128::from(s), i128::from(2 * n)) as i64).clamp(0, i64::from(max_q))
+                        as i32
+                })
+            };
+            let full = (1usize << count) - 1;
+            let mut mask = full;
+            if count >= 2 {
+                if coder.encoding() {
+                    let actual = q[v as usize];
+                    let cost = |m: usize| -> u32 {
+                        let p = average(m);
+                        (0..3)
+                            .filter(|&k| Some(k) != plane_axis)
+                            .map(|k| (actual[k] - p[k]).unsigned_abs())
+                            .sum()
+                    };
+                    let mut best_cost = cost(full);
+                    for m in 1..full {
+                        let c = cost(m);
+                        if c < best_cost {
+                            best_cost = c;
+                            mask = m;
+                        }
+                    }
+                }
+                let base = (count.min(4) - 2) * 4;
+                let mut any = false;
+                for i in 0..count {
+                    if i + 1 == count && !any {
+                        mask |= 1 << i;
+                        break;
+                    }
+                    let mut bit = mask & (1 << i) != 0;
+                    coder.flag(base + i.min(3), &mut bit)?;
+                    if bit {
+                        mask |= 1 << i;
+                        any = true;
+                    } else {
+                        mask &= !(1 << i);
+                    }
+                }
+            }
+            average(mask)
+        };
+        let mut slot = q[v as usize];
+        match best {
+            None => {
+                for c in 0..3 {
+                    let ctx = kind * 3 + bucket(last_class);
+                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+                }
+            }
+            Some(g) => {
+                let pl = planes[g as usize];
+                let n = pl.normal;
+                let k = plane_axis.unwrap_or(0);
+                for c in (0..3).filter(|&c| c != k) {
+                    let ctx = kind * 3 + bucket(last_class);
+                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+                }
+                let a = pl.pts[0];
+                let num: i128 = (0..3)
+                    .filter(|&c| c != k)
+                    .map(|c| i128::from(n[c]) * (i128::from(slot[c]) - i128::from(a[c])))
+                    .sum();
+                let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
+                let pk = pk.clamp(0, i128::from(max_q)) as i32;
+                let ctx = PLANE_CTX * 3 + bucket(last_class);
+                coder.code(ctx, pk, &mut slot[k])?;
+            }
+        }
+        q[v as usize] = slot;
+        known[v as usize] = true;
+        prev_vertex = Some(v);
+        let pt = slot.map(i64::from);
+        for &g in &incident {
+            planes[g as usize].add(pt);
+        }
+        for &h in &out_edges {
+            let w = rb.vertex[rb.next[h as usize] as usize] as usize;
+            if !known[w] && usize::from(level[w]) < MAX_LEVEL {
+                level[w] += 1;
+                buckets[usize::from(level[w])].push(w as u32);
+            }
+        }
+    }
+    // Isolated vertices: delta from the previous vertex.
+    for v in nt..q.len() {
+        let pred = match prev_vertex {
+            Some(w) => q[w as usize],
+            None => [max_q / 2; 3],
+        };
+        let mut slot = q[v];
+        for c in 0..3 {
+            let ctx = KIND_START * 3 + bucket(last_class);
+            last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+        }
+        q[v] = slot;
+        prev_vertex = Some(v as u32);
+    }
+    Ok(())
+}
+
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn node_quantisation_known_answers() {
+        let q = Quantizer {
+            min: [0.0; 3],
+            extent: 1.0,
+            bits: 10,
+            as_f32: true,
+        };
+        assert!((q.step() - 1.0 / 1023.0).abs() < 1e-15);
+        assert_eq!(q.quantize(DVec3::splat(0.3)), [307; 3]);
+        assert!((q.dequantize([307; 3]).x - 0.300098).abs() < 1e-6);
+        assert_eq!(q.quantize(DVec3::ONE), [1023; 3]);
+    }
+
+    #[test]
+    fn box_covers_points_and_bounds_error() {
+        let pts = vec![
+            DVec3::new(-1.234567, 2.0, 1e-3),
+            DVec3::new(3.3, -0.7, 5.123456789),
+            DVec3::new(0.1, 0.2, 0.3),
+        ];
+        for bits in [4u8, 10, 16, 24] {
+            let q = Quantizer::for_positions(&pts, bits);
+            for &p in &pts {
+                let r = q.dequantize(q.quantize(p));
+                assert!((r - p).abs().max_element() <= q.step() / 2.0 * (1.0 + 1e-9) + 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn plane_prediction_worked_example() {
+        // geometry-coding.md §2.1: n = (90552, 180388, 180542), D_z predicted as 297.
+        let a = [102i64, 205, 665];
+        let b = [716i64, 153, 409];
+        let c = [563i64, 460, 179];
+        let n = cross(sub(b, a), sub(c, a));
+        assert_eq!(n, [90552, 180388, 180542]);
+        let num = i128::from(n[0]) * (123 - 102) + i128::from(n[1]) * (563 - 205);
+        assert_eq!(i128::from(a[2]) + div_round(-num, i128::from(n[2])), 297);
+        assert_eq!(div_round(5, 2), 3);
+        assert_eq!(div_round(-5, 2), -3);
+        assert_eq!(div_round(-4, 3), -1);
+    }
+}

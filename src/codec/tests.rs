@@ -1,0 +1,377 @@
+//! Round-trip, robustness and property tests of the whole bitstream.
+
+use super::*;
+use proptest::prelude::*;
+
+use super::samples::*;
+
+fn cyclic_eq(a: &[u32], b: &[u32]) -> bool {
+    a.len() == b.len() && (0..a.len()).any(|r| (0..a.len()).all(|i| a[(i + r) % a.len()] == b[i]))
+}
+
+/// Encodes, decodes and checks everything the round-trip guarantee promises.
+pub(crate) fn check_round_trip(m: &ControlMesh, opts: &EncodeOptions) -> Vec<u8> {
+    let (bytes, map) = encode_with_map(m, opts).unwrap();
+    let d = decode(&bytes, &Limits::default()).unwrap();
+    let out = &d.mesh;
+    assert_eq!(out.vertex_count(), m.vertex_count());
+    assert_eq!(out.face_count(), m.face_count());
+    assert_eq!(out.groups.len(), m.groups.len());
+    for f in 0..m.face_count() {
+        let nf = map.face[f] as usize;
+        let expected: Vec<u32> = m.face(f).iter().map(|&v| map.vertex[v as usize]).collect();
+        assert!(cyclic_eq(&expected, out.face(nf)), "face {f}: {expected:?} vs {:?}", out.face(nf));
+        assert_eq!(out.face_groups[nf], map.group[m.face_groups[f] as usize]);
+    }
+    let step = d.header.quantization_step();
+    for (g, grp) in m.groups.iter().enumerate() {
+        let og = &out.groups[map.group[g] as usize];
+        if opts.store_group_names {
+            assert_eq!(og.name, grp.name);
+        }
+        match (grp.patch, og.patch) {
+            (PatchKind::Closed, PatchKind::Closed) => {}
+            (PatchKind::Boundary(BoundarySurface::Plane), PatchKind::Boundary(BoundarySurface::Plane)) => {}
+            (
+                PatchKind::Boundary(BoundarySurface::Cylinder { axis: a }),
+                PatchKind::Boundary(BoundarySurface::Cylinder { axis: b }),
+            )
+            | (
+                PatchKind::Boundary(BoundarySurface::Cone { axis: a }),
+                PatchKind::Boundary(BoundarySurface::Cone { axis: b }),
+            ) => {
+                assert!((a.origin - b.origin).abs().max_element() <= step / 2.0 + 1e-9);
+                assert!((a.direction.normalize() - b.direction).length() < 1e-4);
+            }
+            (x, y) => panic!("patch kind changed: {x:?} -> {y:?}"),
+        }
+    }
+    let sharp: BTreeSet<(u32, u32)> = m
+        .sharp_edges
+        .iter()
+        .map(|&(a, b)| edge_key(map.vertex[a as usize], map.vertex[b as usize]))
+        .collect();
+    assert_eq!(sharp, out.sharp_edges);
+    let corners: BTreeSet<u32> = m.corners.iter().map(|&c| map.vertex[c as usize]).collect();
+    assert_eq!(corners, out.corners);
+    for (v, p) in m.positions.iter().enumerate() {
+        let e = (out.positions[map.vertex[v] as usize] - *p).abs().max_element();
+        assert!(e <= step / 2.0 * (1.0 + 1e-9) + 1e-12, "vertex {v} off by {e}, step {step}");
+    }
+    // Determinism.
+    assert_eq!(encode(m, opts).unwrap(), bytes);
+    // Decoding is idempotent: re-encoding the decoded mesh reproduces it exactly.
+    let again = decode(&encode(out, opts).unwrap(), &Limits::default()).unwrap();
+    assert_eq!(again.mesh.face_count(), out.face_count());
+    bytes
+}
+
+fn opts() -> EncodeOptions {
+    EncodeOptions::default()
+}
+
+#[test]
+fn small_meshes_round_trip() {
+    for m in [tetrahedron(), cube(), open_box(), torus(4, 3), torus(9, 7), multi_group(), cad_part()] {
+        let b = check_round_trip(&m, &opts());
+        let c = check_round_trip(
+            &m,
+            &EncodeOptions {
+                quantization_bits: 16,
+                content: Content::ControlMesh { default_level: 3 },
+                store_group_names: false,
+            },
+        );
+        assert!(c.len() > b.len() / 2);
+    }
+}
+
+#[test]
+fn sizes_of_small_meshes_are_small() {
+    // Fixed overhead check: a tetrahedron must stay tiny.
+    let b = encode(&tetrahedron(), &opts()).unwrap();
+    assert!(b.len() <= 76, "tetrahedron takes {} bytes", b.len());
+    let info = inspect(&b, &Limits::default()).unwrap();
+    assert_eq!(info.total_bytes, b.len());
+    assert_eq!(info.sections.iter().map(|s| s.stored_bytes).sum::<usize>(), b.len());
+    assert_eq!(info.label_count, 7);
+    assert_eq!(info.component_count, 1);
+}
+
+#[test]
+fn content_and_header_fields() {
+    let m = multi_group();
+    let b = encode(
+        &m,
+        &EncodeOptions {
+            quantization_bits: 12,
+            content: Content::ControlMesh { default_level: 4 },
+            store_group_names: true,
+        },
+    )
+    .unwrap();
+    let info = inspect(&b, &Limits::default()).unwrap();
+    assert_eq!(info.header.content, Content::ControlMesh { default_level: 4 });
+    assert_eq!(info.header.quantization_bits, 12);
+    assert_eq!(info.header.vertex_count, m.vertex_count() as u64);
+    assert_eq!(info.header.face_count, m.face_count() as u64);
+    assert_eq!(info.sharp_edge_count, 6);
+    assert_eq!(info.corner_count, 4);
+    let mut names = info.group_names.clone();
+    names.sort();
+    assert_eq!(names, vec!["rest", "side", "top"]);
+    assert!(info.sections.iter().any(|s| s.name == "patches"));
+}
+
+#[test]
+fn isolated_vertices_and_empty_mesh() {
+    let mut m = cube();
+    m.push_vertex(DVec3::new(5.0, 5.0, 5.0));
+    m.push_vertex(DVec3::new(-1.0, 2.0, 0.5));
+    m.corners.insert(9);
+    check_round_trip(&m, &opts());
+    let empty = ControlMesh::new();
+    let b = encode(&empty, &opts()).unwrap();
+    let d = decode(&b, &Limits::default()).unwrap();
+    assert_eq!(d.mesh.face_count(), 0);
+    assert_eq!(d.mesh.vertex_count(), 0);
+    let mut points = ControlMesh::new();
+    points.push_vertex(DVec3::ONE);
+    points.push_vertex(DVec3::ONE);
+    check_round_trip(&points, &opts());
+}
+
+#[test]
+fn non_manifold_raw_meshes_are_cut_and_restored() {
+    // Three triangles on one edge, and a bow-tie vertex.
+    let pos = [[0., 0., 0.], [1., 0., 0.], [0.5, 1., 0.], [0.5, -1., 0.], [0.5, 0., 1.], [2., 1., 0.], [2., -1., 0.]];
+    let mut m = from_faces(&pos, &[vec![0, 1, 2], vec![1, 0, 3], vec![0, 1, 4], vec![1, 5, 6]]);
+    m.set_sharp(0, 1);
+    m.corners.insert(1);
+    let b = check_round_trip(&m, &opts());
+    let info = inspect(&b, &Limits::default()).unwrap();
+    assert!(info.header.merged_vertex_count > 0);
+    // The same mesh as a control mesh is refused.
+    let e = encode(
+        &m,
+        &EncodeOptions {
+            content: Content::ControlMesh { default_level: 2 },
+            ..opts()
+        },
+    )
+    .unwrap_err();
+    assert!(matches!(e, Error::Mesh(_)), "{e}");
+    assert!(e.to_string().contains("non-manifold"), "{e}");
+}
+
+#[test]
+fn encoder_rejects_bad_input() {
+    let m = cube();
+    assert!(matches!(
+        encode(&m, &EncodeOptions { quantization_bits: 3, ..opts() }),
+        Err(Error::Parameter(_))
+    ));
+    assert!(matches!(
+        encode(&m, &EncodeOptions { quantization_bits: 25, ..opts() }),
+        Err(Error::Parameter(_))
+    ));
+    let mut bad = cube();
+    bad.set_sharp(0, 7); // not an edge
+    assert!(matches!(encode(&bad, &opts()), Err(Error::Mesh(_))));
+    let mut bad = cube();
+    bad.positions[0].x = f64::INFINITY;
+    assert!(matches!(encode(&bad, &opts()), Err(Error::Mesh(_))));
+}
+
+#[test]
+fn decoder_rejects_versions_trailing_bytes_and_limits() {
+    let b = encode(&cube(), &opts()).unwrap();
+    let mut v2 = b.clone();
+    v2[4] = 2;
+    let e = decode(&v2, &Limits::default()).unwrap_err().to_string();
+    assert!(e.contains("major version 2"), "{e}");
+    let mut trailing = b.clone();
+    trailing.push(0);
+    assert!(decode(&trailing, &Limits::default()).is_err());
+    let mut bad_magic = b.clone();
+    bad_magic[0] = b'X';
+    assert!(decode(&bad_magic, &Limits::default()).is_err());
+    let small = Limits {
+        max_vertices: 7,
+        ..Limits::default()
+    };
+    assert!(matches!(decode(&b, &small), Err(Error::LimitsExceeded { .. })));
+    let small = Limits {
+        max_input_bytes: 10,
+        ..Limits::default()
+    };
+    assert!(matches!(decode(&b, &small), Err(Error::LimitsExceeded { .. })));
+}
+
+/// Every prefix errors; every single-bit flip errors (CRC on) or at least never panics
+/// (CRC off). Shared with the spec-vector test.
+pub(crate) fn check_corruptions(b: &[u8]) {
+    for n in 0..b.len() {
+        assert!(decode(&b[..n], &Limits::default()).is_err(), "prefix {n} decoded");
+    }
+    let original = decode(b, &Limits::default()).unwrap();
+    let lax = Limits {
+        verify_checksums: false,
+        ..Limits::default()
+    };
+    for i in 0..b.len() * 8 {
+        let mut c = b.to_vec();
+        c[i / 8] ^= 1 << (i % 8);
+        assert!(decode(&c, &Limits::default()).is_err(), "bit flip {i} not detected");
+        if let Ok(d) = decode(&c, &lax) {
+            // Without CRCs a flip may decode; it must then still be a valid mesh.
+            d.mesh.validate().unwrap();
+            let _ = d == original;
+        }
+    }
+}
+
+#[test]
+fn corruptions_are_detected() {
+    for m in [tetrahedron(), multi_group()] {
+        let b = encode(&m, &opts()).unwrap();
+        check_corruptions(&b);
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Property tests: random small polygon meshes.
+
+/// Parameters of a random mesh: components of quad grids (torus, cylinder or sheet), some
+/// quads split into triangles or merged into hexagons, some faces deleted (holes, possibly
+/// non-manifold vertices), random groups, sharp edges and corners.
+#[derive(Clone, Debug)]
+struct RandomMesh {
+    comps: Vec<(u8, u32, u32)>,
+    bits: Vec<u8>,
+    qbits: u8,
+}
+
+fn random_mesh_strategy() -> impl Strategy<Value = RandomMesh> {
+    (
+        prop::collection::vec((0u8..3, 3u32..7, 3u32..7), 1..4),
+        prop::collection::vec(any::<u8>(), 64..256),
+        4u8..=24,
+    )
+        .prop_map(|(comps, bits, qbits)| RandomMesh { comps, bits, qbits })
+}
+
+fn make_random_mesh(r: &RandomMesh) -> ControlMesh {
+    let mut m = ControlMesh::new();
+    let mut bi = 0usize;
+    let mut next = |n: u8| -> u8 {
+        let b = r.bits[bi % r.bits.len()].wrapping_add(((bi / r.bits.len()) as u8).wrapping_mul(37));
+        bi += 1;
+        b % n
+    };
+    let ngroups = 1 + next(4) as u32;
+    for g in 0..ngroups {
+        let patch = match next(3) {
+            0 => PatchKind::Closed,
+            1 => PatchKind::Boundary(BoundarySurface::Plane),
+            _ => PatchKind::Boundary(BoundarySurface::Cone {
+                axis: Axis {
+                    origin: DVec3::new(0.1, 0.2, g as f64),
+                    direction: DVec3::new(1.0, 2.0, 3.0),
+                },
+            }),
+        };
+        m.push_group(format!("g{g}"), patch);
+    }
+    for (ci, &(kind, n, k)) in r.comps.iter().enumerate() {
+        let base = m.vertex_count() as u32;
+        let (wrap_i, wrap_j) = match kind {
+            0 => (true, true),
+            1 => (true, false),
+            _ => (false, false),
+        };
+        let ni = if wrap_i { n } else { n + 1 };
+        let nj = if wrap_j { k } else { k + 1 };
+        for i in 0..ni {
+            for j in 0..nj {
+                let jitter = f64::from(next(200)) / 1000.0;
+                m.push_vertex(DVec3::new(
+                    i as f64 + 10.0 * ci as f64,
+                    j as f64 + jitter,
+                    (i * j) as f64 * 0.1 - jitter,
+                ));
+            }
+        }
+        let id = |i: u32, j: u32| base + (i % ni) * nj + (j % nj);
+        let mut pending: Option<[u32; 4]> = None;
+        for i in 0..n {
+            for j in 0..k {
+                let q = [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)];
+                let g = u32::from(next(ngroups as u8));
+                match next(8) {
+                    0 => {} // hole
+                    1 | 2 => {
+                        m.push_face(&[q[0], q[1], q[2]], g);
+                        m.push_face(&[q[0], q[2], q[3]], g);
+                    }
+                    3 if j + 1 < k && pending.is_none() => pending = Some(q),
+                    _ => {
+                        if let Some(p) = pending.take() {
+                            if p[3] == q[0] && p[2] == q[1] {
+                                // Merge the two quads into a hexagon.
+                                m.push_face(&[p[0], p[1], p[2], q[2], q[3], p[3]], g);
+                                continue;
+                            }
+                            m.push_face(&p, g);
+                        }
+                        m.push_face(&q, g);
+                    }
+                }
+            }
+            if let Some(p) = pending.take() {
+                m.push_face(&p, 0);
+            }
+        }
+    }
+    // Drop unused grid vertices? No: they are isolated vertices, which must round-trip too.
+    let edges: Vec<(u32, u32)> = {
+        let mut e = BTreeSet::new();
+        for f in m.faces() {
+            for i in 0..f.len() {
+                e.insert(edge_key(f[i], f[(i + 1) % f.len()]));
+            }
+        }
+        e.into_iter().collect()
+    };
+    for e in edges {
+        if next(5) == 0 {
+            m.sharp_edges.insert(e);
+        }
+    }
+    for v in 0..m.vertex_count() as u32 {
+        if next(6) == 0 {
+            m.corners.insert(v);
+        }
+    }
+    m
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_meshes_round_trip(r in random_mesh_strategy()) {
+        let m = make_random_mesh(&r);
+        m.validate().unwrap();
+        check_round_trip(&m, &EncodeOptions { quantization_bits: r.qbits, ..opts() });
+    }
+
+    #[test]
+    fn random_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..200)) {
+        let _ = decode(&bytes, &Limits { verify_checksums: false, ..Limits::default() });
+        let mut framed = MAGIC.to_vec();
+        framed.extend_from_slice(&[1, 0]);
+        framed.extend_from_slice(&bytes);
+        let _ = decode(&framed, &Limits { verify_checksums: false, ..Limits::default() });
+    }
+}
