@@ -1,0 +1,324 @@
+//! Position evaluation: subdivision masks, limit masks and limit normals over one level.
+//!
+//! Masks are produced by `*_mask(.., emit)` functions that call `emit(index, weight)`; the
+//! same producers drive position evaluation (Cartesian sums, or a frame combination for
+//! cylinder/cone patches) and the sparse stencils, so there is one implementation of each
+//! rule.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+
+use super::frame::Frame;
+use super::masks::{crease_limit_weights, eclass, normalize_or_zero, vclass, ValenceTables};
+use super::topology::{Base, Level, NONE};
+
+/// Subdivision mask of old vertex `v` (its new position at the next level).
+#[inline]
+pub(crate) fn vertex_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut impl FnMut(u32, f64)) {
+    let c = l.vclass[v];
+    if vclass::is_smooth_rule(c) {
+        let ring = l.ring(v);
+        let k = ring.len();
+        let b = t.beta(k);
+        emit(v as u32, 1.0 - k as f64 * b);
+        for &e in ring {
+            emit(l.other(e, v as u32), b);
+        }
+    } else if vclass::is_crease(c) {
+        emit(v as u32, 0.75);
+        for &e in l.ring(v) {
+            if l.eclass[e as usize] & eclass::CREASE != 0 {
+                emit(l.other(e, v as u32), 0.125);
+            }
+        }
+    } else {
+        emit(v as u32, 1.0);
+    }
+}
+
+/// Subdivision mask of the new vertex on edge `e`.
+#[inline]
+pub(crate) fn edge_mask(l: &Level, e: usize, emit: &mut impl FnMut(u32, f64)) {
+    let [a, b] = l.edges[e];
+    let rule = l.eclass[e] & eclass::RULE_MASK;
+    let [fl, fr] = l.edge_faces[e];
+    if rule == eclass::SMOOTH && fr != NONE {
+        emit(a, 0.375);
+        emit(b, 0.375);
+        emit(l.opposite(fl, e as u32), 0.125);
+        emit(l.opposite(fr, e as u32), 0.125);
+    } else {
+        let (wa, wb) = eclass::pair_weights(rule);
+        emit(a, wa);
+        emit(b, wb);
+    }
+}
+
+/// Small fixed buffer of `(point, weight)` for frame combinations (framed masks have at
+/// most 4 terms; longer masks fall back to the Cartesian sum).
+struct Terms {
+    buf: [(DVec3, f64); 8],
+    n: usize,
+    overflow: bool,
+}
+
+impl Terms {
+    #[inline]
+    fn new() -> Self {
+        Terms {
+            buf: [(DVec3::ZERO, 0.0); 8],
+            n: 0,
+            overflow: false,
+        }
+    }
+    #[inline]
+    fn push(&mut self, p: DVec3, w: f64) {
+        if self.n < self.buf.len() {
+            self.buf[self.n] = (p, w);
+            self.n += 1;
+        } else {
+            self.overflow = true;
+        }
+    }
+    fn finish(&self, frame: &Frame) -> Option<DVec3> {
+        (!self.overflow).then(|| frame.combine(&self.buf[..self.n]))
+    }
+}
+
+#[inline]
+fn frame_of<'a>(base: &'a Base, id: u16) -> Option<&'a Frame> {
+    if id == 0 {
+        None
+    } else {
+        base.frames.get(id as usize - 1)
+    }
+}
+
+/// Position of the new vertex `v` (old vertex rule) from level positions `p`.
+#[inline]
+pub(crate) fn eval_vertex(l: &Level, t: &ValenceTables, base: &Base, p: &[DVec3], v: usize) -> DVec3 {
+    let mut acc = DVec3::ZERO;
+    if let Some(fr) = frame_of(base, l.vframe(v)) {
+        let mut terms = Terms::new();
+        vertex_mask(l, t, v, &mut |i, w| {
+            acc += p[i as usize] * w;
+            terms.push(p[i as usize], w);
+        });
+        return terms.finish(fr).unwrap_or(acc);
+    }
+    vertex_mask(l, t, v, &mut |i, w| acc += p[i as usize] * w);
+    acc
+}
+
+/// Position of the new vertex on edge `e`.
+#[inline]
+pub(crate) fn eval_edge(l: &Level, base: &Base, p: &[DVec3], e: usize) -> DVec3 {
+    let mut acc = DVec3::ZERO;
+    if let Some(fr) = frame_of(base, l.eframe(e)) {
+        let mut terms = Terms::new();
+        edge_mask(l, e, &mut |i, w| {
+            acc += p[i as usize] * w;
+            terms.push(p[i as usize], w);
+        });
+        return terms.finish(fr).unwrap_or(acc);
+    }
+    edge_mask(l, e, &mut |i, w| acc += p[i as usize] * w);
+    acc
+}
+
+/// The two crease ring edges of a crease vertex, in ring order.
+#[inline]
+fn crease_pair(l: &Level, v: usize) -> Option<(u32, u32)> {
+    let mut it = l
+        .ring(v)
+        .iter()
+        .copied()
+        .filter(|&e| l.eclass[e as usize] & eclass::CREASE != 0);
+    Some((it.next()?, it.next()?))
+}
+
+/// Limit mask (Cartesian composition) of vertex `v` at this level (reference §4.1-4.2).
+pub(crate) fn limit_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut impl FnMut(u32, f64)) {
+    let c = l.vclass[v];
+    if vclass::is_smooth_rule(c) {
+        let ring = l.ring(v);
+        let (wc, wn) = t.limit(ring.len());
+        emit(v as u32, wc);
+        for &e in ring {
+            emit(l.other(e, v as u32), wn);
+        }
+    } else if vclass::is_crease(c) {
+        let Some((ea, eb)) = crease_pair(l, v) else {
+            emit(v as u32, 1.0);
+            return;
+        };
+        let (ws, wc) = crease_limit_weights(c == vclass::CREASE_REGULAR);
+        vertex_mask(l, t, v, &mut |i, w| emit(i, w * wc));
+        edge_mask(l, ea as usize, &mut |i, w| emit(i, w * ws));
+        edge_mask(l, eb as usize, &mut |i, w| emit(i, w * ws));
+    } else {
+        emit(v as u32, 1.0);
+    }
+}
+
+/// Limit position of vertex `v` from level positions `p`.
+pub(crate) fn eval_limit(l: &Level, t: &ValenceTables, base: &Base, p: &[DVec3], v: usize) -> DVec3 {
+    let c = l.vclass[v];
+    if vclass::is_crease(c) {
+        if let Some(fr) = frame_of(base, l.vframe(v)) {
+            if let Some((ea, eb)) = crease_pair(l, v) {
+                let (ws, wc) = crease_limit_weights(c == vclass::CREASE_REGULAR);
+                let vp = eval_vertex(l, t, base, p, v);
+                let a = eval_edge(l, base, p, ea as usize);
+                let b = eval_edge(l, base, p, eb as usize);
+                return fr.combine(&[(a, ws), (vp, wc), (b, ws)]);
+            }
+        }
+    }
+    let mut acc = DVec3::ZERO;
+    limit_mask(l, t, v, &mut |i, w| acc += p[i as usize] * w);
+    acc
+}
+
+/// Frame of the boundary patch containing face `f` of level `j`, if any.
+#[inline]
+fn face_frame<'a>(base: &'a Base, j: u32, f: u32) -> Option<&'a Frame> {
+    let b = (f as usize) >> (2 * j);
+    if base.boundary_patch[b] {
+        frame_of(base, base.group_frame[base.group[b] as usize])
+    } else {
+        None
+    }
+}
+
+/// Face of wedge `i` of `v`'s ring (between ring edges i and i+1).
+#[inline]
+fn wedge_face(l: &Level, v: usize, e: u32) -> u32 {
+    let [a, _] = l.edges[e as usize];
+    let ef = l.edge_faces[e as usize];
+    if a as usize == v {
+        ef[0]
+    } else {
+        ef[1]
+    }
+}
+
+/// Limit normal of vertex `v` at level `j` (reference §5). Crease and corner vertices get
+/// the normalised mean of their sector normals.
+pub(crate) fn eval_normal(
+    l: &Level,
+    t: &ValenceTables,
+    base: &Base,
+    j: u32,
+    p: &[DVec3],
+    v: usize,
+) -> DVec3 {
+    let c = l.vclass[v];
+    let ring = l.ring(v);
+    if ring.is_empty() {
+        return DVec3::ZERO;
+    }
+    let pv = p[v];
+    let is_boundary = l.edge_faces[ring[0] as usize][1] == NONE;
+    let nw = if is_boundary { ring.len() - 1 } else { ring.len() };
+    let ring_pt = |i: usize| p[l.other(ring[i % ring.len()], v as u32) as usize];
+    // area-weighted face normal sum of the wedges [i0, i0 + n)
+    let fan_normal = |pts: &dyn Fn(usize) -> DVec3, centre: DVec3, i0: usize, n: usize| {
+        let mut s = DVec3::ZERO;
+        for i in i0..i0 + n {
+            s += (pts(i) - centre).cross(pts(i + 1) - centre);
+        }
+        s
+    };
+    if vclass::is_smooth_rule(c) && !is_boundary {
+        let k = ring.len();
+        let (mut t1, mut t2) = (DVec3::ZERO, DVec3::ZERO);
+        for i in 0..k {
+            let (co, s) = t.cos_sin(k, i);
+            let q = ring_pt(i);
+            t1 += q * co;
+            t2 += q * s;
+        }
+        let n = t1.cross(t2);
+        let n = if n.dot(fan_normal(&ring_pt, pv, 0, nw)) < 0.0 { -n } else { n };
+        return normalize_or_zero(n);
+    }
+    if c == vclass::FIXED || !(vclass::is_crease(c) || c == vclass::CORNER) {
+        let fan = fan_normal(&ring_pt, pv, 0, nw);
+        let framed = (0..nw).find_map(|i| face_frame(base, j, wedge_face(l, v, ring[i])));
+        if let Some(fr) = framed {
+            let n = fr.surface_normal(pv);
+            if n != DVec3::ZERO {
+                return if n.dot(fan) < 0.0 { -n } else { n };
+            }
+        }
+        return normalize_or_zero(fan);
+    }
+    // Crease / corner: one step later (reference §5.2-5.3).
+    let vp = eval_vertex(l, t, base, p, v);
+    let q = |i: usize| eval_edge(l, base, p, ring[i % ring.len()] as usize);
+    let is_crease_edge = |i: usize| l.eclass[ring[i % ring.len()] as usize] & eclass::CREASE != 0;
+    let Some(start) = (0..ring.len()).find(|&i| is_crease_edge(i)) else {
+        // a tagged corner without creases: no curve tangents; use the fan normal
+        return normalize_or_zero(fan_normal(&ring_pt, pv, 0, nw));
+    };
+    let mut total = DVec3::ZERO;
+    let mut i = 0;
+    while i < nw {
+        // sector: wedges from start+i until the next crease edge
+        let s0 = start + i;
+        let mut nt = 1;
+        while i + nt < nw && !is_crease_edge(s0 + nt) {
+            nt += 1;
+        }
+        let fan = fan_normal(&q, vp, s0, nt);
+        let framed = face_frame(base, j, wedge_face(l, v, ring[s0 % ring.len()]));
+        let in_bp = {
+            let f = wedge_face(l, v, ring[s0 % ring.len()]) as usize;
+            base.boundary_patch[f >> (2 * j)]
+        };
+        let mut n = DVec3::ZERO;
+        if let (true, Some(fr)) = (in_bp, framed) {
+            n = fr.surface_normal(pv);
+        } else if in_bp {
+            n = fan;
+        } else if c == vclass::CORNER {
+            let (ta, tb) = (q(s0) - vp, q(s0 + nt) - vp);
+            let cr = ta.cross(tb);
+            if cr.length() > 1e-3 * ta.length() * tb.length() {
+                n = cr;
+            }
+        }
+        if n == DVec3::ZERO {
+            let p0 = q(s0);
+            let pn = q(s0 + nt);
+            let along = p0 - pn;
+            let across = if nt == 1 {
+                p0 + pn - 2.0 * vp
+            } else if nt == 2 {
+                q(s0 + 1) - vp
+            } else if nt == 3 && c == vclass::CREASE_REGULAR {
+                2.0 * vp + p0 + pn - 2.0 * q(s0 + 1) - 2.0 * q(s0 + 2)
+            } else {
+                let th = PI / nt as f64;
+                let mut a = (p0 + pn) * th.sin();
+                for m in 1..nt {
+                    a += q(s0 + m) * ((2.0 * th.cos() - 2.0) * (m as f64 * th).sin());
+                }
+                a
+            };
+            n = along.cross(across);
+        }
+        if n.length_squared() <= 1e-24 * fan.length_squared() {
+            // degenerate tangents (e.g. a corner with a single crease edge)
+            n = fan;
+        }
+        if n.dot(fan) < 0.0 {
+            n = -n;
+        }
+        total += normalize_or_zero(n);
+        i += nt;
+    }
+    normalize_or_zero(total)
+}

@@ -1,0 +1,208 @@
+//! Level-of-detail extraction with S-CODE gap filling (reference §1.3 and §6).
+//!
+//! Every base triangle is shown at its own level. Along a base edge shared by faces shown at
+//! levels `lc < lf`, the finer side's extra vertices are moved onto the coarser side's chords
+//! (S-CODE Figs. 7-8), and the coarser side's triangles that touch the edge are fanned through
+//! those vertices, so the output is conforming (every interior edge has two faces) and has no
+//! T-junction cracks.
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+
+use super::masks::normalize_or_zero;
+use super::topology::NONE;
+use super::Refinement;
+
+/// Level-n face whose corner `c` is corner `c` of level-m face `g` (reference §1.3):
+/// `g 4^(n-m) + c (4^(n-m) - 1) / 3` (the digit c appended n-m times).
+pub fn lod_corner_face(g: usize, n: u32, m: u32, c: usize) -> usize {
+    let q = 1usize << (2 * (n - m));
+    g * q + c * (q - 1) / 3
+}
+
+/// An indexed triangle mesh produced by [`super::subdivide_adaptive`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AdaptiveMesh {
+    pub positions: Vec<DVec3>,
+    /// Per-vertex unit normals (with `limit`).
+    pub normals: Option<Vec<DVec3>>,
+    /// Counter-clockwise triangles.
+    pub triangles: Vec<[u32; 3]>,
+    /// Group (CAD face) of each triangle.
+    pub face_groups: Vec<u32>,
+}
+
+/// Extracts the LOD mesh from finest-level positions `pos` (and optional normals).
+pub(crate) fn extract(
+    r: &Refinement,
+    pos: &[DVec3],
+    normals: Option<&[DVec3]>,
+    levels: &[u8],
+) -> Result<AdaptiveMesh> {
+    let n = r.max_level();
+    let l0 = &r.levels[0];
+    let ln = &r.levels[n as usize];
+    if levels.len() != l0.nf() {
+        return Err(Error::Parameter(format!(
+            "{} per-face levels given, the mesh has {} base triangles",
+            levels.len(),
+            l0.nf()
+        )));
+    }
+    if let Some(k) = levels.iter().position(|&m| m as u32 > n) {
+        return Err(Error::Parameter(format!(
+            "base triangle {k} asks for level {}, refinement built to {n}",
+            levels[k]
+        )));
+    }
+    if pos.len() != ln.nv {
+        return Err(Error::Parameter("positions do not match the finest level".into()));
+    }
+    let e0 = l0.ne();
+    let span = 1usize << n;
+    // x_j along base edge e (j = 0..=2^n), in the stored direction a -> b
+    let x = |e: usize, j: usize| -> u32 {
+        if j == span {
+            ln.edges[e * span + span - 1][1]
+        } else {
+            ln.edges[e * span + j][0]
+        }
+    };
+
+    // Gap filling.
+    let mut disp = pos.to_vec();
+    for e in 0..e0 {
+        let [fl, fr] = l0.edge_faces[e];
+        if fr == NONE {
+            continue;
+        }
+        let (la, lb) = (levels[fl as usize] as u32, levels[fr as usize] as u32);
+        let (lc, lf) = (la.min(lb), la.max(lb));
+        if lf == lc {
+            continue;
+        }
+        let step = 1usize << (n - lf);
+        let s = 1usize << (n - lc);
+        let mut j = step;
+        while j < span {
+            if j % s != 0 {
+                let j0 = j / s * s;
+                let t = (j - j0) as f64 / s as f64;
+                let (a, b) = (pos[x(e, j0) as usize], pos[x(e, j0 + s) as usize]);
+                disp[x(e, j) as usize] = a * (1.0 - t) + b * t;
+            }
+            j += step;
+        }
+    }
+
+    // Triangles, with fans through the finer neighbour's vertices.
+    let mut tris: Vec<[u32; 3]> = Vec::new();
+    let mut groups: Vec<u32> = Vec::new();
+    let mut centroids: Vec<[u32; 3]> = Vec::new(); // corners of split triangles
+    let mut poly: Vec<u32> = Vec::with_capacity(64);
+    for k in 0..l0.nf() {
+        let m = levels[k] as u32;
+        let lm = &r.levels[m as usize];
+        let g = r.base.group[k];
+        let q = 1usize << (2 * m);
+        for f in k * q..(k + 1) * q {
+            let c = &lm.faces[3 * f..3 * f + 3];
+            poly.clear();
+            let mut edges_with_extras = 0;
+            let mut extra_edge = 0;
+            for s in 0..3 {
+                poly.push(c[s]);
+                let eps = lm.face_edges[3 * f + s] as usize;
+                if eps >= e0 << m {
+                    continue;
+                }
+                let be = eps >> m;
+                let [bl, br] = l0.edge_faces[be];
+                let other = if bl as usize == k { br } else { bl };
+                if other == NONE {
+                    continue;
+                }
+                let lo = levels[other as usize] as u32;
+                if lo <= m {
+                    continue;
+                }
+                edges_with_extras += 1;
+                extra_edge = s;
+                let seg = eps - (be << m);
+                let per = 1usize << (n - m);
+                let step = 1usize << (n - lo);
+                let forward = lm.edges[eps][0] == c[s];
+                let cnt = per / step;
+                for t in 1..cnt {
+                    let tt = if forward { t } else { cnt - t };
+                    poly.push(x(be, seg * per + tt * step));
+                }
+            }
+            if edges_with_extras == 0 {
+                tris.push([c[0], c[1], c[2]]);
+                groups.push(g);
+            } else if edges_with_extras == 1 {
+                // fan from the corner opposite the edge with extras
+                let apex = c[(extra_edge + 2) % 3];
+                let ai = poly.iter().position(|&v| v == apex).unwrap_or(0);
+                let len = poly.len();
+                for i in 1..len - 1 {
+                    let (p1, p2) = (poly[(ai + i) % len], poly[(ai + i + 1) % len]);
+                    tris.push([apex, p1, p2]);
+                    groups.push(g);
+                }
+            } else {
+                let centre = (pos.len() + centroids.len()) as u32;
+                centroids.push([c[0], c[1], c[2]]);
+                let len = poly.len();
+                for i in 0..len {
+                    tris.push([centre, poly[i], poly[(i + 1) % len]]);
+                    groups.push(g);
+                }
+            }
+        }
+    }
+
+    // Compact: keep used vertices in index order, then the centroids.
+    let total = pos.len() + centroids.len();
+    let mut remap = vec![u32::MAX; total];
+    for t in &tris {
+        for &v in t {
+            remap[v as usize] = 0;
+        }
+    }
+    let mut positions = Vec::new();
+    let mut out_normals = normals.map(|_| Vec::new());
+    let mut next = 0u32;
+    for v in 0..total {
+        if remap[v] == u32::MAX {
+            continue;
+        }
+        remap[v] = next;
+        next += 1;
+        if v < pos.len() {
+            positions.push(disp[v]);
+            if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
+                on.push(nn[v]);
+            }
+        } else {
+            let cs = centroids[v - pos.len()];
+            positions.push(cs.iter().map(|&i| disp[i as usize]).sum::<DVec3>() / 3.0);
+            if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
+                on.push(normalize_or_zero(cs.iter().map(|&i| nn[i as usize]).sum()));
+            }
+        }
+    }
+    for t in &mut tris {
+        for v in t.iter_mut() {
+            *v = remap[*v as usize];
+        }
+    }
+    Ok(AdaptiveMesh {
+        positions,
+        normals: out_normals,
+        triangles: tris,
+        face_groups: groups,
+    })
+}

@@ -1,0 +1,871 @@
+//! Known-answer and property tests of the subdivision engine (reference checklist §7).
+
+use std::collections::BTreeMap;
+
+use glam::{DMat3, DVec3};
+
+use super::masks::{crease_limit_weights, eclass, vclass};
+use super::test_support::load_corpus;
+use super::*;
+use crate::mesh::{Axis, BoundarySurface, PatchKind};
+
+fn v3(x: f64, y: f64, z: f64) -> DVec3 {
+    DVec3::new(x, y, z)
+}
+
+fn tetrahedron() -> ControlMesh {
+    let mut m = ControlMesh::new();
+    for p in [
+        v3(1., 1., 1.),
+        v3(1., -1., -1.),
+        v3(-1., 1., -1.),
+        v3(-1., -1., 1.),
+    ] {
+        m.push_vertex(p);
+    }
+    let g = m.push_group("t", PatchKind::Closed);
+    for f in [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]] {
+        m.push_face(&f, g);
+    }
+    m
+}
+
+/// Tiny deterministic pseudo-random numbers in [0, 1).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// (nx+1) x (ny+1) grid, each square split by the diagonal (i,j)-(i+1,j+1).
+fn grid(nx: usize, ny: usize, z: impl Fn(usize, usize) -> f64) -> ControlMesh {
+    let mut m = ControlMesh::new();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            m.push_vertex(v3(i as f64, j as f64, z(i, j)));
+        }
+    }
+    let g = m.push_group("grid", PatchKind::Closed);
+    let id = |i: usize, j: usize| (i + (nx + 1) * j) as u32;
+    for j in 0..ny {
+        for i in 0..nx {
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            m.push_face(&[a, b, c], g);
+            m.push_face(&[a, c, d], g);
+        }
+    }
+    m
+}
+
+fn close(a: DVec3, b: DVec3, tol: f64) -> bool {
+    (a - b).length() <= tol
+}
+
+// ---------------------------------------------------------------------------------------
+// Numbering (reference §1)
+
+#[test]
+fn tetrahedron_numbering_and_positions() {
+    let m = tetrahedron();
+    let r = Refinement::new(&m, 3).unwrap();
+    let l0 = r.level(0);
+    assert_eq!(l0.edges(), &[[0, 1], [1, 2], [2, 0], [0, 3], [3, 1], [2, 3]]);
+    let fe: Vec<[u32; 3]> = (0..4).map(|f| l0.face_edges(f)).collect();
+    assert_eq!(fe, vec![[0, 1, 2], [3, 4, 0], [2, 5, 3], [4, 5, 1]]);
+    let l1 = r.level(1);
+    let faces: Vec<[u32; 3]> = (0..8).map(|f| l1.triangle(f)).collect();
+    assert_eq!(
+        faces,
+        vec![
+            [0, 4, 6],
+            [4, 1, 5],
+            [6, 5, 2],
+            [4, 5, 6],
+            [0, 7, 4],
+            [7, 3, 8],
+            [4, 8, 1],
+            [7, 8, 4]
+        ]
+    );
+    assert_eq!(
+        &l1.edges()[..14],
+        &[
+            [0, 4],
+            [4, 1],
+            [1, 5],
+            [5, 2],
+            [2, 6],
+            [6, 0],
+            [0, 7],
+            [7, 3],
+            [3, 8],
+            [8, 1],
+            [2, 9],
+            [9, 3],
+            [4, 6],
+            [5, 4]
+        ]
+    );
+    // counts (V, E, F) and Euler characteristic
+    let counts: Vec<(usize, usize, usize)> = (0..=3)
+        .map(|j| {
+            let l = r.level(j);
+            (l.vertex_count(), l.edge_count(), l.face_count())
+        })
+        .collect();
+    assert_eq!(counts, vec![(4, 6, 4), (10, 24, 16), (34, 96, 64), (130, 384, 256)]);
+    // every face's edges match its corner pairs, every edge has 2 faces
+    for j in 0..=3 {
+        let l = r.level(j);
+        let mut uses = vec![0; l.edge_count()];
+        for f in 0..l.face_count() {
+            let c = l.triangle(f);
+            for (s, &e) in l.face_edges(f).iter().enumerate() {
+                let [a, b] = l.edges()[e as usize];
+                let (x, y) = (c[s], c[(s + 1) % 3]);
+                assert!((a, b) == (x, y) || (a, b) == (y, x), "level {j} face {f}");
+                uses[e as usize] += 1;
+            }
+        }
+        assert!(uses.iter().all(|&u| u == 2));
+    }
+    let p = r.positions_at(&m.positions, 1).unwrap();
+    let q = 0.25;
+    let want = [
+        v3(q, q, q),
+        v3(q, -q, -q),
+        v3(-q, q, -q),
+        v3(-q, -q, q),
+        v3(0.5, 0., 0.),
+        v3(0., 0., -0.5),
+        v3(0., 0.5, 0.),
+        v3(0., 0., 0.5),
+        v3(0., -0.5, 0.),
+        v3(-0.5, 0., 0.),
+    ];
+    for (i, w) in want.iter().enumerate() {
+        assert!(close(p[i], *w, 1e-15), "v{i}: {:?} vs {w:?}", p[i]);
+    }
+}
+
+#[test]
+fn lod_extraction_formula_matches_levels() {
+    let m = tetrahedron();
+    let r = Refinement::new(&m, 4).unwrap();
+    let n = 4;
+    let fine = r.level(n);
+    for mm in 0..=n {
+        let lm = r.level(mm);
+        for g in 0..lm.face_count() {
+            for c in 0..3 {
+                let f = lod_corner_face(g, n, mm, c);
+                assert_eq!(fine.triangle(f)[c], lm.triangle(g)[c], "level {mm} face {g}");
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Masks and limit points (reference §3-4)
+
+#[test]
+fn grid_exact_limit_points() {
+    let z = [[0., 1., 0., 2.], [1., 3., 2., 0.], [0., 2., 4., 1.], [2., 0., 1., 0.]];
+    let m = grid(3, 3, |i, j| z[j][i]);
+    let want = [
+        (v3(1. / 5., 1. / 5., 2. / 5.), v3(0., 0., 0.)),
+        (v3(49. / 48., 0., 11. / 16.), v3(49. / 48., 0., 11. / 16.)),
+        (v3(95. / 48., 0., 11. / 24.), v3(95. / 48., 0., 11. / 24.)),
+        (v3(14. / 5., 1. / 5., 6. / 5.), v3(3., 0., 2.)),
+        (v3(0., 49. / 48., 11. / 16.), v3(0., 49. / 48., 11. / 16.)),
+        (v3(1., 1., 7. / 3.), v3(1., 1., 7. / 3.)),
+        (v3(2., 1., 7. / 4.), v3(2., 1., 7. / 4.)),
+        (v3(3., 49. / 48., 11. / 24.), v3(3., 49. / 48., 11. / 24.)),
+        (v3(0., 95. / 48., 11. / 24.), v3(0., 95. / 48., 11. / 24.)),
+        (v3(1., 2., 7. / 4.), v3(1., 2., 7. / 4.)),
+        (v3(2., 2., 11. / 4.), v3(2., 2., 11. / 4.)),
+        (v3(3., 95. / 48., 11. / 16.), v3(3., 95. / 48., 11. / 16.)),
+        (v3(1. / 5., 14. / 5., 6. / 5.), v3(0., 3., 2.)),
+        (v3(49. / 48., 3., 11. / 24.), v3(49. / 48., 3., 11. / 24.)),
+        (v3(95. / 48., 3., 11. / 16.), v3(95. / 48., 3., 11. / 16.)),
+        (v3(14. / 5., 14. / 5., 2. / 5.), v3(3., 3., 0.)),
+    ];
+    let r = Refinement::new(&m, 0).unwrap();
+    let lim = r.limit_positions(&m.positions, 0).unwrap();
+    for (v, (w, _)) in want.iter().enumerate() {
+        assert!(close(lim[v], *w, 1e-14), "v{v}: {:?} vs {w:?}", lim[v]);
+    }
+    let mut mc = m.clone();
+    mc.corners.extend([0, 3, 12, 15]);
+    let r = Refinement::new(&mc, 0).unwrap();
+    let lim = r.limit_positions(&mc.positions, 0).unwrap();
+    for (v, (_, w)) in want.iter().enumerate() {
+        assert!(close(lim[v], *w, 1e-14), "corner-tagged v{v}: {:?} vs {w:?}", lim[v]);
+    }
+    // stencils give the same limit points
+    let st = r.stencils(0, true).unwrap();
+    for (a, b) in st.apply(&mc.positions).iter().zip(&lim) {
+        assert!(close(*a, *b, 1e-14));
+    }
+}
+
+/// Table 1 rows by iterated curve subdivision of a unit impulse (reference §4.4.1): the
+/// engine's crease rules on a polyline of typed vertices.
+#[test]
+fn table1_masks_by_iterated_polyline_subdivision() {
+    use vclass::{CORNER, CREASE_NONREG as S, CREASE_REGULAR as R};
+    // (l, c, r) -> (w_l, w_c, w_r)
+    let rows = [
+        ((R, R, R), (1. / 6., 4. / 6., 1. / 6.)),
+        ((R, R, S), (1. / 6., 11. / 16., 7. / 48.)),
+        ((S, R, S), (7. / 48., 17. / 24., 7. / 48.)),
+        ((R, S, R), (1. / 5., 3. / 5., 1. / 5.)),
+        ((R, S, S), (1. / 5., 5. / 8., 7. / 40.)),
+        ((S, S, S), (7. / 40., 13. / 20., 7. / 40.)),
+        ((R, R, CORNER), (1. / 6., 11. / 16., 7. / 48.)),
+    ];
+    for ((tl, tc, tr), (wl, wc, wr)) in rows {
+        // polyline: corner R R R l c r R R R corner
+        let mut types = vec![CORNER, R, R, R, tl, tc, tr, R, R, R, CORNER];
+        let centre = 5;
+        for (probe, want) in [(centre - 1, wl), (centre, wc), (centre + 1, wr)] {
+            let mut vals: Vec<f64> = (0..types.len()).map(|i| (i == probe) as u8 as f64).collect();
+            let mut ty = types.clone();
+            let mut c = centre;
+            for _ in 0..40 {
+                let n = vals.len();
+                let mut nv = Vec::with_capacity(2 * n - 1);
+                let mut nt = Vec::with_capacity(2 * n - 1);
+                for i in 0..n {
+                    let v = if ty[i] == CORNER {
+                        vals[i]
+                    } else {
+                        0.75 * vals[i] + 0.125 * (vals[i - 1] + vals[i + 1])
+                    };
+                    nv.push(v);
+                    nt.push(ty[i]);
+                    if i + 1 < n {
+                        let (wa, wb) = eclass::pair_weights(eclass::crease_rule(ty[i], ty[i + 1]));
+                        nv.push(wa * vals[i] + wb * vals[i + 1]);
+                        nt.push(R);
+                    }
+                }
+                // keep a window of 11 vertices around c's descendant (index 2c)
+                let c2 = 2 * c;
+                let lo = c2 - 5;
+                vals = nv[lo..lo + 11].to_vec();
+                ty = nt[lo..lo + 11].to_vec();
+                ty[0] = CORNER;
+                ty[10] = CORNER;
+                c = 5;
+            }
+            assert!((vals[c] - want).abs() < 1e-9, "{tl}{tc}{tr} probe {probe}: {} vs {want}", vals[c]);
+        }
+        types.clear();
+        // the closed-form recipe of §4.2 agrees
+        let (ws, wcc) = crease_limit_weights(tc == R);
+        let (la, _) = eclass::pair_weights(eclass::crease_rule(tc, tl)); // weight on c
+        let (ra, _) = eclass::pair_weights(eclass::crease_rule(tc, tr));
+        let w_c = wcc * 0.75 + ws * la + ws * ra;
+        assert!((w_c - wc).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn regular_crease_converges_to_cubic_bspline() {
+    // 13 x 2 grid; the middle row is a sharp polyline (regular interior crease vertices).
+    let mut rng = Lcg(7);
+    let m0 = grid(12, 2, |_, _| 0.0);
+    let mut m = m0.clone();
+    for p in &mut m.positions {
+        p.z = rng.next() * 2.0 - 1.0;
+        p.y += 0.3 * (rng.next() - 0.5);
+    }
+    let row = |i: usize| (i + 13) as u32;
+    for i in 0..12 {
+        m.set_sharp(row(i), row(i + 1));
+    }
+    let n = 5;
+    let r = Refinement::new(&m, n).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    let lim = r.limit_positions(&p, n).unwrap();
+    let ctrl = |i: usize| m.positions[row(i) as usize];
+    let bspline = |i: usize, t: f64| {
+        // segment between ctrl(i) and ctrl(i+1)
+        let b0 = (1.0 - t).powi(3) / 6.0;
+        let b1 = (3.0 * t.powi(3) - 6.0 * t * t + 4.0) / 6.0;
+        let b2 = (-3.0 * t.powi(3) + 3.0 * t * t + 3.0 * t + 1.0) / 6.0;
+        let b3 = t.powi(3) / 6.0;
+        ctrl(i - 1) * b0 + ctrl(i) * b1 + ctrl(i + 1) * b2 + ctrl(i + 2) * b3
+    };
+    let l0 = r.level(0);
+    let ln = r.level(n);
+    let span = 1usize << n;
+    let mut checked = 0;
+    for (e, &[a, b]) in l0.edges().iter().enumerate() {
+        // crease edge (row(i), row(i+1)) with i in 3..=8: all of i-1..i+2 regular and away
+        // from the boundary corners
+        let (i, fwd) = if a >= 13 && a <= 25 && b == a + 1 {
+            ((a - 13) as usize, true)
+        } else if b >= 13 && b <= 25 && a == b + 1 {
+            ((b - 13) as usize, false)
+        } else {
+            continue;
+        };
+        if !(3..=8).contains(&i) {
+            continue;
+        }
+        for j in 0..=span {
+            let vtx = if j == span {
+                ln.edges()[e * span + span - 1][1]
+            } else {
+                ln.edges()[e * span + j][0]
+            };
+            let t = j as f64 / span as f64;
+            let t = if fwd { t } else { 1.0 - t };
+            let want = bspline(i, t);
+            assert!(close(lim[vtx as usize], want, 1e-12), "edge {i} t {t}");
+            // the subdivided (non-limit) points converge: within O(4^-n)
+            assert!(close(p[vtx as usize], want, 2e-3));
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 6 * (span + 1));
+}
+
+#[test]
+fn planar_mesh_stays_planar_and_corners_fixed() {
+    let mut rng = Lcg(3);
+    let mut m = grid(5, 4, |_, _| 0.0);
+    let (u, w) = (v3(1.0, 0.2, 0.3).normalize(), v3(-0.1, 1.0, 0.5).normalize());
+    let normal = u.cross(w).normalize();
+    let origin = v3(0.3, -2.0, 5.0);
+    for p in &mut m.positions {
+        let (x, y) = (p.x + 0.3 * rng.next(), p.y + 0.3 * rng.next());
+        *p = origin + u * x + w * y;
+    }
+    m.set_sharp(7, 8);
+    m.set_sharp(8, 9);
+    m.set_sharp(8, 14);
+    m.corners.extend([0, 9, 20]);
+    let n = 4;
+    let r = Refinement::new(&m, n).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    for j in 0..=n {
+        let pj = r.positions_at(&m.positions, j).unwrap();
+        let lim = r.limit_positions(&pj, j).unwrap();
+        for q in pj.iter().chain(&lim) {
+            assert!((q - origin).dot(normal).abs() < 1e-12);
+        }
+    }
+    for &c in &m.corners {
+        assert_eq!(p[c as usize], m.positions[c as usize]);
+    }
+    // vertex 8 has 3 sharp edges: a corner by valence
+    assert_eq!(p[8], m.positions[8]);
+    // limit normals of a planar surface are the plane normal
+    let nn = r.limit_normals(&p, n).unwrap();
+    for (v, q) in nn.iter().enumerate() {
+        assert!(q.dot(normal).abs() > 1.0 - 1e-9, "v{v} class {}: {q:?}", r.levels[n as usize].vclass[v]);
+    }
+}
+
+/// A mixed test mesh: grid with random heights, an interior crease ending in a dart, an
+/// interior crease through a corner tag, boundary creases.
+fn mixed_mesh() -> ControlMesh {
+    let mut rng = Lcg(11);
+    let mut m = grid(6, 6, |_, _| 0.0);
+    for p in &mut m.positions {
+        p.z = rng.next();
+        p.x += 0.2 * (rng.next() - 0.5);
+    }
+    let id = |i: u32, j: u32| i + 7 * j;
+    // crease along row 3 from x=0 to x=4: ends at (4,3) as a dart
+    for i in 0..4 {
+        m.set_sharp(id(i, 3), id(i + 1, 3));
+    }
+    // a crease along column 2 crossing nothing, corner tag in the middle
+    for j in 0..2 {
+        m.set_sharp(id(5, j), id(5, j + 1));
+    }
+    m.corners.insert(id(5, 1));
+    m.corners.insert(id(6, 6));
+    m
+}
+
+#[test]
+fn limit_points_invariant_across_levels() {
+    let m = mixed_mesh();
+    let r = Refinement::new(&m, 6).unwrap();
+    let l0 = r.level(0);
+    let classes: Vec<u8> = (0..l0.vertex_count()).map(|v| r.levels[0].vclass[v]).collect();
+    assert!(classes.contains(&vclass::DART));
+    assert!(classes.contains(&vclass::CORNER));
+    assert!(classes.contains(&vclass::CREASE_REGULAR));
+    assert!(classes.contains(&vclass::CREASE_NONREG));
+    let lim0 = r.limit_positions(&m.positions, 0).unwrap();
+    for j in [1, 3, 6] {
+        let pj = r.positions_at(&m.positions, j).unwrap();
+        let limj = r.limit_positions(&pj, j).unwrap();
+        for v in 0..lim0.len() {
+            assert!(close(lim0[v], limj[v], 1e-12), "v{v} level {j}: {:?} {:?}", lim0[v], limj[v]);
+        }
+    }
+    // limit stencils reproduce it
+    let st = r.stencils(2, true).unwrap();
+    let p2 = r.positions_at(&m.positions, 2).unwrap();
+    let lim2 = r.limit_positions(&p2, 2).unwrap();
+    assert!(st.exact.iter().all(|&e| e));
+    for (a, b) in st.apply(&m.positions).iter().zip(&lim2) {
+        assert!(close(*a, *b, 1e-12));
+    }
+    let st = r.stencils(3, false).unwrap();
+    let p3 = r.positions_at(&m.positions, 3).unwrap();
+    for (a, b) in st.apply(&m.positions).iter().zip(&p3) {
+        assert!(close(*a, *b, 1e-12));
+    }
+    for i in 0..st.row_count() {
+        let s: f64 = st.row(i).1.iter().sum();
+        assert!((s - 1.0).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn normals_invariant_across_levels() {
+    let m = mixed_mesh();
+    let r = Refinement::new(&m, 6).unwrap();
+    let p1 = r.positions_at(&m.positions, 1).unwrap();
+    let p6 = r.positions(&m.positions).unwrap();
+    let n1 = r.limit_normals(&p1, 1).unwrap();
+    let n6 = r.limit_normals(&p6, 6).unwrap();
+    let l1 = &r.levels[1];
+    let mut kinds = BTreeMap::new();
+    for v in 0..l1.nv {
+        // skip sectors of two triangles (reference §5.2: unresolved) and darts' neighbours
+        let ring = l1.ring(v);
+        let c = l1.vclass[v];
+        let boundary = l1.edge_faces[ring[0] as usize][1] == topology::NONE;
+        let nt = if boundary { ring.len() - 1 } else { ring.len() };
+        if c == vclass::CREASE_NONREG && nt == 2 || c == vclass::CORNER && nt <= 2 {
+            continue;
+        }
+        let ang = n1[v].dot(n6[v]).clamp(-1.0, 1.0).acos().to_degrees();
+        assert!(ang < 1e-4, "vertex {v} class {c}: {ang} degrees");
+        *kinds.entry(c).or_insert(0) += 1;
+    }
+    assert!(kinds.len() >= 4, "{kinds:?}");
+    // smooth normals of a sphere-like closed mesh point outward
+    let t = tetrahedron();
+    let r = Refinement::new(&t, 2).unwrap();
+    let p = r.positions(&t.positions).unwrap();
+    let nn = r.limit_normals(&p, 2).unwrap();
+    for (q, nq) in p.iter().zip(&nn) {
+        assert!(q.dot(*nq) > 0.0);
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Boundary patches (cylinder / cone)
+
+/// Two rings of `n` points (angles jittered) joined by belt quads in one Cylinder or Cone
+/// group, closed by planar n-gon caps; ring edges sharp. Returns the mesh and the frame
+/// (origin, axis). `r(h)` gives the radius at height h along the axis.
+fn belt_mesh(n: usize, cone: bool, closed_belt: bool) -> (ControlMesh, DVec3, DVec3) {
+    let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.4, -0.7, 1.1);
+    let origin = v3(1.5, -0.5, 2.0);
+    let axis = rot * DVec3::Z;
+    let (h0, h1) = if cone { (1.0, 2.5) } else { (0.0, 3.0) };
+    let radius = |h: f64| if cone { 0.6 * h } else { 2.0 };
+    let mut rng = Lcg(5);
+    let mut m = ControlMesh::new();
+    let surf = if cone {
+        BoundarySurface::Cone {
+            axis: Axis {
+                origin,
+                direction: axis * 3.0,
+            },
+        }
+    } else {
+        BoundarySurface::Cylinder {
+            axis: Axis {
+                origin: origin + axis * 0.7,
+                direction: -axis,
+            },
+        }
+    };
+    let cap0 = m.push_group("cap0", PatchKind::Boundary(BoundarySurface::Plane));
+    let belt = m.push_group("belt", PatchKind::Boundary(surf));
+    let cap1 = m.push_group("cap1", PatchKind::Boundary(BoundarySurface::Plane));
+    let (e1, e2) = (rot * DVec3::X, rot * DVec3::Y);
+    for (k, h) in [h0, h1].into_iter().enumerate() {
+        for i in 0..n {
+            let th = std::f64::consts::TAU * (i as f64 + 0.35 * (rng.next() - 0.5)) / n as f64
+                + 0.2 * k as f64;
+            let (s, c) = th.sin_cos();
+            m.push_vertex(origin + axis * h + (e1 * c + e2 * s) * radius(h));
+        }
+    }
+    let b = |i: usize| (i % n) as u32;
+    let t = |i: usize| (n + i % n) as u32;
+    let quads = if closed_belt { n } else { n / 2 };
+    for i in 0..quads {
+        m.push_face(&[b(i), b(i + 1), t(i + 1), t(i)], belt);
+    }
+    if closed_belt {
+        let bottom: Vec<u32> = (0..n).rev().map(b).collect();
+        m.push_face(&bottom, cap0);
+        let top: Vec<u32> = (0..n).map(t).collect();
+        m.push_face(&top, cap1);
+        for i in 0..n {
+            m.set_sharp(b(i), b(i + 1));
+            m.set_sharp(t(i), t(i + 1));
+        }
+    } else {
+        // trimmed patch: open mesh (boundary edges are creases), corners at the ends
+        m.corners.extend([b(0), t(0), b(quads), t(quads)]);
+    }
+    (m, origin, axis)
+}
+
+fn surface_error(p: DVec3, origin: DVec3, axis: DVec3, cone: bool) -> f64 {
+    let d = p - origin;
+    let h = d.dot(axis);
+    let r = (d - axis * h).length();
+    if cone {
+        // distance to the cone r = 0.6 h, relative to the local radius
+        let k: f64 = 0.6;
+        ((r - k * h) / (1.0 + k * k).sqrt()).abs() / (k * h).abs().max(1e-9)
+    } else {
+        (r - 2.0).abs() / 2.0
+    }
+}
+
+#[test]
+fn cylinder_and_cone_patches_stay_on_their_surfaces() {
+    for cone in [false, true] {
+        for closed_belt in [true, false] {
+            let (m, origin, axis) = belt_mesh(8, cone, closed_belt);
+            let n = 3;
+            let r = Refinement::new(&m, n).unwrap();
+            let p = r.positions(&m.positions).unwrap();
+            let lim = r.limit_positions(&p, n).unwrap();
+            let ln = r.level(n);
+            let mut worst: f64 = 0.0;
+            for f in 0..ln.face_count() {
+                if ln.face_group(f) != 1 {
+                    continue;
+                }
+                for v in ln.triangle(f) {
+                    worst = worst.max(surface_error(p[v as usize], origin, axis, cone));
+                    worst = worst.max(surface_error(lim[v as usize], origin, axis, cone));
+                }
+            }
+            assert!(worst < 1e-3, "cone {cone} closed {closed_belt}: {worst}");
+            assert!(worst < 1e-10, "exact by construction: {worst}");
+            // cap faces stay planar
+            if closed_belt {
+                for (g, k) in [(0u32, 0usize), (2, 1)] {
+                    let h = (m.positions[k * 8] - origin).dot(axis);
+                    for f in 0..ln.face_count() {
+                        if ln.face_group(f) == g {
+                            for v in ln.triangle(f) {
+                                assert!(((p[v as usize] - origin).dot(axis) - h).abs() < 1e-12);
+                            }
+                        }
+                    }
+                }
+            }
+            // the same control mesh refined as closed Loop patches leaves the surface:
+            // the test can fail.
+            let mut mc = m.clone();
+            for g in &mut mc.groups {
+                g.patch = PatchKind::Closed;
+            }
+            let rc = Refinement::new(&mc, n).unwrap();
+            let pc = rc.positions(&mc.positions).unwrap();
+            let worst_c = (0..rc.level(n).face_count())
+                .filter(|&f| rc.level(n).face_group(f) == 1)
+                .flat_map(|f| rc.level(n).triangle(f))
+                .map(|v| surface_error(pc[v as usize], origin, axis, cone))
+                .fold(0.0, f64::max);
+            assert!(worst_c > 1e-3, "closed-patch refinement unexpectedly exact: {worst_c}");
+            // and the boundary-patch surface is watertight
+            check_closed_or_boundary(ln.triangles(), |a, b| {
+                let lv = r.level(n);
+                boundary_edge(&lv, a, b)
+            });
+        }
+    }
+}
+
+#[test]
+fn cone_patch_with_apex() {
+    let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.2, -0.4);
+    let apex = v3(0.2, 0.1, -0.3);
+    let axis = rot * DVec3::Z;
+    let mut m = ControlMesh::new();
+    let cone = m.push_group(
+        "cone",
+        PatchKind::Boundary(BoundarySurface::Cone {
+            axis: Axis {
+                origin: apex,
+                direction: axis,
+            },
+        }),
+    );
+    let cap = m.push_group("cap", PatchKind::Boundary(BoundarySurface::Plane));
+    let n = 7;
+    m.push_vertex(apex);
+    for i in 0..n {
+        let th = std::f64::consts::TAU * (i as f64 + 0.2 * (i % 3) as f64) / n as f64;
+        let (s, c) = th.sin_cos();
+        m.push_vertex(apex + axis * 2.0 + (rot * v3(c, s, 0.0)) * 1.2);
+    }
+    for i in 0..n {
+        let (a, b) = (1 + i as u32, 1 + ((i + 1) % n) as u32);
+        m.push_face(&[0, b, a], cone);
+        m.set_sharp(a, b);
+    }
+    let capv: Vec<u32> = (1..=n as u32).collect();
+    m.push_face(&capv, cap);
+    m.corners.insert(0);
+    let r = Refinement::new(&m, 3).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    let l3 = r.level(3);
+    let cone_vertices: std::collections::BTreeSet<u32> = (0..l3.face_count())
+        .filter(|&f| l3.face_group(f) == cone)
+        .flat_map(|f| l3.triangle(f))
+        .collect();
+    assert!(cone_vertices.len() > 100);
+    for &v in &cone_vertices {
+        let d = p[v as usize] - apex;
+        let h = d.dot(axis);
+        let rr = (d - axis * h).length();
+        assert!((rr - 0.6 * h).abs() < 1e-12 * (1.0 + h), "v{v}: r {rr} h {h}");
+    }
+    assert_eq!(p[0], apex);
+}
+
+// ---------------------------------------------------------------------------------------
+// Watertightness, LOD
+
+fn boundary_edge(l: &LevelView<'_>, a: u32, b: u32) -> bool {
+    // slow lookup, fine for tests
+    l.edges()
+        .iter()
+        .enumerate()
+        .any(|(e, &[x, y])| ((x, y) == (a, b) || (x, y) == (b, a)) && l.edge_is_boundary(e))
+}
+
+/// Every undirected edge is used by exactly two faces with opposite directions, or once and
+/// then `on_boundary` must accept it.
+fn check_closed_or_boundary(tris: &[u32], on_boundary: impl Fn(u32, u32) -> bool) {
+    let mut directed: Vec<(u32, u32)> = Vec::with_capacity(tris.len());
+    for t in tris.chunks(3) {
+        assert!(t[0] != t[1] && t[1] != t[2] && t[0] != t[2], "degenerate triangle {t:?}");
+        for s in 0..3 {
+            directed.push((t[s], t[(s + 1) % 3]));
+        }
+    }
+    directed.sort_unstable();
+    for w in directed.windows(2) {
+        assert_ne!(w[0], w[1], "directed edge {:?} used twice", w[0]);
+    }
+    let mut undirected: Vec<(u32, u32)> =
+        directed.iter().map(|&(a, b)| (a.min(b), a.max(b))).collect();
+    undirected.sort_unstable();
+    let mut i = 0;
+    while i < undirected.len() {
+        let mut j = i;
+        while j < undirected.len() && undirected[j] == undirected[i] {
+            j += 1;
+        }
+        let (a, b) = undirected[i];
+        match j - i {
+            2 => {}
+            1 => assert!(on_boundary(a, b), "open edge ({a}, {b})"),
+            k => panic!("edge ({a}, {b}) used {k} times"),
+        }
+        i = j;
+    }
+}
+
+fn flat(t: &[[u32; 3]]) -> Vec<u32> {
+    t.iter().flatten().copied().collect()
+}
+
+#[test]
+fn corpus_models_are_watertight_uniform_and_lod() {
+    let models = [
+        ("tess/screw_coarse.obj", 4),
+        ("tess/four_cone_coarse.obj", 4),
+        ("tess/block_fillet3_coarse.obj", 4),
+        ("tess/bug3883_xr2-ct-214_plate_coarse.obj", 3),
+        ("tess/abc_00000050_coarse.obj", 3),
+        ("meshes/fandisk.obj", 2),
+    ];
+    let mut rng = Lcg(99);
+    for (name, max) in models {
+        let Some(m) = load_corpus(name) else { continue };
+        let r = Refinement::new(&m, max).unwrap();
+        let p = r.positions(&m.positions).unwrap();
+        assert!(p.iter().all(|q| q.is_finite()));
+        for j in 1..=max {
+            let l = r.level(j);
+            check_closed_or_boundary(l.triangles(), |_, _| false);
+        }
+        // mixed-level LOD with random per-face levels
+        let levels: Vec<u8> = (0..r.base_face_count())
+            .map(|_| (rng.next() * (max + 1) as f64) as u8)
+            .collect();
+        let lod = lod::extract(&r, &p, None, &levels).unwrap();
+        check_closed_or_boundary(&flat(&lod.triangles), |_, _| false);
+        eprintln!("{name}: level {max} {} triangles; LOD {} triangles", r.level(max).face_count(), lod.triangles.len());
+    }
+}
+
+#[test]
+fn gap_filling_puts_fine_vertices_on_coarse_chords() {
+    let mut rng = Lcg(1);
+    let mut m = grid(2, 1, |_, _| 0.0);
+    for p in &mut m.positions {
+        p.z = rng.next();
+    }
+    m.corners.extend([0, 2, 3, 5]);
+    let n = 4;
+    let r = Refinement::new(&m, n).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    let nb = r.base_face_count();
+    for la in 0..=n as u8 {
+        for lb in 0..=n as u8 {
+            let levels: Vec<u8> = (0..nb).map(|k| if k % 2 == 0 { la } else { lb }).collect();
+            let lod = lod::extract(&r, &p, None, &levels).unwrap();
+            check_closed_or_boundary(&flat(&lod.triangles), |a, b| {
+                // open edges only on the grid's outer boundary
+                let (pa, pb) = (lod.positions[a as usize], lod.positions[b as usize]);
+                let same_side = (pa.x - pb.x).abs() < 1e-12 && (pa.x.abs() < 1e-12 || (pa.x - 2.0).abs() < 1e-12)
+                    || (pa.y - pb.y).abs() < 1e-12 && (pa.y.abs() < 1e-12 || (pa.y - 1.0).abs() < 1e-12);
+                same_side
+            });
+            // the fine side's vertices on the shared base edge 0-4 sit on the coarse chords
+            let e = r.level(0).edges().iter().position(|&[a, b]| (a, b) == (0, 4) || (a, b) == (4, 0)).unwrap();
+            let (lc, lf) = (la.min(lb) as usize, la.max(lb) as usize);
+            let span = 1usize << n;
+            let ln = r.level(n);
+            let xj = |j: usize| if j == span { ln.edges()[e * span + span - 1][1] } else { ln.edges()[e * span + j][0] };
+            let s = 1usize << (n as usize - lc);
+            let step = 1usize << (n as usize - lf);
+            for j in (0..=span).step_by(step) {
+                let j0 = j / s * s;
+                let want = if j % s == 0 {
+                    p[xj(j) as usize]
+                } else {
+                    let t = (j - j0) as f64 / s as f64;
+                    p[xj(j0) as usize] * (1.0 - t) + p[xj(j0 + s) as usize] * t
+                };
+                assert!(lod.positions.iter().any(|&q| close(q, want, 1e-12)), "levels {la} {lb} j {j}");
+                if j % s != 0 && !close(want, p[xj(j) as usize], 1e-9) {
+                    assert!(!lod.positions.iter().any(|&q| close(q, p[xj(j) as usize], 1e-12)));
+                }
+            }
+            // every output vertex on an interior base edge lies on the segment of the coarser
+            // side: equivalently, the output surface has no cracks: the conforming check above
+            // plus: all triangles of the stitched side are non-degenerate
+            for t in &lod.triangles {
+                let [a, b, c] = t.map(|i| lod.positions[i as usize]);
+                assert!((b - a).cross(c - a).length() > 1e-12, "levels {la} {lb}");
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// API, errors
+
+#[test]
+fn subdivide_keeps_groups_sharp_edges_corners() {
+    let m = mixed_mesh();
+    let (out, normals) = subdivide(&m, 2, &SubdivOptions { limit: true, ..Default::default() }).unwrap();
+    out.validate().unwrap();
+    assert_eq!(out.face_count(), m.face_count() * 16);
+    assert_eq!(out.sharp_edges.len(), m.sharp_edges.len() * 4);
+    assert_eq!(out.corners, m.corners);
+    assert_eq!(normals.unwrap().len(), out.vertex_count());
+    // re-subdividing the output once more equals level 3 of the input (sharp flags kept)
+    // for the non-limit positions
+    let (o2, _) = subdivide(&m, 2, &SubdivOptions::default()).unwrap();
+    let (o3, _) = subdivide(&o2, 1, &SubdivOptions::default()).unwrap();
+    let r = Refinement::new(&m, 3).unwrap();
+    let p3 = r.positions(&m.positions).unwrap();
+    // same vertex numbering is not expected (different level-0 edge order), compare sets
+    let mut a: Vec<[i64; 3]> = o3.positions.iter().map(|q| (*q * 1e9).round().as_i64vec3().to_array()).collect();
+    let mut b: Vec<[i64; 3]> = p3.iter().map(|q| (*q * 1e9).round().as_i64vec3().to_array()).collect();
+    a.sort();
+    b.sort();
+    assert_eq!(a.len(), b.len());
+    let diff = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    assert!(diff <= a.len() / 1000, "{diff} of {} differ", a.len());
+}
+
+#[test]
+fn rejects_bad_meshes() {
+    // non-manifold edge
+    let mut m = tetrahedron();
+    m.push_vertex(v3(0., 0., 5.));
+    m.push_face(&[0, 1, 4], 0);
+    assert!(matches!(Refinement::new(&m, 1), Err(Error::Mesh(_))));
+    // inconsistent orientation
+    let mut m = tetrahedron();
+    let fv = &mut m.face_vertices;
+    fv.swap(0, 1);
+    assert!(matches!(Refinement::new(&m, 1), Err(Error::Mesh(_))));
+    // unknown sharp edge (vertex 4 is isolated)
+    let mut m = tetrahedron();
+    m.push_vertex(v3(0., 0., 5.));
+    m.set_sharp(0, 4);
+    assert!(matches!(Refinement::new(&m, 1), Err(Error::Mesh(_))));
+    // face cap
+    let m = tetrahedron();
+    assert!(matches!(
+        Refinement::with_max_faces(&m, 3, 100),
+        Err(Error::LimitsExceeded { .. })
+    ));
+    assert!(matches!(Refinement::new(&m, 40), Err(Error::Parameter(_))));
+    // zero axis
+    let (mut m, _, _) = belt_mesh(6, false, true);
+    m.groups[1].patch = PatchKind::Boundary(BoundarySurface::Cylinder {
+        axis: Axis {
+            origin: DVec3::ZERO,
+            direction: DVec3::ZERO,
+        },
+    });
+    assert!(matches!(Refinement::new(&m, 1), Err(Error::Mesh(_))));
+    // wrong control count
+    let m = tetrahedron();
+    let r = Refinement::new(&m, 1).unwrap();
+    assert!(r.positions(&m.positions[..3]).is_err());
+    // non-manifold vertex (two tetrahedra sharing a vertex) is rejected
+    let mut m = tetrahedron();
+    let off = m.vertex_count() as u32;
+    for p in [v3(3., 3., 3.), v3(3., 1., 1.), v3(1., 3., 1.)] {
+        m.push_vertex(p);
+    }
+    for f in [[0, off, off + 1], [0, off + 2, off], [0, off + 1, off + 2], [off, off + 2, off + 1]] {
+        m.push_face(&f, 0);
+    }
+    assert!(matches!(Refinement::new(&m, 1), Err(Error::Mesh(_))));
+}
+
+#[test]
+fn polygons_are_fan_triangulated() {
+    let (m, _, _) = belt_mesh(6, false, true);
+    let r = Refinement::new(&m, 1).unwrap();
+    // 6 quads -> 12 triangles, two hexagons -> 4 each
+    assert_eq!(r.base_face_count(), 20);
+    assert_eq!(r.level(0).triangle(0), [0, 1, 7]);
+    assert_eq!(r.level(0).triangle(1), [0, 7, 6]);
+    assert_eq!(r.base_control_face(1), 0);
+    assert_eq!(r.base_control_face(19), 7);
+}
