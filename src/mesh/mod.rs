@@ -27,9 +27,13 @@ pub struct Axis {
 pub enum BoundarySurface {
     Plane,
     /// `axis.origin` is any point on the axis.
-    Cylinder { axis: Axis },
+    Cylinder {
+        axis: Axis,
+    },
     /// `axis.origin` is the apex.
-    Cone { axis: Axis },
+    Cone {
+        axis: Axis,
+    },
 }
 
 /// How the decoder refines one CAD face (one group).
@@ -190,10 +194,14 @@ impl ControlMesh {
             )));
         }
         if *self.face_offsets.last().unwrap() as usize != self.face_vertices.len() {
-            return Err(Error::Mesh("face_offsets do not cover face_vertices".into()));
+            return Err(Error::Mesh(
+                "face_offsets do not cover face_vertices".into(),
+            ));
         }
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(Error::Mesh(format!("vertex {i} has a non-finite coordinate")));
+            return Err(Error::Mesh(format!(
+                "vertex {i} has a non-finite coordinate"
+            )));
         }
         for f in 0..self.face_count() {
             let (s, e) = (self.face_offsets[f], self.face_offsets[f + 1]);
@@ -219,7 +227,11 @@ impl ControlMesh {
                 )));
             }
         }
-        if let Some(&(a, b)) = self.sharp_edges.iter().find(|&&(a, b)| b as usize >= nv || a >= b) {
+        if let Some(&(a, b)) = self
+            .sharp_edges
+            .iter()
+            .find(|&&(a, b)| b as usize >= nv || a >= b)
+        {
             return Err(Error::Mesh(format!("sharp edge ({a}, {b}) is invalid")));
         }
         if let Some(&c) = self.corners.iter().find(|&&c| c as usize >= nv) {

@@ -1,1 +1,245 @@
-//! TODO: metrics layer (being built).
+//! Point-to-surface distances between triangle meshes: closest-point queries with a BVH,
+//! deterministic surface sampling and Hausdorff / RMS / mean distance reports.
+//!
+//! One implementation serves the encoder (error control while fitting), the tests and the
+//! report (design.md: "Distances live in `metrics`"). Nothing here depends on `fit` or
+//! `codec`.
+
+mod distance;
+mod sampling;
+mod surface;
+
+pub use distance::{
+    hausdorff, one_sided_distances, point_distances, DistanceOptions, DistanceReport, OneSided,
+};
+#[cfg(test)]
+pub(crate) use sampling::SplitMixForTests;
+pub use sampling::{sample_surface, SampleCount, SurfaceSample};
+pub use surface::{closest_point_on_triangle, ClosestPoint, TriangleSurface};
+
+#[cfg(test)]
+mod tests {
+    use super::sampling::SplitMix64;
+    use super::*;
+    use crate::mesh::{ControlMesh, PatchKind};
+    use glam::DVec3;
+
+    /// Random triangle soup-ish mesh: a jittered grid surface folded in 3D plus a few
+    /// random triangles (including a degenerate one), so queries hit vertices, edges and
+    /// faces.
+    fn random_mesh(seed: u64, n: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let mut rng = SplitMix64::new(seed);
+        let mut pos = Vec::new();
+        for i in 0..=n {
+            for j in 0..=n {
+                let (x, y) = (i as f64 / n as f64, j as f64 / n as f64);
+                let z = 0.3 * (3.0 * x).sin() * (2.0 * y).cos() + 0.05 * rng.next_f64();
+                pos.push(DVec3::new(x + 0.01 * rng.next_f64(), y, z));
+            }
+        }
+        let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+        let mut tris = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                tris.push([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)]);
+                tris.push([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]);
+            }
+        }
+        for _ in 0..5 {
+            let base = pos.len() as u32;
+            for _ in 0..3 {
+                pos.push(DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64()) * 1.5);
+            }
+            tris.push([base, base + 1, base + 2]);
+        }
+        // A degenerate (collinear) triangle.
+        let base = pos.len() as u32;
+        pos.extend([DVec3::ZERO, DVec3::new(0.5, 0.5, 0.5), DVec3::ONE]);
+        tris.push([base, base + 1, base + 2]);
+        (pos, tris)
+    }
+
+    fn brute(p: DVec3, pos: &[DVec3], tris: &[[u32; 3]]) -> f64 {
+        tris.iter()
+            .map(|t| {
+                let (q, _) = closest_point_on_triangle(
+                    p,
+                    pos[t[0] as usize],
+                    pos[t[1] as usize],
+                    pos[t[2] as usize],
+                );
+                (p - q).length()
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn closest_point_on_triangle_regions() {
+        let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Y);
+        let cases = [
+            (DVec3::new(0.2, 0.2, 1.0), DVec3::new(0.2, 0.2, 0.0)),
+            (DVec3::new(-1.0, -1.0, 0.3), a),
+            (DVec3::new(2.0, -0.1, 0.0), b),
+            (DVec3::new(-0.1, 3.0, 0.0), c),
+            (DVec3::new(0.5, -2.0, 0.0), DVec3::new(0.5, 0.0, 0.0)),
+            (DVec3::new(-2.0, 0.5, 0.0), DVec3::new(0.0, 0.5, 0.0)),
+            (DVec3::new(1.0, 1.0, 0.0), DVec3::new(0.5, 0.5, 0.0)),
+        ];
+        for (p, want) in cases {
+            let (q, bc) = closest_point_on_triangle(p, a, b, c);
+            assert!((q - want).length() < 1e-15, "{p} -> {q}, want {want}");
+            let r = a * bc[0] + b * bc[1] + c * bc[2];
+            assert!((r - q).length() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn bvh_matches_brute_force() {
+        for seed in 0..4u64 {
+            let (pos, tris) = random_mesh(seed, 12);
+            let surf = TriangleSurface::new(pos.clone(), tris.clone()).unwrap();
+            let mut rng = SplitMix64::new(100 + seed);
+            for k in 0..2000 {
+                // Mix of near-surface and far points.
+                let scale = if k % 2 == 0 { 1.2 } else { 5.0 };
+                let p = DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64()) * scale
+                    - DVec3::splat(0.1 * scale);
+                let hit = surf.closest_point(p);
+                let want = brute(p, &pos, &tris);
+                assert!(
+                    (hit.distance - want).abs() <= 1e-9,
+                    "seed {seed} point {p}: bvh {} brute {want}",
+                    hit.distance
+                );
+                // The reported triangle + barycentrics reproduce the closest point.
+                let [a, b, c] = surf.triangle_points(hit.triangle);
+                let bc = hit.barycentric;
+                let r = a * bc[0] + b * bc[1] + c * bc[2];
+                assert!((r - hit.point).length() <= 1e-9, "bary mismatch");
+                assert!(((p - hit.point).length() - hit.distance).abs() <= 1e-12);
+            }
+            // Chunked, bounded queries agree with the plain ones.
+            let pts: Vec<DVec3> = (0..1000)
+                .map(|_| DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64()))
+                .collect();
+            let d = point_distances(&pts, &surf);
+            for (p, d) in pts.iter().zip(d) {
+                assert!((d - brute(*p, &pos, &tris)).abs() <= 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn sampling_is_deterministic_and_area_weighted() {
+        // Two triangles, areas 1/2 and 3/2.
+        let pos = vec![
+            DVec3::ZERO,
+            DVec3::X,
+            DVec3::Y,
+            DVec3::new(10.0, 0.0, 0.0),
+            DVec3::new(13.0, 0.0, 0.0),
+            DVec3::new(10.0, 1.0, 0.0),
+        ];
+        let tris = vec![[0, 1, 2], [3, 4, 5]];
+        let s1 = sample_surface(&pos, &tris, SampleCount::Total(20_000), true, 7);
+        let s2 = sample_surface(&pos, &tris, SampleCount::Total(20_000), true, 7);
+        assert_eq!(s1, s2);
+        assert_eq!(s1.len(), 20_006);
+        let on_second = s1[6..].iter().filter(|s| s.triangle == 1).count() as f64;
+        let frac = on_second / 20_000.0;
+        assert!(
+            (frac - 0.75).abs() < 0.02,
+            "fraction on big triangle {frac}"
+        );
+        for s in &s1 {
+            let t = tris[s.triangle as usize].map(|v| pos[v as usize]);
+            let r = t[0] * s.barycentric[0] + t[1] * s.barycentric[1] + t[2] * s.barycentric[2];
+            assert!((r - s.point).length() < 1e-12);
+            assert!(s
+                .barycentric
+                .iter()
+                .all(|&b| (-1e-12..=1.0 + 1e-12).contains(&b)));
+        }
+        // Per-area density.
+        let s3 = sample_surface(&pos, &tris, SampleCount::PerArea(100.0), false, 1);
+        assert_eq!(s3.len(), 200);
+        // Another seed gives other points.
+        let s4 = sample_surface(&pos, &tris, SampleCount::Total(10), false, 8);
+        assert_ne!(&s4[..], &s1[6..16]);
+    }
+
+    fn grid_mesh(n: usize, z: f64, quads: bool) -> ControlMesh {
+        let mut m = ControlMesh::new();
+        let g = m.push_group("face_0", PatchKind::Closed);
+        for i in 0..=n {
+            for j in 0..=n {
+                m.push_vertex(DVec3::new(i as f64 / n as f64, j as f64 / n as f64, z));
+            }
+        }
+        let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+        for i in 0..n {
+            for j in 0..n {
+                let q = [idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)];
+                if quads {
+                    m.push_face(&q, g);
+                } else {
+                    m.push_face(&[q[0], q[1], q[2]], g);
+                    m.push_face(&[q[0], q[2], q[3]], g);
+                }
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn hausdorff_known_answers() {
+        let opts = DistanceOptions {
+            samples: SampleCount::Total(5000),
+            ..Default::default()
+        };
+        // Identical surfaces (one as quads, one as triangles): zero.
+        let a = grid_mesh(6, 0.0, true);
+        let b = grid_mesh(4, 0.0, false);
+        let r = hausdorff(&a, &b, &opts).unwrap();
+        assert!(r.max < 1e-12, "{r:?}");
+        // Parallel unit squares 0.25 apart: every distance is 0.25.
+        let c = grid_mesh(3, 0.25, false);
+        let r = hausdorff(&a, &c, &opts).unwrap();
+        for v in [
+            r.max,
+            r.rms,
+            r.mean,
+            r.max_a_to_b,
+            r.rms_b_to_a,
+            r.mean_b_to_a,
+        ] {
+            assert!((v - 0.25).abs() < 1e-12, "{r:?}");
+        }
+        assert!((r.diagonal - 2.0625f64.sqrt()).abs() < 1e-12);
+        assert!((r.relative().max - 0.25 / 2.0625f64.sqrt()).abs() < 1e-12);
+        // A bump: one vertex of a lifted by h. A -> B max is h (the vertex); B -> A is
+        // smaller (the bump is a thin pyramid); the report is asymmetric accordingly.
+        let mut d = grid_mesh(4, 0.0, false);
+        d.positions[12].z = 0.1; // centre vertex (2, 2)
+        let r = hausdorff(&d, &b, &opts).unwrap();
+        assert!((r.max_a_to_b - 0.1).abs() < 1e-12);
+        assert!(r.max_b_to_a < 0.1 && r.max_b_to_a > 0.0);
+        assert_eq!(r.max, r.max_a_to_b);
+        // Determinism.
+        assert_eq!(r, hausdorff(&d, &b, &opts).unwrap());
+    }
+
+    #[test]
+    fn rejects_bad_input() {
+        assert!(TriangleSurface::new(vec![DVec3::ZERO], vec![]).is_err());
+        assert!(TriangleSurface::new(vec![DVec3::ZERO; 3], vec![[0, 1, 3]]).is_err());
+        assert!(TriangleSurface::new(vec![DVec3::NAN; 3], vec![[0, 1, 2]]).is_err());
+        let empty = ControlMesh::new();
+        assert!(hausdorff(
+            &empty,
+            &grid_mesh(1, 0.0, true),
+            &DistanceOptions::default()
+        )
+        .is_err());
+    }
+}

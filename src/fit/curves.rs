@@ -1,0 +1,896 @@
+//! The boundary curve network of a grouped mesh: corners (B-rep vertices) and chains
+//! (polylines of group-boundary edges between corners), plus each group's boundary loops as
+//! sequences of chains.
+//!
+//! Chains are the unit of sharing between patches: the encoder fits one subdivision crease
+//! curve per chain and both adjacent patches use its control points, which is what makes
+//! the assembled control mesh watertight (design.md). Fitting that curve needs the crease
+//! masks of `src/subdiv/`; this module only provides the topology, a first Douglas-Peucker
+//! control polygon per chain, and the seam [`CreaseCurveEvaluator`] /
+//! [`chain_fit_error`] through which the subdivision code will plug in.
+
+use std::collections::BTreeMap;
+
+use glam::DVec3;
+
+use super::adjacency::EdgeTable;
+use crate::error::{Error, Result};
+use crate::mesh::ControlMesh;
+
+/// Parameters of [`build_curve_network`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct CurveOptions {
+    /// A chain vertex where the polyline turns by more than this (angle between the
+    /// incoming and outgoing edge directions) becomes a corner.
+    pub corner_angle_deg: f64,
+    /// Douglas-Peucker tolerance of the control polygons, in model units; default
+    /// `1e-3 * bounding-box diagonal`.
+    pub simplify_tolerance: Option<f64>,
+}
+
+impl Default for CurveOptions {
+    fn default() -> Self {
+        CurveOptions {
+            corner_angle_deg: 60.0,
+            simplify_tolerance: None,
+        }
+    }
+}
+
+/// Why a vertex is a corner.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum CornerReason {
+    /// Three or more groups meet, or the number of boundary edges at the vertex is not two
+    /// (junction of chains, end of a dangling boundary).
+    Junction,
+    /// Two boundary edges with different adjacent groups meet (e.g. where a group boundary
+    /// reaches an open mesh boundary).
+    GroupChange,
+    /// The chain turns sharply.
+    SharpTurn,
+    /// Inserted to cut a closed loop without corners (or a chain that would start and end at
+    /// the same corner) into chains with distinct end points.
+    LoopSplit,
+}
+
+/// A corner vertex of the network.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Corner {
+    pub vertex: u32,
+    pub reason: CornerReason,
+}
+
+/// A maximal polyline of group-boundary edges between two distinct corners.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Chain {
+    /// Mesh vertices in order, from one corner to the other (both included).
+    pub vertices: Vec<u32>,
+    /// Adjacent groups, ascending: two for an edge between faces, one for an open
+    /// boundary, more along non-manifold edges.
+    pub groups: Vec<u32>,
+    /// True when the chain lies on the mesh boundary (edges with a single face).
+    pub open_boundary: bool,
+    /// Indices into `vertices` of the coarse control polygon (Douglas-Peucker within the
+    /// tolerance); always includes both ends. Shared by both adjacent patches.
+    pub control: Vec<u32>,
+}
+
+impl Chain {
+    pub fn start(&self) -> u32 {
+        self.vertices[0]
+    }
+    pub fn end(&self) -> u32 {
+        self.vertices[self.vertices.len() - 1]
+    }
+    pub fn edge_count(&self) -> usize {
+        self.vertices.len() - 1
+    }
+}
+
+/// One chain of a group's boundary loop, in the loop's direction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoopChain {
+    pub chain: u32,
+    /// The loop runs the chain from its end to its start.
+    pub reversed: bool,
+}
+
+/// Boundary loops of one group, each oriented like the group's faces (counter-clockwise
+/// seen from outside). The longest loop comes first (the outer loop of a planar face);
+/// a cylinder side face has two loops of similar length.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GroupLoops {
+    pub loops: Vec<Vec<LoopChain>>,
+}
+
+/// Corners, chains and per-group loops. Corners are sorted by vertex; chains are in a
+/// deterministic order (walked from corners in ascending vertex order).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CurveNetwork {
+    pub corners: Vec<Corner>,
+    pub chains: Vec<Chain>,
+    /// Indexed by group.
+    pub group_loops: Vec<GroupLoops>,
+    /// The Douglas-Peucker tolerance used.
+    pub simplify_tolerance: f64,
+}
+
+impl CurveNetwork {
+    pub fn is_corner(&self, v: u32) -> bool {
+        self.corners.binary_search_by_key(&v, |c| c.vertex).is_ok()
+    }
+
+    /// Positions of a chain's vertices.
+    pub fn chain_points(&self, mesh: &ControlMesh, chain: usize) -> Vec<DVec3> {
+        self.chains[chain]
+            .vertices
+            .iter()
+            .map(|&v| mesh.positions[v as usize])
+            .collect()
+    }
+
+    /// Positions of a chain's control polygon.
+    pub fn control_points(&self, mesh: &ControlMesh, chain: usize) -> Vec<DVec3> {
+        let c = &self.chains[chain];
+        c.control
+            .iter()
+            .map(|&i| mesh.positions[c.vertices[i as usize] as usize])
+            .collect()
+    }
+
+    /// Total number of edges over all chains.
+    pub fn edge_count(&self) -> usize {
+        self.chains.iter().map(|c| c.edge_count()).sum()
+    }
+}
+
+/// Seam to the subdivision engine (`src/subdiv/`): evaluates the crease/boundary
+/// subdivision curve of a control polygon whose two end points are corners (fixed).
+/// The fitting stage will implement it with the shared crease masks (one implementation
+/// of each rule); [`PolylineCurve`] is the trivial stand-in used until then.
+pub trait CreaseCurveEvaluator {
+    /// Dense points on the limit curve, starting at `control[0]` and ending at
+    /// `control[last]`, e.g. the limit positions after a few refinement steps.
+    fn dense_curve(&self, control: &[DVec3]) -> Vec<DVec3>;
+}
+
+/// Stand-in evaluator: the control polygon itself (what the curve would be without
+/// subdivision). Replace with the crease-curve evaluator from `subdiv` when fitting.
+pub struct PolylineCurve;
+
+impl CreaseCurveEvaluator for PolylineCurve {
+    fn dense_curve(&self, control: &[DVec3]) -> Vec<DVec3> {
+        control.to_vec()
+    }
+}
+
+/// Two-sided max distance between the curve evaluated from `control` and the chain
+/// polyline `target` (points of each sampled against the other's segments, plus segment
+/// midpoints). This is the error the curve fitter will drive below its tolerance.
+pub fn chain_fit_error(
+    control: &[DVec3],
+    target: &[DVec3],
+    evaluator: &dyn CreaseCurveEvaluator,
+) -> f64 {
+    let curve = evaluator.dense_curve(control);
+    polyline_hausdorff(&curve, target)
+}
+
+fn point_segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let l2 = ab.length_squared();
+    let t = if l2 > 0.0 {
+        ((p - a).dot(ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + t * ab)).length()
+}
+
+fn point_polyline_distance(p: DVec3, line: &[DVec3]) -> f64 {
+    match line.len() {
+        0 => f64::INFINITY,
+        1 => (p - line[0]).length(),
+        _ => line
+            .windows(2)
+            .map(|w| point_segment_distance(p, w[0], w[1]))
+            .fold(f64::INFINITY, f64::min),
+    }
+}
+
+/// Symmetric max distance between two polylines, sampled at vertices and edge midpoints.
+pub fn polyline_hausdorff(a: &[DVec3], b: &[DVec3]) -> f64 {
+    let one_sided = |x: &[DVec3], y: &[DVec3]| {
+        let mut d: f64 = 0.0;
+        for (i, &p) in x.iter().enumerate() {
+            d = d.max(point_polyline_distance(p, y));
+            if i + 1 < x.len() {
+                d = d.max(point_polyline_distance(0.5 * (p + x[i + 1]), y));
+            }
+        }
+        d
+    };
+    one_sided(a, b).max(one_sided(b, a))
+}
+
+/// Douglas-Peucker simplification: indices (ascending, with both ends) of a sub-polyline
+/// within `tol` of every point. Iterative (explicit stack) so long chains cannot overflow.
+pub fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<u32> {
+    let n = points.len();
+    if n <= 2 {
+        return (0..n as u32).collect();
+    }
+    let mut keep = vec![false; n];
+    keep[0] = true;
+    keep[n - 1] = true;
+    let mut stack = vec![(0usize, n - 1)];
+    while let Some((s, e)) = stack.pop() {
+        if e <= s + 1 {
+            continue;
+        }
+        let (mut worst, mut at) = (-1.0, s);
+        for i in s + 1..e {
+            let d = point_segment_distance(points[i], points[s], points[e]);
+            if d > worst {
+                worst = d;
+                at = i;
+            }
+        }
+        if worst > tol {
+            keep[at] = true;
+            stack.push((s, at));
+            stack.push((at, e));
+        }
+    }
+    (0..n as u32).filter(|&i| keep[i as usize]).collect()
+}
+
+/// Builds the curve network of a grouped mesh. Errors on invalid meshes, on groups whose
+/// faces are inconsistently oriented along a boundary, and on bad options.
+pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<CurveNetwork> {
+    mesh.validate()?;
+    if !(opts.corner_angle_deg > 0.0 && opts.corner_angle_deg <= 180.0) {
+        return Err(Error::Parameter(format!(
+            "corner angle {} must be in (0, 180] degrees",
+            opts.corner_angle_deg
+        )));
+    }
+    let tol = opts.simplify_tolerance.unwrap_or(1e-3 * mesh.diagonal());
+    if !(tol >= 0.0 && tol.is_finite()) {
+        return Err(Error::Parameter(format!(
+            "simplification tolerance {tol} must be finite and >= 0"
+        )));
+    }
+    let edges = EdgeTable::new(mesh);
+    let ne = edges.len();
+    let nv = mesh.vertex_count();
+
+    // Boundary edges and their labels (adjacent groups + open flag).
+    let mut label_ids: BTreeMap<(Vec<u32>, bool), u32> = BTreeMap::new();
+    let mut labels: Vec<(Vec<u32>, bool)> = Vec::new();
+    let mut edge_label = vec![u32::MAX; ne];
+    for e in 0..ne {
+        let fs = edges.faces(e);
+        let mut groups: Vec<u32> = fs
+            .iter()
+            .map(|&(f, _)| mesh.face_groups[f as usize])
+            .collect();
+        groups.sort_unstable();
+        groups.dedup();
+        let open = fs.len() == 1;
+        if groups.len() == 1 && fs.len() == 2 {
+            continue; // interior edge of one group
+        }
+        let key = (groups, open);
+        let id = *label_ids.entry(key.clone()).or_insert_with(|| {
+            labels.push(key);
+            (labels.len() - 1) as u32
+        });
+        edge_label[e] = id;
+    }
+    let is_boundary = |e: usize| edge_label[e] != u32::MAX;
+
+    // Boundary edges per vertex (CSR, ascending edge id).
+    let mut deg = vec![0u32; nv + 1];
+    for e in 0..ne {
+        if is_boundary(e) {
+            let (a, b) = edges.keys[e];
+            deg[a as usize + 1] += 1;
+            deg[b as usize + 1] += 1;
+        }
+    }
+    for i in 0..nv {
+        deg[i + 1] += deg[i];
+    }
+    let vstart = deg.clone();
+    let mut fill = deg.clone();
+    let mut vedges = vec![0u32; *deg.last().unwrap_or(&0) as usize];
+    for e in 0..ne {
+        if is_boundary(e) {
+            let (a, b) = edges.keys[e];
+            for v in [a, b] {
+                vedges[fill[v as usize] as usize] = e as u32;
+                fill[v as usize] += 1;
+            }
+        }
+    }
+    let vertex_edges =
+        |v: u32| &vedges[vstart[v as usize] as usize..vstart[v as usize + 1] as usize];
+    let other_end = |e: u32, v: u32| {
+        let (a, b) = edges.keys[e as usize];
+        if a == v {
+            b
+        } else {
+            a
+        }
+    };
+
+    // Number of distinct groups around each vertex.
+    let mut vg: Vec<(u32, u32)> = Vec::with_capacity(mesh.face_vertices.len());
+    for f in 0..mesh.face_count() {
+        for &v in mesh.face(f) {
+            vg.push((v, mesh.face_groups[f]));
+        }
+    }
+    vg.sort_unstable();
+    vg.dedup();
+    let mut group_count = vec![0u32; nv];
+    for &(v, _) in &vg {
+        group_count[v as usize] += 1;
+    }
+
+    // Corners.
+    let cos_turn = opts.corner_angle_deg.to_radians().cos();
+    let mut corner_reason: BTreeMap<u32, CornerReason> = BTreeMap::new();
+    for v in 0..nv as u32 {
+        let es = vertex_edges(v);
+        if es.is_empty() {
+            continue;
+        }
+        let reason = if es.len() != 2 || group_count[v as usize] >= 3 {
+            Some(CornerReason::Junction)
+        } else if edge_label[es[0] as usize] != edge_label[es[1] as usize] {
+            Some(CornerReason::GroupChange)
+        } else {
+            let p = mesh.positions[v as usize];
+            let a = mesh.positions[other_end(es[0], v) as usize];
+            let b = mesh.positions[other_end(es[1], v) as usize];
+            let (din, dout) = ((p - a).normalize_or_zero(), (b - p).normalize_or_zero());
+            (din.dot(dout) < cos_turn).then_some(CornerReason::SharpTurn)
+        };
+        if let Some(r) = reason {
+            corner_reason.insert(v, r);
+        }
+    }
+
+    // Walk chains from corners; then closed loops without corners.
+    let mut visited = vec![false; ne];
+    let mut chains: Vec<Chain> = Vec::new();
+    let walk = |start: u32,
+                first: u32,
+                visited: &mut Vec<bool>,
+                corner_reason: &BTreeMap<u32, CornerReason>|
+     -> Vec<u32> {
+        let mut verts = vec![start];
+        let (mut v, mut e) = (start, first);
+        loop {
+            visited[e as usize] = true;
+            let w = other_end(e, v);
+            verts.push(w);
+            if corner_reason.contains_key(&w) {
+                break;
+            }
+            // A non-corner vertex has exactly two boundary edges.
+            let es = vertex_edges(w);
+            let next = if es[0] == e { es[1] } else { es[0] };
+            if visited[next as usize] {
+                break; // closed loop back to its start (only for corner-less loops)
+            }
+            v = w;
+            e = next;
+        }
+        verts
+    };
+    let mut pending: Vec<Vec<u32>> = Vec::new();
+    let corner_list: Vec<u32> = corner_reason.keys().copied().collect();
+    for &c in &corner_list {
+        for &e in vertex_edges(c) {
+            if !visited[e as usize] {
+                pending.push(walk(c, e, &mut visited, &corner_reason));
+            }
+        }
+    }
+    for e0 in 0..ne {
+        if !is_boundary(e0) || visited[e0] {
+            continue;
+        }
+        // A closed loop with no corner: collect it, cut at its lowest vertex and at the
+        // vertex half-way round.
+        let (a, _) = edges.keys[e0];
+        let mut loop_verts = walk(a, e0 as u32, &mut visited, &corner_reason);
+        loop_verts.pop(); // last == first
+        let n = loop_verts.len();
+        let (imin, _) = loop_verts
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, &v)| v)
+            .unwrap_or((0, &a));
+        loop_verts.rotate_left(imin);
+        let half = n / 2;
+        corner_reason.insert(loop_verts[0], CornerReason::LoopSplit);
+        corner_reason.insert(loop_verts[half], CornerReason::LoopSplit);
+        pending.push(loop_verts[..=half].to_vec());
+        let mut second = loop_verts[half..].to_vec();
+        second.push(loop_verts[0]);
+        pending.push(second);
+    }
+    // Chains that start and end at the same corner are cut in the middle.
+    let mut polylines: Vec<Vec<u32>> = Vec::with_capacity(pending.len());
+    for p in pending {
+        if p.len() >= 3 && p[0] == p[p.len() - 1] {
+            let half = (p.len() - 1) / 2;
+            corner_reason.insert(p[half], CornerReason::LoopSplit);
+            polylines.push(p[..=half].to_vec());
+            polylines.push(p[half..].to_vec());
+        } else {
+            polylines.push(p);
+        }
+    }
+    for verts in polylines {
+        let e = edges
+            .find(verts[0], verts[1])
+            .ok_or_else(|| Error::Mesh("internal: chain edge not found".into()))?;
+        let (groups, open) = labels[edge_label[e] as usize].clone();
+        let pts: Vec<DVec3> = verts.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let control = douglas_peucker(&pts, tol);
+        chains.push(Chain {
+            vertices: verts,
+            groups,
+            open_boundary: open,
+            control,
+        });
+    }
+
+    // Edge -> (chain, position) to map group boundary cycles onto chains.
+    let mut edge_chain = vec![(u32::MAX, 0u32); ne];
+    for (ci, c) in chains.iter().enumerate() {
+        for (i, w) in c.vertices.windows(2).enumerate() {
+            if let Some(e) = edges.find(w[0], w[1]) {
+                edge_chain[e] = (ci as u32, i as u32);
+            }
+        }
+    }
+    let group_loops = build_group_loops(mesh, &edges, &edge_label, &edge_chain, &chains)?;
+
+    Ok(CurveNetwork {
+        corners: corner_reason
+            .into_iter()
+            .map(|(vertex, reason)| Corner { vertex, reason })
+            .collect(),
+        chains,
+        group_loops,
+        simplify_tolerance: tol,
+    })
+}
+
+/// Traces every group's boundary half-edges into cycles (rotating around each vertex
+/// inside the group to find the successor, which is exact even where a group touches
+/// itself at a vertex) and expresses each cycle as a sequence of chains.
+fn build_group_loops(
+    mesh: &ControlMesh,
+    edges: &EdgeTable,
+    edge_label: &[u32],
+    edge_chain: &[(u32, u32)],
+    chains: &[Chain],
+) -> Result<Vec<GroupLoops>> {
+    let ng = mesh.groups.len();
+    // Chain end points, for finding a cycle position where a chain starts.
+    let mut is_end = std::collections::BTreeSet::new();
+    for c in chains {
+        is_end.insert(c.start());
+        is_end.insert(c.end());
+    }
+    // Half-edge id = face corner index (face_offsets[f] + i).
+    let nh = mesh.face_vertices.len();
+    let mut visited = vec![false; nh];
+    let mut face_of = vec![0u32; nh];
+    for f in 0..mesh.face_count() {
+        for h in mesh.face_offsets[f]..mesh.face_offsets[f + 1] {
+            face_of[h as usize] = f as u32;
+        }
+    }
+    let edge_of = |h: usize| edges.face_edge[h] as usize;
+    let head = |h: usize| {
+        let f = face_of[h] as usize;
+        let (s, e) = (
+            mesh.face_offsets[f] as usize,
+            mesh.face_offsets[f + 1] as usize,
+        );
+        let next = if h + 1 == e { s } else { h + 1 };
+        (mesh.face_vertices[next], next)
+    };
+    let successor = |h: usize| -> Result<usize> {
+        let (b, mut cur) = head(h);
+        for _ in 0..1024 {
+            let e = edge_of(cur);
+            if edge_label[e] != u32::MAX {
+                return Ok(cur);
+            }
+            // Interior edge of the group: continue in the other face around b.
+            let f = face_of[cur];
+            let Some(&(g, gi)) = edges.faces(e).iter().find(|&&(g, _)| g != f) else {
+                break;
+            };
+            let gs = mesh.face_offsets[g as usize] as usize;
+            let gk = mesh.face(g as usize).len();
+            let nxt = gs + (gi as usize + 1) % gk;
+            if mesh.face_vertices[nxt] != b {
+                return Err(Error::Mesh(format!(
+                    "faces {f} and {g} of group {} are inconsistently oriented",
+                    mesh.face_groups[f as usize]
+                )));
+            }
+            cur = nxt;
+        }
+        Err(Error::Mesh(format!(
+            "cannot walk around vertex {b} inside its group"
+        )))
+    };
+    let mut out = vec![GroupLoops::default(); ng];
+    let mut loops_len: Vec<Vec<f64>> = vec![Vec::new(); ng];
+    for h0 in 0..nh {
+        if visited[h0] || edge_label[edge_of(h0)] == u32::MAX {
+            continue;
+        }
+        let g = mesh.face_groups[face_of[h0] as usize] as usize;
+        let mut cycle = Vec::new();
+        let mut h = h0;
+        loop {
+            if visited[h] {
+                if h == h0 {
+                    break;
+                }
+                return Err(Error::Mesh(format!(
+                    "boundary of group {g} is not a set of simple cycles"
+                )));
+            }
+            visited[h] = true;
+            cycle.push(h);
+            h = successor(h)?;
+            if cycle.len() > nh {
+                return Err(Error::Mesh(format!(
+                    "boundary walk of group {g} does not close"
+                )));
+            }
+        }
+        // Start the cycle where a chain starts.
+        let tail = |h: usize| mesh.face_vertices[h];
+        let Some(s) = cycle.iter().position(|&h| is_end.contains(&tail(h))) else {
+            return Err(Error::Mesh(format!(
+                "boundary loop of group {g} passes no corner"
+            )));
+        };
+        cycle.rotate_left(s);
+        let mut lp: Vec<LoopChain> = Vec::new();
+        let mut length = 0.0;
+        let mut i = 0;
+        while i < cycle.len() {
+            let h = cycle[i];
+            let (ci, _) = edge_chain[edge_of(h)];
+            if ci == u32::MAX {
+                return Err(Error::Mesh(format!("group {g}: boundary edge in no chain")));
+            }
+            let c = &chains[ci as usize];
+            let reversed = tail(h) != c.start();
+            let n = c.edge_count();
+            // The next n half-edges must be this chain's edges, in order.
+            for k in 0..n {
+                let hk = cycle.get(i + k).copied().ok_or_else(|| {
+                    Error::Mesh(format!("group {g}: loop ends inside chain {ci}"))
+                })?;
+                let pos = if reversed { n - 1 - k } else { k };
+                let (a, b) = (c.vertices[pos], c.vertices[pos + 1]);
+                let t = tail(hk);
+                let expect = if reversed { b } else { a };
+                if edge_chain[edge_of(hk)].0 != ci || t != expect {
+                    return Err(Error::Mesh(format!(
+                        "group {g}: loop leaves chain {ci} before its end"
+                    )));
+                }
+                length += (mesh.positions[a as usize] - mesh.positions[b as usize]).length();
+            }
+            lp.push(LoopChain {
+                chain: ci,
+                reversed,
+            });
+            i += n;
+        }
+        out[g].loops.push(lp);
+        loops_len[g].push(length);
+    }
+    // Longest loop first (stable for equal lengths).
+    for (g, gl) in out.iter_mut().enumerate() {
+        let mut order: Vec<usize> = (0..gl.loops.len()).collect();
+        order.sort_by(|&a, &b| loops_len[g][b].total_cmp(&loops_len[g][a]).then(a.cmp(&b)));
+        gl.loops = order.iter().map(|&i| gl.loops[i].clone()).collect();
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::test_support::{corpus_dir, load_corpus};
+    use crate::mesh::PatchKind;
+
+    /// Axis-aligned cube [0,1]^3, each side an n x n grid of quads split into triangles,
+    /// one group per side, outward orientation.
+    pub(crate) fn grid_cube(n: usize) -> ControlMesh {
+        let mut m = ControlMesh::new();
+        let mut index: BTreeMap<(i64, i64, i64), u32> = BTreeMap::new();
+        let mut vid = |m: &mut ControlMesh, p: DVec3| {
+            let key = (
+                (p.x * 1e6).round() as i64,
+                (p.y * 1e6).round() as i64,
+                (p.z * 1e6).round() as i64,
+            );
+            *index.entry(key).or_insert_with(|| m.push_vertex(p))
+        };
+        // (origin, u, v) with u x v pointing outward.
+        let sides = [
+            (DVec3::ZERO, DVec3::Y, DVec3::X), // z = 0, normal -z
+            (DVec3::Z, DVec3::X, DVec3::Y),    // z = 1
+            (DVec3::ZERO, DVec3::X, DVec3::Z), // y = 0, normal -y
+            (DVec3::Y, DVec3::Z, DVec3::X),    // y = 1
+            (DVec3::ZERO, DVec3::Z, DVec3::Y), // x = 0
+            (DVec3::X, DVec3::Y, DVec3::Z),    // x = 1
+        ];
+        for (s, (o, u, v)) in sides.iter().enumerate() {
+            let g = m.push_group(format!("face_{s}"), PatchKind::Closed);
+            for i in 0..n {
+                for j in 0..n {
+                    let p = |a: usize, b: usize| {
+                        *o + *u * (a as f64 / n as f64) + *v * (b as f64 / n as f64)
+                    };
+                    let a = vid(&mut m, p(i, j));
+                    let b = vid(&mut m, p(i + 1, j));
+                    let c = vid(&mut m, p(i + 1, j + 1));
+                    let d = vid(&mut m, p(i, j + 1));
+                    m.push_face(&[a, b, c], g);
+                    m.push_face(&[a, c, d], g);
+                }
+            }
+        }
+        m
+    }
+
+    /// Checks the structural invariants of a network against its mesh.
+    fn check_network(mesh: &ControlMesh, net: &CurveNetwork, name: &str) {
+        let edges = EdgeTable::new(mesh);
+        let mut boundary = std::collections::BTreeSet::new();
+        for e in 0..edges.len() {
+            let fs = edges.faces(e);
+            let g0 = mesh.face_groups[fs[0].0 as usize];
+            if fs.len() != 2 || fs.iter().any(|&(f, _)| mesh.face_groups[f as usize] != g0) {
+                boundary.insert(edges.keys[e]);
+            }
+        }
+        let mut seen = std::collections::BTreeSet::new();
+        for (ci, c) in net.chains.iter().enumerate() {
+            assert!(c.vertices.len() >= 2, "{name}: chain {ci} too short");
+            assert_ne!(c.start(), c.end(), "{name}: chain {ci} is closed");
+            assert!(
+                net.is_corner(c.start()) && net.is_corner(c.end()),
+                "{name}: chain {ci} ends"
+            );
+            for &v in &c.vertices[1..c.vertices.len() - 1] {
+                assert!(!net.is_corner(v), "{name}: corner {v} inside chain {ci}");
+            }
+            for w in c.vertices.windows(2) {
+                let k = crate::mesh::edge_key(w[0], w[1]);
+                assert!(
+                    boundary.contains(&k),
+                    "{name}: chain {ci} uses non-boundary edge"
+                );
+                assert!(seen.insert(k), "{name}: edge {k:?} in two chains");
+            }
+            // Control polygon keeps the ends and stays within tolerance.
+            assert_eq!(c.control[0], 0);
+            assert_eq!(*c.control.last().unwrap() as usize, c.vertices.len() - 1);
+            let pts = net.chain_points(mesh, ci);
+            let ctrl = net.control_points(mesh, ci);
+            assert!(
+                polyline_hausdorff(&ctrl, &pts) <= net.simplify_tolerance * (1.0 + 1e-9) + 1e-12,
+                "{name}: control polygon of chain {ci} off tolerance"
+            );
+        }
+        assert_eq!(seen, boundary, "{name}: boundary edges not all covered");
+        // Loops: closed, each chain once per adjacent group.
+        let mut uses: BTreeMap<(u32, u32), usize> = BTreeMap::new();
+        for (g, gl) in net.group_loops.iter().enumerate() {
+            for lp in &gl.loops {
+                assert!(!lp.is_empty());
+                let ends = |l: &LoopChain| {
+                    let c = &net.chains[l.chain as usize];
+                    if l.reversed {
+                        (c.end(), c.start())
+                    } else {
+                        (c.start(), c.end())
+                    }
+                };
+                for k in 0..lp.len() {
+                    let (_, e) = ends(&lp[k]);
+                    let (s, _) = ends(&lp[(k + 1) % lp.len()]);
+                    assert_eq!(e, s, "{name}: loop of group {g} not closed");
+                    *uses.entry((g as u32, lp[k].chain)).or_insert(0) += 1;
+                }
+            }
+        }
+        for (ci, c) in net.chains.iter().enumerate() {
+            for &g in &c.groups {
+                assert_eq!(
+                    uses.get(&(g, ci as u32)),
+                    Some(&1),
+                    "{name}: chain {ci} group {g}"
+                );
+            }
+        }
+        assert_eq!(
+            uses.values().sum::<usize>(),
+            net.chains.iter().map(|c| c.groups.len()).sum()
+        );
+    }
+
+    #[test]
+    fn cube_network() {
+        let m = grid_cube(4);
+        let net = build_curve_network(&m, &CurveOptions::default()).unwrap();
+        assert_eq!(net.corners.len(), 8);
+        assert!(net
+            .corners
+            .iter()
+            .all(|c| c.reason == CornerReason::Junction));
+        assert_eq!(net.chains.len(), 12);
+        assert!(net
+            .chains
+            .iter()
+            .all(|c| c.edge_count() == 4 && c.groups.len() == 2));
+        // Straight edges simplify to their two corners.
+        assert!(net.chains.iter().all(|c| c.control == vec![0, 4]));
+        for gl in &net.group_loops {
+            assert_eq!(gl.loops.len(), 1);
+            assert_eq!(gl.loops[0].len(), 4);
+        }
+        check_network(&m, &net, "cube");
+        // Two adjacent groups run a shared chain in opposite directions.
+        let c0 = 0u32;
+        let dirs: Vec<bool> = net
+            .group_loops
+            .iter()
+            .flat_map(|gl| gl.loops.iter().flatten())
+            .filter(|l| l.chain == c0)
+            .map(|l| l.reversed)
+            .collect();
+        assert_eq!(dirs.len(), 2);
+        assert_ne!(dirs[0], dirs[1]);
+    }
+
+    #[test]
+    fn corner_less_loops_and_open_boundaries() {
+        // An open tube (no caps) of two groups split along a circle: three closed loops
+        // without corners (two open rims + the circle between the groups), each cut at two
+        // corners.
+        let mut m = ControlMesh::new();
+        let k = 12;
+        for ring in 0..3 {
+            for i in 0..k {
+                let t = i as f64 / k as f64 * std::f64::consts::TAU;
+                m.push_vertex(DVec3::new(t.cos(), t.sin(), ring as f64));
+            }
+        }
+        let g0 = m.push_group("a", PatchKind::Closed);
+        let g1 = m.push_group("b", PatchKind::Closed);
+        for ring in 0..2u32 {
+            for i in 0..k as u32 {
+                let j = (i + 1) % k as u32;
+                let (a, b) = (ring * k as u32 + i, ring * k as u32 + j);
+                let (c, d) = (a + k as u32, b + k as u32);
+                let g = if ring == 0 { g0 } else { g1 };
+                m.push_face(&[a, b, d], g);
+                m.push_face(&[a, d, c], g);
+            }
+        }
+        let net = build_curve_network(&m, &CurveOptions::default()).unwrap();
+        assert_eq!(net.corners.len(), 6);
+        assert!(net
+            .corners
+            .iter()
+            .all(|c| c.reason == CornerReason::LoopSplit));
+        assert_eq!(net.chains.len(), 6);
+        assert_eq!(net.chains.iter().filter(|c| c.open_boundary).count(), 4);
+        assert_eq!(net.group_loops[0].loops.len(), 2);
+        check_network(&m, &net, "tube");
+        // Sharp turns: a square rim needs corners at its four turns.
+        let sq = grid_cube(3);
+        let mut one = sq.clone();
+        // Drop the top side: its rim becomes an open boundary of the four walls.
+        let keep: Vec<usize> = (0..one.face_count())
+            .filter(|&f| one.face_groups[f] != 1)
+            .collect();
+        let mut open = ControlMesh::new();
+        open.positions = one.positions.clone();
+        open.groups = one.groups.clone();
+        for f in keep {
+            let face = one.face(f).to_vec();
+            open.push_face(&face, one.face_groups[f]);
+        }
+        one = open;
+        let net = build_curve_network(&one, &CurveOptions::default()).unwrap();
+        check_network(&one, &net, "open box");
+        assert_eq!(net.corners.len(), 8);
+    }
+
+    #[test]
+    fn douglas_peucker_bounds() {
+        let pts: Vec<DVec3> = (0..100)
+            .map(|i| {
+                let t = i as f64 / 99.0 * std::f64::consts::PI;
+                DVec3::new(t.cos(), t.sin(), 0.0)
+            })
+            .collect();
+        for tol in [1e-1, 1e-2, 1e-4] {
+            let keep = douglas_peucker(&pts, tol);
+            let sub: Vec<DVec3> = keep.iter().map(|&i| pts[i as usize]).collect();
+            assert!(polyline_hausdorff(&sub, &pts) <= tol);
+            assert_eq!(keep[0], 0);
+            assert_eq!(*keep.last().unwrap(), 99);
+        }
+        assert!(douglas_peucker(&pts, 1e-1).len() < douglas_peucker(&pts, 1e-4).len());
+        // The seam: polyline stand-in error equals the polyline distance.
+        let e = chain_fit_error(&[pts[0], pts[99]], &pts, &PolylineCurve);
+        assert!((e - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn corpus_networks() {
+        let Some(dir) = corpus_dir() else {
+            eprintln!("corpus not found; skipping");
+            return;
+        };
+        let mut names: Vec<String> = Vec::new();
+        for sub in ["tess", "abc"] {
+            for e in std::fs::read_dir(dir.join(sub)).unwrap().flatten() {
+                let n = e.file_name().to_string_lossy().to_string();
+                if n.ends_with("_coarse.obj") || (sub == "abc" && n.ends_with(".obj")) {
+                    names.push(format!("{sub}/{n}"));
+                }
+            }
+        }
+        names.sort();
+        assert!(names.len() >= 19);
+        for name in names {
+            let Some(m) = load_corpus(&name) else { return };
+            let t = std::time::Instant::now();
+            let net = build_curve_network(&m, &CurveOptions::default()).unwrap();
+            let dt = t.elapsed();
+            check_network(&m, &net, &name);
+            let loops: usize = net.group_loops.iter().map(|g| g.loops.len()).sum();
+            let multi = net.group_loops.iter().filter(|g| g.loops.len() > 1).count();
+            let none = net
+                .group_loops
+                .iter()
+                .filter(|g| g.loops.is_empty())
+                .count();
+            let splits = net
+                .corners
+                .iter()
+                .filter(|c| c.reason == CornerReason::LoopSplit)
+                .count();
+            let ctrl: usize = net.chains.iter().map(|c| c.control.len() - 1).sum();
+            println!(
+                "{name}: {} groups, {} corners ({} loop splits), {} chains, {} chain edges -> {} control edges, {} loops ({} groups with holes/multiple loops, {} without boundary) [{:?}]",
+                m.groups.len(), net.corners.len(), splits, net.chains.len(), net.edge_count(), ctrl, loops, multi, none, dt
+            );
+        }
+    }
+}

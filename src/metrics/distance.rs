@@ -1,0 +1,194 @@
+//! Sampled one-sided and symmetric (Hausdorff-style) distances between two meshes.
+
+use glam::DVec3;
+
+use super::sampling::{sample_surface, SampleCount};
+use super::surface::TriangleSurface;
+use crate::error::Result;
+use crate::mesh::ControlMesh;
+
+/// How densely to sample each mesh when measuring distances.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DistanceOptions {
+    /// Random area-weighted samples per mesh.
+    pub samples: SampleCount,
+    /// Also measure from every mesh vertex (catches errors at corners and creases).
+    pub include_vertices: bool,
+    /// Seed of the sampler; the same seed gives the same report.
+    pub seed: u64,
+}
+
+impl Default for DistanceOptions {
+    fn default() -> Self {
+        DistanceOptions {
+            samples: SampleCount::Total(100_000),
+            include_vertices: true,
+            seed: 0x5C0D_E5C0_DE5C_0DE5,
+        }
+    }
+}
+
+/// Statistics of the distances from sample points of one mesh to the other surface.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OneSided {
+    pub max: f64,
+    pub rms: f64,
+    pub mean: f64,
+    /// Number of sample points measured.
+    pub count: usize,
+    /// The sample point that attains `max` (the first one in sample order on ties).
+    pub argmax: DVec3,
+}
+
+/// Distances between two surfaces A and B, in model units.
+///
+/// The symmetric values follow the usual Hausdorff convention: the larger of the two
+/// directions (`max` is the sampled Hausdorff distance). `diagonal` is the bounding-box
+/// diagonal of A and B together, for relative errors ([`DistanceReport::relative`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DistanceReport {
+    pub max_a_to_b: f64,
+    pub max_b_to_a: f64,
+    pub rms_a_to_b: f64,
+    pub rms_b_to_a: f64,
+    pub mean_a_to_b: f64,
+    pub mean_b_to_a: f64,
+    /// max(max_a_to_b, max_b_to_a): the (sampled) Hausdorff distance.
+    pub max: f64,
+    /// max(rms_a_to_b, rms_b_to_a).
+    pub rms: f64,
+    /// max(mean_a_to_b, mean_b_to_a).
+    pub mean: f64,
+    pub diagonal: f64,
+    pub samples_a: usize,
+    pub samples_b: usize,
+}
+
+impl DistanceReport {
+    /// The same report with every distance divided by `diagonal` (unchanged if it is 0).
+    pub fn relative(&self) -> DistanceReport {
+        let s = if self.diagonal > 0.0 {
+            1.0 / self.diagonal
+        } else {
+            1.0
+        };
+        DistanceReport {
+            max_a_to_b: self.max_a_to_b * s,
+            max_b_to_a: self.max_b_to_a * s,
+            rms_a_to_b: self.rms_a_to_b * s,
+            rms_b_to_a: self.rms_b_to_a * s,
+            mean_a_to_b: self.mean_a_to_b * s,
+            mean_b_to_a: self.mean_b_to_a * s,
+            max: self.max * s,
+            rms: self.rms * s,
+            mean: self.mean * s,
+            diagonal: 1.0,
+            samples_a: self.samples_a,
+            samples_b: self.samples_b,
+        }
+    }
+}
+
+/// Queries are processed in fixed chunks of this many points: within a chunk each query
+/// uses the previous answer as a distance bound (neighbouring samples are close), and the
+/// chunking does not depend on the thread count, so results are bit-identical with and
+/// without the `parallel` feature.
+const CHUNK: usize = 256;
+
+/// Distances from each of `points` to `surface`, in the order of `points`.
+pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
+    let chunk_fn = |chunk: &[DVec3]| -> Vec<f64> {
+        let mut out = Vec::with_capacity(chunk.len());
+        let mut prev: Option<DVec3> = None;
+        for &p in chunk {
+            let hit = prev.and_then(|q| {
+                // |p - q| bounds the distance since q is on the surface; pad for rounding.
+                let bound = (p - q).length() * (1.0 + 1e-9) + 1e-300;
+                surface.closest_point_within(p, bound)
+            });
+            let hit = hit.unwrap_or_else(|| surface.closest_point(p));
+            prev = Some(hit.point).filter(|q| q.is_finite());
+            out.push(hit.distance);
+        }
+        out
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        let parts: Vec<Vec<f64>> = points.par_chunks(CHUNK).map(chunk_fn).collect();
+        parts.concat()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        points.chunks(CHUNK).flat_map(chunk_fn).collect()
+    }
+}
+
+/// Statistics of the distances from `points` to `surface` (sequential, ordered reduction).
+pub fn one_sided_distances(points: &[DVec3], surface: &TriangleSurface) -> OneSided {
+    let d = point_distances(points, surface);
+    let mut out = OneSided {
+        count: d.len(),
+        ..Default::default()
+    };
+    let (mut sum, mut sum2) = (0.0, 0.0);
+    for (i, &x) in d.iter().enumerate() {
+        sum += x;
+        sum2 += x * x;
+        if x > out.max || i == 0 {
+            out.max = x;
+            out.argmax = points[i];
+        }
+    }
+    if !d.is_empty() {
+        out.mean = sum / d.len() as f64;
+        out.rms = (sum2 / d.len() as f64).sqrt();
+    }
+    out
+}
+
+/// Sampled symmetric distance between the surfaces of `a` and `b` (polygons are fan
+/// triangulated). Errors if either mesh is invalid or has no faces.
+pub fn hausdorff(
+    a: &ControlMesh,
+    b: &ControlMesh,
+    opts: &DistanceOptions,
+) -> Result<DistanceReport> {
+    let sa = TriangleSurface::from_control_mesh(a)?;
+    let sb = TriangleSurface::from_control_mesh(b)?;
+    let pa = samples_of(&sa, opts, opts.seed);
+    let pb = samples_of(&sb, opts, opts.seed ^ 0xB);
+    let ab = one_sided_distances(&pa, &sb);
+    let ba = one_sided_distances(&pb, &sa);
+    let diagonal = match (a.bounding_box(), b.bounding_box()) {
+        (Some((l1, h1)), Some((l2, h2))) => (h1.max(h2) - l1.min(l2)).length(),
+        _ => 0.0,
+    };
+    Ok(DistanceReport {
+        max_a_to_b: ab.max,
+        max_b_to_a: ba.max,
+        rms_a_to_b: ab.rms,
+        rms_b_to_a: ba.rms,
+        mean_a_to_b: ab.mean,
+        mean_b_to_a: ba.mean,
+        max: ab.max.max(ba.max),
+        rms: ab.rms.max(ba.rms),
+        mean: ab.mean.max(ba.mean),
+        diagonal,
+        samples_a: ab.count,
+        samples_b: ba.count,
+    })
+}
+
+fn samples_of(s: &TriangleSurface, opts: &DistanceOptions, seed: u64) -> Vec<DVec3> {
+    sample_surface(
+        s.positions(),
+        s.triangles(),
+        opts.samples,
+        opts.include_vertices,
+        seed,
+    )
+    .into_iter()
+    .map(|s| s.point)
+    .collect()
+}

@@ -1,0 +1,283 @@
+//! A triangle mesh with a bounding-volume hierarchy answering closest-point queries.
+
+use glam::DVec3;
+use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::shape::{TriMesh, TriMeshFlags};
+
+use crate::error::{Error, Result};
+use crate::mesh::ControlMesh;
+
+/// Result of a closest-point query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClosestPoint {
+    /// The closest point on the surface.
+    pub point: DVec3,
+    /// Euclidean distance from the query point to `point`.
+    pub distance: f64,
+    /// Index of the triangle holding `point` (into [`TriangleSurface::triangles`]).
+    pub triangle: u32,
+    /// Barycentric coordinates of `point` in that triangle (sum to 1).
+    pub barycentric: [f64; 3],
+}
+
+/// A triangle mesh prepared for closest-point queries.
+///
+/// Keeps its own copy of positions and triangles (parry's `TriMesh` owns its buffers and
+/// builds a BVH over them) plus, for meshes built from polygons, the polygon each triangle
+/// came from, so callers can map a hit back to the face of their `ControlMesh`.
+pub struct TriangleSurface {
+    trimesh: TriMesh,
+    source_face: Vec<u32>,
+}
+
+impl std::fmt::Debug for TriangleSurface {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TriangleSurface")
+            .field("vertices", &self.trimesh.vertices().len())
+            .field("triangles", &self.trimesh.indices().len())
+            .finish()
+    }
+}
+
+impl TriangleSurface {
+    /// Builds the BVH over `triangles` (indices into `positions`). Errors on an empty mesh,
+    /// out-of-range indices or non-finite positions.
+    pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Result<Self> {
+        let n = triangles.len() as u32;
+        Self::with_source(positions, triangles, (0..n).collect())
+    }
+
+    fn with_source(
+        positions: Vec<DVec3>,
+        triangles: Vec<[u32; 3]>,
+        source_face: Vec<u32>,
+    ) -> Result<Self> {
+        if triangles.is_empty() {
+            return Err(Error::Mesh("surface has no triangles".into()));
+        }
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(Error::Mesh(format!(
+                "vertex {i} has a non-finite coordinate"
+            )));
+        }
+        let nv = positions.len();
+        if let Some((t, tri)) = triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&v| v as usize >= nv))
+        {
+            return Err(Error::Mesh(format!(
+                "triangle {t} references vertex {tri:?}, but there are only {nv} vertices"
+            )));
+        }
+        let trimesh = TriMesh::with_flags(positions, triangles, TriMeshFlags::empty())
+            .map_err(|e| Error::Mesh(format!("cannot build triangle BVH: {e:?}")))?;
+        Ok(TriangleSurface {
+            trimesh,
+            source_face,
+        })
+    }
+
+    /// Triangulates every face of `mesh` by a fan from its first vertex and builds the BVH.
+    pub fn from_control_mesh(mesh: &ControlMesh) -> Result<Self> {
+        let (triangles, source) = fan_triangulate(mesh)?;
+        Self::with_source(mesh.positions.clone(), triangles, source)
+    }
+
+    pub fn positions(&self) -> &[DVec3] {
+        self.trimesh.vertices()
+    }
+
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        self.trimesh.indices()
+    }
+
+    /// Face of the source `ControlMesh` that triangle `t` was cut from (identity for
+    /// [`TriangleSurface::new`]).
+    pub fn source_face(&self, t: u32) -> u32 {
+        self.source_face[t as usize]
+    }
+
+    /// Closest point on the surface to `p`.
+    pub fn closest_point(&self, p: DVec3) -> ClosestPoint {
+        self.closest_point_within(p, f64::MAX)
+            .unwrap_or_else(|| self.brute_force_closest(p))
+    }
+
+    /// Closest point on the surface to `p` if it is within `max_dist`; `None` otherwise.
+    /// A good bound makes the BVH traversal much cheaper for points far from the surface.
+    pub fn closest_point_within(&self, p: DVec3, max_dist: f64) -> Option<ClosestPoint> {
+        let (proj, (tri, loc)) = self
+            .trimesh
+            .project_local_point_and_get_location_with_max_dist(p, false, max_dist)?;
+        let barycentric = loc
+            .barycentric_coordinates()
+            .unwrap_or_else(|| self.barycentric_of(tri, proj.point));
+        Some(ClosestPoint {
+            point: proj.point,
+            distance: (p - proj.point).length(),
+            triangle: tri,
+            barycentric,
+        })
+    }
+
+    /// Distance from `p` to the surface.
+    pub fn distance(&self, p: DVec3) -> f64 {
+        self.closest_point(p).distance
+    }
+
+    /// Barycentric coordinates of a point lying on triangle `t` (least-squares for points
+    /// slightly off it; vertex 0 for a degenerate triangle).
+    pub fn barycentric_of(&self, t: u32, q: DVec3) -> [f64; 3] {
+        let [a, b, c] = self.triangle_points(t);
+        barycentric(a, b, c, q)
+    }
+
+    pub fn triangle_points(&self, t: u32) -> [DVec3; 3] {
+        let tri = self.trimesh.indices()[t as usize];
+        let v = self.trimesh.vertices();
+        [v[tri[0] as usize], v[tri[1] as usize], v[tri[2] as usize]]
+    }
+
+    /// Linear scan, used only if the BVH returns nothing (non-finite query point).
+    fn brute_force_closest(&self, p: DVec3) -> ClosestPoint {
+        let mut best: Option<ClosestPoint> = None;
+        for t in 0..self.trimesh.indices().len() as u32 {
+            let [a, b, c] = self.triangle_points(t);
+            let (q, bc) = closest_point_on_triangle(p, a, b, c);
+            let d = (p - q).length();
+            if best.as_ref().is_none_or(|b| d < b.distance) {
+                best = Some(ClosestPoint {
+                    point: q,
+                    distance: d,
+                    triangle: t,
+                    barycentric: bc,
+                });
+            }
+        }
+        best.unwrap_or(ClosestPoint {
+            point: p,
+            distance: f64::NAN,
+            triangle: 0,
+            barycentric: [1.0, 0.0, 0.0],
+        })
+    }
+}
+
+/// Fan triangulation of every face (first vertex as apex) with the source face of each
+/// triangle. Errors when an index is out of range.
+pub(crate) fn fan_triangulate(mesh: &ControlMesh) -> Result<(Vec<[u32; 3]>, Vec<u32>)> {
+    let nv = mesh.positions.len();
+    let mut tris = Vec::with_capacity(mesh.face_vertices.len());
+    let mut src = Vec::with_capacity(mesh.face_vertices.len());
+    if mesh.face_offsets.windows(2).any(|w| w[1] < w[0])
+        || mesh
+            .face_offsets
+            .last()
+            .is_some_and(|&e| e as usize > mesh.face_vertices.len())
+    {
+        return Err(Error::Mesh("face offsets are inconsistent".into()));
+    }
+    for f in 0..mesh.face_count() {
+        let face = mesh.face(f);
+        if let Some(&v) = face.iter().find(|&&v| v as usize >= nv) {
+            return Err(Error::Mesh(format!(
+                "face {f} references vertex {v}, but there are only {nv} vertices"
+            )));
+        }
+        for i in 1..face.len().saturating_sub(1) {
+            tris.push([face[0], face[i], face[i + 1]]);
+            src.push(f as u32);
+        }
+    }
+    Ok((tris, src))
+}
+
+/// Barycentric coordinates of the projection of `q` onto the plane of (a, b, c).
+pub(crate) fn barycentric(a: DVec3, b: DVec3, c: DVec3, q: DVec3) -> [f64; 3] {
+    let (e0, e1, e2) = (b - a, c - a, q - a);
+    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (d20, d21) = (e2.dot(e0), e2.dot(e1));
+    let den = d00 * d11 - d01 * d01;
+    if den.abs() <= f64::EPSILON * d00 * d11 || den == 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d11 * d20 - d01 * d21) / den;
+    let w = (d00 * d21 - d01 * d20) / den;
+    [1.0 - v - w, v, w]
+}
+
+/// Exact closest point on triangle (a, b, c) to p, with its barycentric coordinates
+/// (Ericson, Real-Time Collision Detection §5.1.5: Voronoi regions of vertices, edges and
+/// face). Handles degenerate triangles (falls back to the closest edge).
+pub fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, [f64; 3]) {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, [1.0, 0.0, 0.0]);
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, [0.0, 1.0, 0.0]);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + v * ab, [1.0 - v, v, 0.0]);
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, [0.0, 0.0, 1.0]);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + w * ac, [1.0 - w, 0.0, w]);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + w * (c - b), [0.0, 1.0 - w, w]);
+    }
+    let sum = va + vb + vc;
+    if sum.abs() < f64::MIN_POSITIVE || !sum.is_finite() {
+        // Degenerate (collinear) triangle: best of the three edges.
+        let cands = [
+            closest_on_segment(p, a, b, [0, 1]),
+            closest_on_segment(p, b, c, [1, 2]),
+            closest_on_segment(p, a, c, [0, 2]),
+        ];
+        let mut best = cands[0];
+        for c in &cands[1..] {
+            if (p - c.0).length_squared() < (p - best.0).length_squared() {
+                best = *c;
+            }
+        }
+        return best;
+    }
+    let denom = 1.0 / sum;
+    let v = vb * denom;
+    let w = vc * denom;
+    (a + ab * v + ac * w, [1.0 - v - w, v, w])
+}
+
+fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3, idx: [usize; 2]) -> (DVec3, [f64; 3]) {
+    let ab = b - a;
+    let l2 = ab.length_squared();
+    let t = if l2 > 0.0 {
+        ((p - a).dot(ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let mut bc = [0.0; 3];
+    bc[idx[0]] += 1.0 - t;
+    bc[idx[1]] += t;
+    (a + t * ab, bc)
+}
