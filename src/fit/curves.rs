@@ -737,7 +737,7 @@ mod tests {
         }
         assert_eq!(
             uses.values().sum::<usize>(),
-            net.chains.iter().map(|c| c.groups.len()).sum()
+            net.chains.iter().map(|c| c.groups.len()).sum::<usize>()
         );
     }
 
