@@ -17,5 +17,7 @@ pub mod fit;
 pub mod codec;
 pub mod metrics;
 
+pub mod pipeline;
+
 pub use error::{Error, Result};
 pub use mesh::ControlMesh;

@@ -6,6 +6,8 @@
 
 mod adjacency;
 pub mod curves;
+pub mod decimate;
+pub mod encoder;
 mod linalg;
 pub mod primitives;
 pub mod segment;

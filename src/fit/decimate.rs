@@ -1,0 +1,697 @@
+//! Constrained edge-collapse decimation of a grouped triangle mesh: the step that turns a
+//! dense CAD tessellation into the topology of a coarse control mesh.
+//!
+//! The whole model is decimated as *one* mesh, so a boundary chain shared by two CAD faces
+//! is simplified once for both: the control mesh is watertight by construction. Collapses are
+//! half-edge collapses `u -> v` (the survivor keeps its input position, which lies on the
+//! CAD surface and is the starting point of the fit). What may collapse is decided by each
+//! vertex's [`VertexRole`] and each group's [`GroupRule`]:
+//!
+//! * chain vertices that were not chosen as control points slide along their chain only;
+//! * interior vertices of boundary patches (planes, cylinders, cones) are all removed if at
+//!   all possible (a boundary patch has no interior control vertices);
+//! * interior vertices of closed patches are removed while the quadric error stays below the
+//!   group's threshold.
+//!
+//! Every collapse keeps the mesh manifold (link condition) and keeps triangles facing the
+//! way the CAD surface faces (analytic normal for boundary patches, previous normal for
+//! closed ones); framed patches also keep every edge within an angular span about the axis,
+//! as the cylinder/cone subdivision rule requires (spec/subdivision.md §5).
+//! Ties are broken by vertex index, so the result is deterministic.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use glam::DVec3;
+
+use crate::mesh::Axis;
+
+/// What decimation may do with a vertex.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VertexRole {
+    /// Never removed: B-rep corners, chosen chain control points.
+    Keep,
+    /// On a boundary chain but not a control point: removed by sliding onto a chain neighbour.
+    ChainDrop,
+    /// Strictly inside one group: removable onto any neighbour.
+    Interior,
+}
+
+/// The surface a group approximates, as far as collapse validity is concerned.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SurfaceRef {
+    Plane { normal: DVec3 },
+    Cylinder { axis: Axis },
+    Cone { axis: Axis },
+    /// Freeform: triangles are compared with their normal before the collapse.
+    Free,
+}
+
+impl SurfaceRef {
+    /// Unit normal of the analytic surface at `p` (up to sign), if there is one.
+    fn normal_at(&self, p: DVec3) -> Option<DVec3> {
+        match *self {
+            SurfaceRef::Plane { normal } => Some(normal),
+            SurfaceRef::Cylinder { axis } => {
+                let d = p - axis.origin;
+                let radial = d - axis.direction * d.dot(axis.direction);
+                radial.try_normalize()
+            }
+            SurfaceRef::Cone { axis } => {
+                let d = p - axis.origin;
+                let h = d.dot(axis.direction);
+                let q = d - axis.direction * h;
+                let r = q.length();
+                if h.abs() < 1e-300 || r < 1e-300 {
+                    return None;
+                }
+                (q / r - axis.direction * (r / h)).try_normalize()
+            }
+            SurfaceRef::Free => None,
+        }
+    }
+
+    fn axis(&self) -> Option<Axis> {
+        match *self {
+            SurfaceRef::Cylinder { axis } | SurfaceRef::Cone { axis } => Some(axis),
+            _ => None,
+        }
+    }
+}
+
+/// Per-group decimation policy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroupRule {
+    /// Boundary patch: every interior vertex should go (cost is ignored).
+    pub remove_all_interior: bool,
+    /// Closed patch: largest allowed mean squared distance (model units squared) between a
+    /// collapsed vertex and the input planes it stands for.
+    pub max_cost: f64,
+    pub surface: SurfaceRef,
+    /// Framed patches: largest angle (radians) an edge may span about the axis.
+    pub max_edge_angle: f64,
+}
+
+/// A triangle mesh to decimate. `roles` and `face_groups` index `positions`/`triangles`.
+pub struct DecimateInput<'a> {
+    pub positions: &'a [DVec3],
+    pub triangles: &'a [[u32; 3]],
+    pub face_groups: &'a [u32],
+    pub roles: &'a [VertexRole],
+    pub rules: &'a [GroupRule],
+}
+
+/// The decimated mesh, still indexing the input's vertices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decimated {
+    /// Surviving triangles (input vertex ids) with their groups, in input face order.
+    pub triangles: Vec<[u32; 3]>,
+    pub face_groups: Vec<u32>,
+    /// Surviving vertices, ascending.
+    pub vertices: Vec<u32>,
+    /// Chain vertices that could not slide away (they became control points).
+    pub kept_chain_drops: usize,
+    /// Interior vertices of boundary patches that could not be removed.
+    pub kept_boundary_interior: usize,
+}
+
+/// Symmetric 4x4 quadric (Garland-Heckbert) with the total weight, stored as the 10 upper
+/// coefficients: cheap to add, evaluates a mean squared plane distance.
+#[derive(Clone, Copy, Debug, Default)]
+struct Quadric {
+    q: [f64; 10],
+    weight: f64,
+}
+
+impl Quadric {
+    fn plane(n: DVec3, d: f64, w: f64) -> Quadric {
+        let (a, b, c) = (n.x, n.y, n.z);
+        Quadric {
+            q: [
+                a * a * w,
+                a * b * w,
+                a * c * w,
+                a * d * w,
+                b * b * w,
+                b * c * w,
+                b * d * w,
+                c * c * w,
+                c * d * w,
+                d * d * w,
+            ],
+            weight: w,
+        }
+    }
+    fn add(&mut self, o: &Quadric) {
+        for i in 0..10 {
+            self.q[i] += o.q[i];
+        }
+        self.weight += o.weight;
+    }
+    /// Mean squared distance of `p` to the accumulated planes.
+    fn eval(&self, p: DVec3) -> f64 {
+        let q = &self.q;
+        let (x, y, z) = (p.x, p.y, p.z);
+        let v = q[0] * x * x
+            + 2.0 * q[1] * x * y
+            + 2.0 * q[2] * x * z
+            + 2.0 * q[3] * x
+            + q[4] * y * y
+            + 2.0 * q[5] * y * z
+            + 2.0 * q[6] * y
+            + q[7] * z * z
+            + 2.0 * q[8] * z
+            + q[9];
+        if self.weight > 0.0 {
+            (v / self.weight).max(0.0)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Heap entry: lower `(class, cost)` first, ties by vertex id.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    class: u8,
+    cost: f64,
+    u: u32,
+    v: u32,
+    stamp: u32,
+}
+
+impl PartialEq for Candidate {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o) == Ordering::Equal
+    }
+}
+impl Eq for Candidate {}
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Candidate {
+    // Reversed so that BinaryHeap (a max-heap) pops the smallest.
+    fn cmp(&self, o: &Self) -> Ordering {
+        (o.class, o.cost, o.u, o.v)
+            .partial_cmp(&(self.class, self.cost, self.u, self.v))
+            .unwrap_or_else(|| o.cost.total_cmp(&self.cost))
+    }
+}
+
+struct State<'a> {
+    input: &'a DecimateInput<'a>,
+    tris: Vec<[u32; 3]>,
+    alive: Vec<bool>,
+    vfaces: Vec<Vec<u32>>,
+    quadric: Vec<Quadric>,
+    removed: Vec<bool>,
+    stamp: Vec<u32>,
+    min_area2: f64,
+}
+
+fn tri_normal(p: [DVec3; 3]) -> DVec3 {
+    (p[1] - p[0]).cross(p[2] - p[0])
+}
+
+/// Angle between the projections of `a` and `b` onto the plane perpendicular to the axis.
+fn angle_about(axis: &Axis, a: DVec3, b: DVec3) -> f64 {
+    let d = axis.direction;
+    let qa = (a - axis.origin) - d * (a - axis.origin).dot(d);
+    let qb = (b - axis.origin) - d * (b - axis.origin).dot(d);
+    let (la, lb) = (qa.length(), qb.length());
+    if la < 1e-300 || lb < 1e-300 {
+        return 0.0; // a point on the axis (cone apex) has no angle
+    }
+    (qa.dot(qb) / (la * lb)).clamp(-1.0, 1.0).acos()
+}
+
+impl<'a> State<'a> {
+    fn new(input: &'a DecimateInput<'a>) -> Self {
+        let nv = input.positions.len();
+        let mut vfaces = vec![Vec::new(); nv];
+        let mut quadric = vec![Quadric::default(); nv];
+        let mut total_area = 0.0;
+        for (f, t) in input.triangles.iter().enumerate() {
+            let p = t.map(|i| input.positions[i as usize]);
+            let n2 = tri_normal(p);
+            let area = 0.5 * n2.length();
+            total_area += area;
+            if let Some(n) = n2.try_normalize() {
+                let q = Quadric::plane(n, -n.dot(p[0]), area);
+                for &i in t {
+                    quadric[i as usize].add(&q);
+                }
+            }
+            for &i in t {
+                vfaces[i as usize].push(f as u32);
+            }
+        }
+        let mean_area = total_area / input.triangles.len().max(1) as f64;
+        State {
+            input,
+            tris: input.triangles.to_vec(),
+            alive: vec![true; input.triangles.len()],
+            vfaces,
+            quadric,
+            removed: vec![false; nv],
+            stamp: vec![0; nv],
+            // Doubled-area floor below which a triangle counts as degenerate.
+            min_area2: (2.0 * mean_area * 1e-8).powi(2),
+        }
+    }
+
+    fn pos(&self, v: u32) -> DVec3 {
+        self.input.positions[v as usize]
+    }
+
+    fn neighbours(&self, u: u32) -> Vec<u32> {
+        let mut n: Vec<u32> = self.vfaces[u as usize]
+            .iter()
+            .flat_map(|&f| self.tris[f as usize])
+            .filter(|&w| w != u)
+            .collect();
+        n.sort_unstable();
+        n.dedup();
+        n
+    }
+
+    /// Faces containing both `u` and `v`.
+    fn edge_faces(&self, u: u32, v: u32) -> Vec<u32> {
+        self.vfaces[u as usize]
+            .iter()
+            .copied()
+            .filter(|&f| self.tris[f as usize].contains(&v))
+            .collect()
+    }
+
+    /// A group-boundary edge: its faces are in different groups, or it has a single face.
+    fn is_group_boundary(&self, u: u32, v: u32) -> bool {
+        let f = self.edge_faces(u, v);
+        match f.as_slice() {
+            [a, b] => self.input.face_groups[*a as usize] != self.input.face_groups[*b as usize],
+            _ => true,
+        }
+    }
+
+    /// Cost class and cost of collapsing `u` onto `v`, or `None` when not allowed.
+    fn evaluate(&self, u: u32, v: u32) -> Option<(u8, f64)> {
+        let role = self.input.roles[u as usize];
+        let edge = self.edge_faces(u, v);
+        if edge.is_empty() || edge.len() > 2 {
+            return None;
+        }
+        let class = match role {
+            VertexRole::Keep => return None,
+            VertexRole::ChainDrop => {
+                if !self.is_group_boundary(u, v) {
+                    return None;
+                }
+                0
+            }
+            VertexRole::Interior => {
+                let g = self.input.face_groups[self.vfaces[u as usize][0] as usize];
+                if self.input.rules[g as usize].remove_all_interior {
+                    1
+                } else {
+                    2
+                }
+            }
+        };
+        // Link condition: the common neighbours of u and v are exactly the vertices
+        // opposite the edge.
+        let nu = self.neighbours(u);
+        let nv = self.neighbours(v);
+        let common = nu.iter().filter(|w| nv.binary_search(w).is_ok()).count();
+        if common != edge.len() {
+            return None;
+        }
+        // A vertex on the open boundary must not be pulled onto an interior edge's end.
+        if edge.len() == 2 && self.on_open_boundary(u) && self.on_open_boundary(v) {
+            return None;
+        }
+        let pv = self.pos(v);
+        for &f in &self.vfaces[u as usize] {
+            let t = self.tris[f as usize];
+            if t.contains(&v) {
+                continue;
+            }
+            let old = t.map(|i| self.pos(i));
+            let new = t.map(|i| if i == u { pv } else { self.pos(i) });
+            let n_old = tri_normal(old);
+            let n_new = tri_normal(new);
+            if n_new.length_squared() <= self.min_area2 {
+                return None;
+            }
+            let rule = &self.input.rules[self.input.face_groups[f as usize] as usize];
+            let centroid = (new[0] + new[1] + new[2]) / 3.0;
+            match rule.surface.normal_at(centroid) {
+                Some(s) => {
+                    let c_old = (old[0] + old[1] + old[2]) / 3.0;
+                    let s_old = rule.surface.normal_at(c_old).unwrap_or(s);
+                    let sign = n_old.dot(s_old).signum();
+                    if sign * n_new.normalize().dot(s) < 0.3 {
+                        return None;
+                    }
+                }
+                None => {
+                    if n_old.length_squared() > self.min_area2
+                        && n_new.normalize().dot(n_old.normalize()) < 0.5
+                    {
+                        return None;
+                    }
+                }
+            }
+            if let Some(axis) = rule.surface.axis() {
+                for &w in &t {
+                    if w != u && angle_about(&axis, pv, self.pos(w)) > rule.max_edge_angle {
+                        return None;
+                    }
+                }
+            }
+        }
+        let cost = match class {
+            2 => {
+                let mut q = self.quadric[u as usize];
+                q.add(&self.quadric[v as usize]);
+                let c = q.eval(pv);
+                let g = self.input.face_groups[self.vfaces[u as usize][0] as usize];
+                if c > self.input.rules[g as usize].max_cost {
+                    return None;
+                }
+                c
+            }
+            // Boundary-patch interiors and chain slides: shortest edges first keeps
+            // triangles well shaped.
+            _ => (pv - self.pos(u)).length_squared(),
+        };
+        Some((class, cost))
+    }
+
+    fn on_open_boundary(&self, u: u32) -> bool {
+        self.neighbours(u)
+            .iter()
+            .any(|&w| self.edge_faces(u, w).len() == 1)
+    }
+
+    fn best_candidate(&self, u: u32) -> Option<Candidate> {
+        if self.removed[u as usize] || self.input.roles[u as usize] == VertexRole::Keep {
+            return None;
+        }
+        let mut best: Option<Candidate> = None;
+        for v in self.neighbours(u) {
+            if let Some((class, cost)) = self.evaluate(u, v) {
+                let c = Candidate {
+                    class,
+                    cost,
+                    u,
+                    v,
+                    stamp: self.stamp[u as usize],
+                };
+                if best.is_none_or(|b| c > b) {
+                    best = Some(c);
+                }
+            }
+        }
+        best
+    }
+
+    fn collapse(&mut self, u: u32, v: u32) {
+        let faces = std::mem::take(&mut self.vfaces[u as usize]);
+        for f in faces {
+            let t = self.tris[f as usize];
+            if t.contains(&v) {
+                self.alive[f as usize] = false;
+                for &w in &t {
+                    if w != u {
+                        self.vfaces[w as usize].retain(|&g| g != f);
+                    }
+                }
+            } else {
+                for c in self.tris[f as usize].iter_mut() {
+                    if *c == u {
+                        *c = v;
+                    }
+                }
+                self.vfaces[v as usize].push(f);
+            }
+        }
+        self.vfaces[v as usize].sort_unstable();
+        let qu = self.quadric[u as usize];
+        self.quadric[v as usize].add(&qu);
+        self.removed[u as usize] = true;
+    }
+}
+
+/// Decimates `input` under its constraints. Never fails: vertices that cannot be removed
+/// are kept (and counted in the result).
+pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
+    let mut st = State::new(input);
+    let nv = input.positions.len();
+    let mut heap = BinaryHeap::new();
+    for u in 0..nv as u32 {
+        if let Some(c) = st.best_candidate(u) {
+            heap.push(c);
+        }
+    }
+    while let Some(c) = heap.pop() {
+        if st.removed[c.u as usize] || c.stamp != st.stamp[c.u as usize] {
+            continue;
+        }
+        // Re-validate: the neighbourhood may have changed since the entry was pushed.
+        match st.evaluate(c.u, c.v) {
+            Some((class, cost)) if class == c.class && cost <= c.cost * (1.0 + 1e-12) + 1e-300 => {}
+            _ => {
+                st.stamp[c.u as usize] += 1;
+                if let Some(n) = st.best_candidate(c.u) {
+                    heap.push(n);
+                }
+                continue;
+            }
+        }
+        st.collapse(c.u, c.v);
+        // The survivor's ring (which now includes u's old ring) and the survivor itself
+        // see new neighbourhoods: their best collapses and link conditions changed.
+        let mut ring = st.neighbours(c.v);
+        ring.push(c.v);
+        for w in ring {
+            if st.removed[w as usize] {
+                continue;
+            }
+            st.stamp[w as usize] += 1;
+            if let Some(n) = st.best_candidate(w) {
+                heap.push(n);
+            }
+        }
+    }
+    let mut triangles = Vec::new();
+    let mut face_groups = Vec::new();
+    for (f, t) in st.tris.iter().enumerate() {
+        if st.alive[f] {
+            triangles.push(*t);
+            face_groups.push(input.face_groups[f]);
+        }
+    }
+    let vertices: Vec<u32> = (0..nv as u32)
+        .filter(|&v| !st.removed[v as usize] && !st.vfaces[v as usize].is_empty())
+        .collect();
+    let kept_chain_drops = vertices
+        .iter()
+        .filter(|&&v| input.roles[v as usize] == VertexRole::ChainDrop)
+        .count();
+    let kept_boundary_interior = vertices
+        .iter()
+        .filter(|&&v| {
+            input.roles[v as usize] == VertexRole::Interior
+                && st.vfaces[v as usize]
+                    .first()
+                    .is_some_and(|&f| input.rules[input.face_groups[f as usize] as usize].remove_all_interior)
+        })
+        .count();
+    Decimated {
+        triangles,
+        face_groups,
+        vertices,
+        kept_chain_drops,
+        kept_boundary_interior,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An n x n grid of the unit square (z = 0), two groups split at x = 0.5 when `split`.
+    fn grid(n: usize, split: bool) -> (Vec<DVec3>, Vec<[u32; 3]>, Vec<u32>) {
+        let mut p = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                p.push(DVec3::new(i as f64 / n as f64, j as f64 / n as f64, 0.0));
+            }
+        }
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        let mut t = Vec::new();
+        let mut g = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let grp = u32::from(split && i >= n / 2);
+                t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+                g.push(grp);
+                g.push(grp);
+            }
+        }
+        (p, t, g)
+    }
+
+    fn euler(tris: &[[u32; 3]]) -> i64 {
+        let mut e = std::collections::BTreeSet::new();
+        let mut v = std::collections::BTreeSet::new();
+        for t in tris {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                e.insert((a.min(b), a.max(b)));
+                v.insert(a);
+            }
+        }
+        v.len() as i64 - e.len() as i64 + tris.len() as i64
+    }
+
+    #[test]
+    fn plane_patch_loses_every_interior_and_dropped_boundary_vertex() {
+        let n = 8;
+        let (p, t, g) = grid(n, false);
+        // Keep the four corners; every other boundary vertex is a chain drop.
+        let roles: Vec<VertexRole> = p
+            .iter()
+            .map(|q| {
+                let on_x = q.x == 0.0 || q.x == 1.0;
+                let on_y = q.y == 0.0 || q.y == 1.0;
+                match (on_x, on_y) {
+                    (true, true) => VertexRole::Keep,
+                    (true, false) | (false, true) => VertexRole::ChainDrop,
+                    _ => VertexRole::Interior,
+                }
+            })
+            .collect();
+        let rules = [GroupRule {
+            remove_all_interior: true,
+            max_cost: 0.0,
+            surface: SurfaceRef::Plane { normal: DVec3::Z },
+            max_edge_angle: std::f64::consts::PI,
+        }];
+        let out = decimate(&DecimateInput {
+            positions: &p,
+            triangles: &t,
+            face_groups: &g,
+            roles: &roles,
+            rules: &rules,
+        });
+        assert_eq!(out.vertices.len(), 4, "{out:?}");
+        assert_eq!(out.triangles.len(), 2);
+        assert_eq!(euler(&out.triangles), 1);
+        // Orientation kept: normals still +z.
+        for t in &out.triangles {
+            assert!(tri_normal(t.map(|i| p[i as usize])).z > 0.0);
+        }
+    }
+
+    #[test]
+    fn closed_patch_keeps_vertices_where_the_cost_is_high() {
+        // A bumpy height field: a zero threshold keeps everything, a huge one removes all
+        // the interior vertices it can.
+        let n = 6;
+        let (mut p, t, g) = grid(n, false);
+        for q in &mut p {
+            q.z = 0.3 * (6.0 * q.x).sin() * (5.0 * q.y).cos();
+        }
+        let roles: Vec<VertexRole> = p
+            .iter()
+            .map(|q| {
+                if q.x == 0.0 || q.x == 1.0 || q.y == 0.0 || q.y == 1.0 {
+                    VertexRole::Keep
+                } else {
+                    VertexRole::Interior
+                }
+            })
+            .collect();
+        let run = |max_cost: f64| {
+            let rules = [GroupRule {
+                remove_all_interior: false,
+                max_cost,
+                surface: SurfaceRef::Free,
+                max_edge_angle: std::f64::consts::PI,
+            }];
+            decimate(&DecimateInput {
+                positions: &p,
+                triangles: &t,
+                face_groups: &g,
+                roles: &roles,
+                rules: &rules,
+            })
+        };
+        let strict = run(0.0);
+        assert_eq!(strict.vertices.len(), p.len());
+        let loose = run(1e9);
+        assert!(loose.vertices.len() < p.len() - 20, "{}", loose.vertices.len());
+        assert_eq!(euler(&loose.triangles), 1);
+    }
+
+    #[test]
+    fn chain_drops_slide_only_along_group_boundaries() {
+        let n = 8;
+        let (p, t, g) = grid(n, true);
+        // The seam x = 0.5 is a chain between the groups; keep its ends only.
+        let roles: Vec<VertexRole> = p
+            .iter()
+            .map(|q| {
+                let seam = (q.x - 0.5).abs() < 1e-12;
+                let border = q.x == 0.0 || q.x == 1.0 || q.y == 0.0 || q.y == 1.0;
+                if seam && (q.y == 0.0 || q.y == 1.0) {
+                    VertexRole::Keep
+                } else if seam {
+                    VertexRole::ChainDrop
+                } else if border {
+                    VertexRole::Keep
+                } else {
+                    VertexRole::Interior
+                }
+            })
+            .collect();
+        let rule = GroupRule {
+            remove_all_interior: true,
+            max_cost: 0.0,
+            surface: SurfaceRef::Plane { normal: DVec3::Z },
+            max_edge_angle: std::f64::consts::PI,
+        };
+        let out = decimate(&DecimateInput {
+            positions: &p,
+            triangles: &t,
+            face_groups: &g,
+            roles: &roles,
+            rules: &[rule, rule],
+        });
+        // No seam vertex survives but its ends, and every surviving vertex is on the x = 0.5
+        // line or on the border: groups never leak across the seam.
+        for &v in &out.vertices {
+            let q = p[v as usize];
+            assert!(
+                roles[v as usize] == VertexRole::Keep,
+                "vertex {v} at {q} survived with role {:?}",
+                roles[v as usize]
+            );
+        }
+        for (t, &grp) in out.triangles.iter().zip(&out.face_groups) {
+            for &v in t {
+                let x = p[v as usize].x;
+                if grp == 0 {
+                    assert!(x <= 0.5 + 1e-12);
+                } else {
+                    assert!(x >= 0.5 - 1e-12);
+                }
+            }
+        }
+        assert_eq!(euler(&out.triangles), 1);
+    }
+}

@@ -1,0 +1,1001 @@
+//! The fitting encoder: from a face-grouped triangle mesh (a tessellated B-rep) to a coarse
+//! control mesh whose subdivision surface stays within a tolerance of the input.
+//!
+//! Pipeline (each step is deterministic):
+//! 1. **Faces.** Use the input's groups (one per CAD face) with their surface types when the
+//!    caller knows them, classify the rest by least-squares primitive fits; an ungrouped mesh
+//!    is segmented first ([`super::segment`]).
+//! 2. **Curve network.** Corners and boundary chains between them ([`super::curves`]).
+//! 3. **Control points on chains.** Each chain keeps a few of its vertices (Douglas-Peucker
+//!    within the chain's tolerance; on cylinders and cones at most 60 degrees apart about the
+//!    axis). Both adjacent faces share them.
+//! 4. **Topology.** One constrained decimation of the whole mesh ([`super::decimate`]): chain
+//!    vertices that are not control points slide away along their chain, boundary patches
+//!    (planes, cylinders, cones) lose every interior vertex, closed patches are simplified
+//!    while their quadric error allows. Sharp edges are the group boundaries, corners the
+//!    B-rep vertices: watertight by construction.
+//! 5. **Geometry.** Control points are fitted so the *limit* surface computed by
+//!    [`crate::subdiv`] (the decoder's own rules) matches the input: first the Cartesian
+//!    crease curves against their chain polylines, then the interiors of closed patches
+//!    against their faces, by linearised least squares with re-projected targets. Curves on
+//!    cylinders and cones keep their on-surface positions: the decoder's cylindrical rule
+//!    keeps them exactly on the surface.
+//! 6. **Error control.** The caller's `reconstruct` callback quantises the control mesh the
+//!    way the bitstream will; the decoded surface at the default level is measured against
+//!    the input both ways ([`crate::metrics`]). Faces and chains that exceed the tolerance get
+//!    more control points and the model is rebuilt, until the tolerance holds.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use glam::DVec3;
+
+use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
+use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole};
+use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
+use super::segment::{segment, SegmentOptions};
+use crate::error::{Error, Result};
+use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, PatchKind};
+use crate::metrics::{point_distances, sample_surface, SampleCount, TriangleSurface};
+use crate::subdiv::{subdivide, Refinement, SubdivOptions};
+
+/// What the input says a group's surface is (a STEP face type or a sidecar entry).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SurfaceHint {
+    Plane,
+    Cylinder,
+    Cone,
+    /// Sphere, torus, B-spline, revolution, ...: a closed patch.
+    Freeform,
+    /// Unknown: classify from the geometry.
+    Unknown,
+}
+
+/// Options of [`fit_model`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Largest allowed distance between input and decoded surface, model units; default
+    /// `1e-3` of the bounding-box diagonal.
+    pub tolerance: Option<f64>,
+    /// Decode level the tolerance is checked at; default: 4, raised to 5 when that is what
+    /// it takes.
+    pub default_level: Option<u8>,
+    /// Segmentation of ungrouped meshes: dihedral angle of sharp edges.
+    pub sharp_angle_deg: f64,
+    /// Rebuild rounds with more control points before giving up on the tolerance.
+    pub max_rounds: usize,
+    /// Surface samples per direction for the error measurement.
+    pub error_samples: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            tolerance: None,
+            default_level: None,
+            sharp_angle_deg: 30.0,
+            max_rounds: 8,
+            error_samples: 60_000,
+        }
+    }
+}
+
+/// Measured distances between the input and the decoded surface (model units).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FitError {
+    pub max: f64,
+    pub rms: f64,
+    pub mean: f64,
+    /// Largest distance beyond the input's own chord error (see [`chord_allowance`]): the
+    /// quantity the tolerance bounds.
+    pub max_beyond_chord: f64,
+}
+
+/// What the encoder did, for `--verbose` and the report.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FitReport {
+    pub tolerance: f64,
+    pub diagonal: f64,
+    /// The input had no groups and was segmented.
+    pub segmented: bool,
+    /// Patch kinds of the output groups ("closed", "plane", "cylinder", "cone").
+    pub patch_kinds: BTreeMap<&'static str, usize>,
+    pub control_vertices: usize,
+    pub control_faces: usize,
+    pub rounds: usize,
+    pub default_level: u8,
+    /// Error of the decoded surface (quantised, default level, limit positions).
+    pub error: FitError,
+    pub within_tolerance: bool,
+    /// Stage name and seconds.
+    pub timings: Vec<(&'static str, f64)>,
+    pub notes: Vec<String>,
+}
+
+/// The result of [`fit_model`].
+pub struct FitOutcome {
+    /// The control mesh to store (before quantisation).
+    pub control: ControlMesh,
+    pub default_level: u8,
+    pub report: FitReport,
+}
+
+/// Per-group state that the rounds refine.
+#[derive(Clone, Copy, Debug)]
+struct GroupPlan {
+    kind: PatchKind,
+    /// Closed patches: decimation threshold as a multiple of the tolerance.
+    cost_factor: f64,
+    failures: u32,
+}
+
+/// The chain's frame: cylinder/cone axis of the lowest-index framed group next to it.
+fn chain_frame(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<Axis> {
+    chain_groups.iter().find_map(|&g| match plans[g as usize].kind {
+        PatchKind::Boundary(BoundarySurface::Cylinder { axis })
+        | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
+        _ => None,
+    })
+}
+
+fn kind_name(k: &PatchKind) -> &'static str {
+    match k {
+        PatchKind::Closed => "closed",
+        PatchKind::Boundary(BoundarySurface::Plane) => "plane",
+        PatchKind::Boundary(BoundarySurface::Cylinder { .. }) => "cylinder",
+        PatchKind::Boundary(BoundarySurface::Cone { .. }) => "cone",
+    }
+}
+
+/// Area-weighted vertex normals over the faces of one group.
+fn group_points_normals(mesh: &ControlMesh, tris: &[[u32; 3]], group: u32) -> (Vec<DVec3>, Vec<DVec3>) {
+    let mut normal: BTreeMap<u32, DVec3> = BTreeMap::new();
+    for (f, t) in tris.iter().enumerate() {
+        if mesh.face_groups[f] != group {
+            continue;
+        }
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let n = (p[1] - p[0]).cross(p[2] - p[0]);
+        for &i in t {
+            *normal.entry(i).or_insert(DVec3::ZERO) += n;
+        }
+    }
+    let points = normal.keys().map(|&i| mesh.positions[i as usize]).collect();
+    let normals = normal.values().map(|n| n.normalize_or_zero()).collect();
+    (points, normals)
+}
+
+/// Chooses a group's patch kind from its hint and its geometry: a boundary patch only when
+/// the analytic surface fits the group's vertices within a fraction of the tolerance.
+fn classify_group(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    group: u32,
+    hint: SurfaceHint,
+    tol: f64,
+) -> PatchKind {
+    let (points, normals) = group_points_normals(mesh, tris, group);
+    if points.len() < 3 {
+        return PatchKind::Closed;
+    }
+    let within = |r: &super::primitives::PrimitiveFit| r.residuals.max <= 0.25 * tol;
+    let try_plane = || fit_plane(&points).filter(within).map(|_| PatchKind::Boundary(BoundarySurface::Plane));
+    let try_cyl = || {
+        fit_cylinder(&points, &normals).filter(within).and_then(|f| match f.primitive {
+            Primitive::Cylinder { axis, .. } => {
+                Some(PatchKind::Boundary(BoundarySurface::Cylinder { axis }))
+            }
+            _ => None,
+        })
+    };
+    let try_cone = || {
+        fit_cone(&points, &normals).filter(within).and_then(|f| match f.primitive {
+            Primitive::Cone { axis, .. } => Some(PatchKind::Boundary(BoundarySurface::Cone { axis })),
+            _ => None,
+        })
+    };
+    let kind = match hint {
+        SurfaceHint::Plane => try_plane(),
+        SurfaceHint::Cylinder => try_cyl(),
+        SurfaceHint::Cone => try_cone(),
+        SurfaceHint::Freeform => None,
+        SurfaceHint::Unknown => try_plane().or_else(try_cyl).or_else(try_cone),
+    };
+    kind.unwrap_or(PatchKind::Closed)
+}
+
+/// Cylindrical coordinates about an axis: (theta, h, r).
+fn cyl_coords(axis: &Axis, p: DVec3) -> (f64, f64, f64) {
+    let (e1, e2) = axis.direction.any_orthonormal_pair();
+    let d = p - axis.origin;
+    let h = d.dot(axis.direction);
+    let q = d - axis.direction * h;
+    (q.dot(e2).atan2(q.dot(e1)), h, q.length())
+}
+
+/// Douglas-Peucker on a polyline given as points; returns kept indices (ends included).
+fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<usize> {
+    let n = points.len();
+    if n <= 2 {
+        return (0..n).collect();
+    }
+    let mut keep = vec![false; n];
+    keep[0] = true;
+    keep[n - 1] = true;
+    let mut stack = vec![(0usize, n - 1)];
+    while let Some((a, b)) = stack.pop() {
+        if b <= a + 1 {
+            continue;
+        }
+        let (pa, pb) = (points[a], points[b]);
+        let ab = pb - pa;
+        let len2 = ab.length_squared();
+        let (mut worst, mut at) = (-1.0, a);
+        for (i, &p) in points.iter().enumerate().take(b).skip(a + 1) {
+            let t = if len2 > 0.0 { ((p - pa).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+            let d = (p - (pa + ab * t)).length();
+            if d > worst {
+                worst = d;
+                at = i;
+            }
+        }
+        if worst > tol {
+            keep[at] = true;
+            stack.push((a, at));
+            stack.push((at, b));
+        }
+    }
+    (0..n).filter(|&i| keep[i]).collect()
+}
+
+/// Control points (indices into `chain.vertices`) of one chain.
+fn chain_controls(points: &[DVec3], frame: Option<Axis>, tol: f64, min_interior: usize) -> Vec<usize> {
+    let n = points.len();
+    let mut keep: Vec<usize> = match frame {
+        None => douglas_peucker(points, tol),
+        Some(axis) => {
+            // Unwrapped cylindrical coordinates, scaled to lengths, then DP in that space,
+            // plus at most 60 degrees between consecutive control points.
+            let mut prev = None;
+            let mut unwrapped = 0.0;
+            let param: Vec<DVec3> = points
+                .iter()
+                .map(|&p| {
+                    let (th, h, r) = cyl_coords(&axis, p);
+                    if let Some(pt) = prev {
+                        let mut d: f64 = th - pt;
+                        while d > std::f64::consts::PI {
+                            d -= std::f64::consts::TAU;
+                        }
+                        while d <= -std::f64::consts::PI {
+                            d += std::f64::consts::TAU;
+                        }
+                        unwrapped += d;
+                    }
+                    prev = Some(th);
+                    DVec3::new(unwrapped, h, r)
+                })
+                .collect();
+            let rmax = param.iter().map(|q| q.z).fold(0.0, f64::max);
+            let scaled: Vec<DVec3> = param.iter().map(|q| DVec3::new(q.x * rmax, q.y, q.z)).collect();
+            let mut k = douglas_peucker(&scaled, tol);
+            let max_step = 60f64.to_radians();
+            let mut out = vec![0];
+            for w in k.windows(2) {
+                let (a, b) = (w[0], w[1]);
+                let span = (param[b].x - param[a].x).abs();
+                let pieces = (span / max_step).ceil().max(1.0) as usize;
+                // Insert evenly spaced (in angle) chain vertices between a and b.
+                for s in 1..pieces {
+                    let target = param[a].x + (param[b].x - param[a].x) * s as f64 / pieces as f64;
+                    let best = (a + 1..b)
+                        .min_by(|&i, &j| {
+                            (param[i].x - target).abs().total_cmp(&(param[j].x - target).abs())
+                        })
+                        .unwrap_or(a);
+                    if best > *out.last().unwrap_or(&0) {
+                        out.push(best);
+                    }
+                }
+                out.push(b);
+            }
+            k = out;
+            k.dedup();
+            k
+        }
+    };
+    // Short loops need interior points or the decimation would collapse them to a digon.
+    let interior = keep.len().saturating_sub(2);
+    if interior < min_interior && n > 2 {
+        let want = min_interior.min(n - 2);
+        keep = (0..want + 2).map(|i| i * (n - 1) / (want + 1)).collect();
+        keep.dedup();
+    }
+    keep
+}
+
+/// Closest point to `p` on a polyline.
+fn closest_on_polyline(p: DVec3, line: &[DVec3]) -> DVec3 {
+    let mut best = (f64::INFINITY, line[0]);
+    for w in line.windows(2) {
+        let ab = w[1] - w[0];
+        let len2 = ab.length_squared();
+        let t = if len2 > 0.0 { ((p - w[0]).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+        let q = w[0] + ab * t;
+        let d = (p - q).length_squared();
+        if d < best.0 {
+            best = (d, q);
+        }
+    }
+    best.1
+}
+
+/// Linearised least squares: find `delta` for the `unknowns` (control ids) minimising
+/// `sum_r |sum_k w_rk delta_k - residual_r|^2 + mu |delta|^2`, by conjugate gradients on the
+/// normal equations (three right-hand sides, one matrix, Jacobi-preconditioned).
+fn solve_increment(
+    rows: &[(Vec<(usize, f64)>, DVec3)],
+    n_unknowns: usize,
+    mu: f64,
+) -> Vec<DVec3> {
+    let mut diag = vec![mu; n_unknowns];
+    for (row, _) in rows {
+        for &(k, w) in row {
+            diag[k] += w * w;
+        }
+    }
+    let apply = |x: &[DVec3], out: &mut Vec<DVec3>| {
+        out.clear();
+        out.extend(x.iter().map(|&v| v * mu));
+        for (row, _) in rows {
+            let s: DVec3 = row.iter().map(|&(k, w)| x[k] * w).sum();
+            for &(k, w) in row {
+                out[k] += s * w;
+            }
+        }
+    };
+    let mut b = vec![DVec3::ZERO; n_unknowns];
+    for (row, r) in rows {
+        for &(k, w) in row {
+            b[k] += *r * w;
+        }
+    }
+    // Componentwise CG (the three coordinates share the matrix but not the step sizes).
+    let mut x = vec![DVec3::ZERO; n_unknowns];
+    let mut r = b.clone();
+    let mut z: Vec<DVec3> = r.iter().zip(&diag).map(|(v, d)| *v / *d).collect();
+    let mut p = z.clone();
+    let dot = |a: &[DVec3], b: &[DVec3]| -> DVec3 { a.iter().zip(b).map(|(u, v)| *u * *v).sum() };
+    let mut rz = dot(&r, &z);
+    let b_norm = dot(&b, &b);
+    let mut ap = Vec::with_capacity(n_unknowns);
+    for _ in 0..(4 * n_unknowns + 50).min(2000) {
+        apply(&p, &mut ap);
+        let pap = dot(&p, &ap);
+        let alpha = DVec3::select(pap.cmpgt(DVec3::splat(1e-300)), rz / pap, DVec3::ZERO);
+        for i in 0..n_unknowns {
+            x[i] += p[i] * alpha;
+            r[i] -= ap[i] * alpha;
+        }
+        let rr = dot(&r, &r);
+        if rr.cmple(b_norm * 1e-20 + DVec3::splat(1e-300)).all() {
+            break;
+        }
+        for i in 0..n_unknowns {
+            z[i] = r[i] / diag[i];
+        }
+        let rz_new = dot(&r, &z);
+        let beta = DVec3::select(rz.cmpgt(DVec3::splat(1e-300)), rz_new / rz, DVec3::ZERO);
+        rz = rz_new;
+        for i in 0..n_unknowns {
+            p[i] = z[i] + p[i] * beta;
+        }
+    }
+    x
+}
+
+/// Per input triangle, how far its flat facet may be from the CAD surface it tessellates:
+/// the largest arc sagitta `L/2 tan(theta/4)` over its edges, where `theta` is the angle
+/// between the edge's two vertex normals within the triangle's group (planar facets get 0).
+/// A decoded surface that follows the CAD surface is this far from the facets, and the
+/// tolerance should not charge the codec for the input's own discretisation.
+pub fn chord_allowance(mesh: &ControlMesh, tris: &[[u32; 3]]) -> Vec<f64> {
+    let mut normals: BTreeMap<(u32, u32), DVec3> = BTreeMap::new();
+    for (f, t) in tris.iter().enumerate() {
+        let g = mesh.face_groups[f];
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let n = (p[1] - p[0]).cross(p[2] - p[0]);
+        for &i in t {
+            *normals.entry((g, i)).or_insert(DVec3::ZERO) += n;
+        }
+    }
+    tris.iter()
+        .enumerate()
+        .map(|(f, t)| {
+            let g = mesh.face_groups[f];
+            (0..3)
+                .map(|k| {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    let (na, nb) = (normals[&(g, a)], normals[&(g, b)]);
+                    let theta = na.angle_between(nb);
+                    let len = (mesh.positions[a as usize] - mesh.positions[b as usize]).length();
+                    if theta.is_finite() {
+                        0.5 * len * (0.25 * theta).tan()
+                    } else {
+                        0.0
+                    }
+                })
+                .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+/// Facets along a curved CAD edge end at the edge's chord while the decoded patch follows
+/// the curve: give every triangle on a chain edge at least that edge's sagitta
+/// `L/2 tan(theta/4)`, `theta` the mean turning angle of the chain at the edge's ends.
+fn add_curved_edge_allowance(mesh: &ControlMesh, tris: &[[u32; 3]], net: &CurveNetwork, chord: &mut [f64]) {
+    let mut edge_sag: BTreeMap<(u32, u32), f64> = BTreeMap::new();
+    for chain in &net.chains {
+        let p: Vec<DVec3> = chain.vertices.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let n = p.len();
+        let turn = |i: usize| -> f64 {
+            if i == 0 || i + 1 >= n {
+                return 0.0;
+            }
+            let a = (p[i] - p[i - 1]).angle_between(p[i + 1] - p[i]);
+            if a.is_finite() {
+                a
+            } else {
+                0.0
+            }
+        };
+        for i in 0..n.saturating_sub(1) {
+            let (ta, tb) = (turn(i), turn(i + 1));
+            let theta = match (i == 0, i + 2 >= n) {
+                (true, true) => 0.0,
+                (true, false) => tb,
+                (false, true) => ta,
+                _ => 0.5 * (ta + tb),
+            };
+            let sag = 0.5 * (p[i + 1] - p[i]).length() * (0.25 * theta).tan();
+            edge_sag.insert(edge_key(chain.vertices[i], chain.vertices[i + 1]), sag);
+        }
+    }
+    for (f, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            if let Some(&s) = edge_sag.get(&edge_key(t[k], t[(k + 1) % 3])) {
+                chord[f] = chord[f].max(s);
+            }
+        }
+    }
+}
+
+/// Everything one build round produces.
+struct Built {
+    control: ControlMesh,
+    /// Control edge -> chain index, for sharp edges.
+    edge_chain: BTreeMap<(u32, u32), usize>,
+}
+
+/// Steps 3 and 4: control points on chains, then the constrained decimation.
+#[allow(clippy::too_many_arguments)]
+fn build_topology(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    net: &CurveNetwork,
+    plans: &[GroupPlan],
+    chain_tol: &[f64],
+    tol: f64,
+    chain_loop_len: &[usize],
+) -> Built {
+    let nv = mesh.vertex_count();
+    let mut roles = vec![VertexRole::Interior; nv];
+    for c in &net.corners {
+        roles[c.vertex as usize] = VertexRole::Keep;
+    }
+    for (ci, chain) in net.chains.iter().enumerate() {
+        let points: Vec<DVec3> = chain.vertices.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let frame = chain_frame(&chain.groups, plans);
+        let min_interior = if chain_loop_len[ci] < 3 { 2 } else { 0 };
+        let keep = chain_controls(&points, frame, chain_tol[ci], min_interior);
+        for (i, &v) in chain.vertices.iter().enumerate() {
+            if roles[v as usize] == VertexRole::Keep {
+                continue;
+            }
+            roles[v as usize] = if keep.binary_search(&i).is_ok() {
+                VertexRole::Keep
+            } else {
+                VertexRole::ChainDrop
+            };
+        }
+    }
+    let rules: Vec<GroupRule> = plans
+        .iter()
+        .enumerate()
+        .map(|(g, plan)| {
+            let surface = match plan.kind {
+                PatchKind::Closed => SurfaceRef::Free,
+                PatchKind::Boundary(BoundarySurface::Plane) => {
+                    let (pts, _) = group_points_normals(mesh, tris, g as u32);
+                    let normal = fit_plane(&pts)
+                        .and_then(|f| match f.primitive {
+                            Primitive::Plane { normal, .. } => Some(normal),
+                            _ => None,
+                        })
+                        .unwrap_or(DVec3::Z);
+                    SurfaceRef::Plane { normal }
+                }
+                PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => SurfaceRef::Cylinder { axis },
+                PatchKind::Boundary(BoundarySurface::Cone { axis }) => SurfaceRef::Cone { axis },
+            };
+            GroupRule {
+                remove_all_interior: !matches!(plan.kind, PatchKind::Closed),
+                max_cost: (plan.cost_factor * tol).powi(2),
+                surface,
+                max_edge_angle: 80f64.to_radians(),
+            }
+        })
+        .collect();
+    let dec = decimate(&DecimateInput {
+        positions: &mesh.positions,
+        triangles: tris,
+        face_groups: &mesh.face_groups,
+        roles: &roles,
+        rules: &rules,
+    });
+    // Compact into a control mesh.
+    let mut index = vec![u32::MAX; nv];
+    let mut control = ControlMesh::new();
+    let mut origin = Vec::new();
+    for &v in &dec.vertices {
+        index[v as usize] = control.push_vertex(mesh.positions[v as usize]);
+        origin.push(v);
+    }
+    for g in &mesh.groups {
+        control.groups.push(g.clone());
+    }
+    for (g, plan) in plans.iter().enumerate() {
+        control.groups[g].patch = plan.kind;
+    }
+    for (t, &g) in dec.triangles.iter().zip(&dec.face_groups) {
+        control.push_face(&t.map(|v| index[v as usize]), g);
+    }
+    // Sharp edges: every edge between two groups; mesh-boundary edges are creases anyway.
+    let mut edge_faces: BTreeMap<(u32, u32), Vec<u32>> = BTreeMap::new();
+    for f in 0..control.face_count() {
+        let face = control.face(f);
+        for k in 0..face.len() {
+            let e = edge_key(face[k], face[(k + 1) % face.len()]);
+            edge_faces.entry(e).or_default().push(control.face_groups[f]);
+        }
+    }
+    for (&(a, b), groups) in &edge_faces {
+        if groups.len() == 2 && groups[0] != groups[1] {
+            control.set_sharp(a, b);
+        }
+    }
+    for c in &net.corners {
+        let i = index[c.vertex as usize];
+        if i != u32::MAX {
+            control.corners.insert(i);
+        }
+    }
+    // Which chain each control edge on a chain belongs to.
+    let mut vertex_chain: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for (ci, chain) in net.chains.iter().enumerate() {
+        for &v in &chain.vertices {
+            vertex_chain.entry(v).or_default().push(ci);
+        }
+    }
+    let mut edge_chain = BTreeMap::new();
+    for &(a, b) in edge_faces.keys() {
+        let (oa, ob) = (origin[a as usize], origin[b as usize]);
+        if let (Some(ca), Some(cb)) = (vertex_chain.get(&oa), vertex_chain.get(&ob)) {
+            if let Some(&c) = ca.iter().find(|c| cb.contains(c)) {
+                let boundary = edge_faces[&(a, b)].len() == 1
+                    || edge_faces[&(a, b)].first() != edge_faces[&(a, b)].last();
+                if boundary {
+                    edge_chain.insert((a, b), c);
+                }
+            }
+        }
+    }
+    Built { control, edge_chain }
+}
+
+/// Step 5: least-squares fit of the Cartesian crease curves, then of closed-patch interiors.
+fn fit_geometry(
+    built: &mut Built,
+    mesh: &ControlMesh,
+    net: &CurveNetwork,
+    plans: &[GroupPlan],
+    group_surfaces: &[Option<TriangleSurface>],
+) -> Result<()> {
+    const LEVEL: u32 = 2;
+    let control = &mut built.control;
+    let refinement = Refinement::new(control, LEVEL)?;
+    let stencils = refinement.stencils(LEVEL, true)?;
+    let view = refinement.level(LEVEL);
+    let nv_l = view.vertex_count();
+    let base = refinement.level(0);
+    let base_edges = base.edges();
+    // Per level-LEVEL vertex: chain it lies on (crease samples) and group (interior samples).
+    let mut sample_chain: Vec<Option<usize>> = vec![None; nv_l];
+    let mut multi_chain = vec![false; nv_l];
+    let e0 = base_edges.len();
+    for (e, ends) in view.edges().iter().enumerate() {
+        if !view.edge_is_crease(e) || e >= e0 << LEVEL {
+            continue;
+        }
+        let be = base_edges[e >> LEVEL];
+        let Some(&c) = built.edge_chain.get(&edge_key(be[0], be[1])) else {
+            continue;
+        };
+        for &v in ends {
+            match sample_chain[v as usize] {
+                Some(old) if old != c => multi_chain[v as usize] = true,
+                _ => sample_chain[v as usize] = Some(c),
+            }
+        }
+    }
+    let mut sample_group: Vec<Option<u32>> = vec![None; nv_l];
+    let mut mixed = vec![false; nv_l];
+    for f in 0..view.face_count() {
+        let g = view.face_group(f);
+        for v in view.triangle(f) {
+            match sample_group[v as usize] {
+                Some(old) if old != g => mixed[v as usize] = true,
+                _ => sample_group[v as usize] = Some(g),
+            }
+        }
+    }
+    // Unknowns.
+    let nc = control.vertex_count();
+    let mut on_sharp = vec![false; nc];
+    for &(a, b) in &control.sharp_edges {
+        on_sharp[a as usize] = true;
+        on_sharp[b as usize] = true;
+    }
+    let chain_frame_of = |c: usize| chain_frame(&net.chains[c].groups, plans);
+    // Stage 1: Cartesian chains. Stage 2: closed interiors.
+    for stage in 0..2 {
+        let mut col = vec![usize::MAX; nc];
+        let mut unknowns = Vec::new();
+        for v in 0..nc {
+            let movable = if stage == 0 {
+                // Interior control point of a Cartesian chain.
+                !control.corners.contains(&(v as u32))
+                    && on_sharp[v]
+                    && sample_chain.get(v).copied().flatten().is_some_and(|c| chain_frame_of(c).is_none())
+                    && !multi_chain[v]
+            } else {
+                !on_sharp[v]
+                    && !mixed[v]
+                    && sample_group[v].is_some_and(|g| matches!(plans[g as usize].kind, PatchKind::Closed))
+            };
+            if movable {
+                col[v] = unknowns.len();
+                unknowns.push(v);
+            }
+        }
+        if unknowns.is_empty() {
+            continue;
+        }
+        let chain_points: BTreeMap<usize, Vec<DVec3>> = if stage == 0 {
+            net.chains
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (i, c.vertices.iter().map(|&v| mesh.positions[v as usize]).collect()))
+                .collect()
+        } else {
+            BTreeMap::new()
+        };
+        for _iteration in 0..4 {
+            let level = refinement.positions_at(&control.positions, LEVEL)?;
+            let limit = refinement.limit_positions(&level, LEVEL)?;
+            let mut rows = Vec::new();
+            for s in 0..nv_l {
+                let target = if stage == 0 {
+                    match sample_chain[s] {
+                        Some(c) if !multi_chain[s] && chain_frame_of(c).is_none() => {
+                            closest_on_polyline(limit[s], &chain_points[&c])
+                        }
+                        _ => continue,
+                    }
+                } else {
+                    match sample_group[s] {
+                        Some(g) if !mixed[s] && sample_chain[s].is_none() => match &group_surfaces[g as usize] {
+                            Some(surface) if matches!(plans[g as usize].kind, PatchKind::Closed) => {
+                                surface.closest_point(limit[s]).point
+                            }
+                            _ => continue,
+                        },
+                        _ => continue,
+                    }
+                };
+                let (idx, w) = stencils.row(s);
+                let row: Vec<(usize, f64)> = idx
+                    .iter()
+                    .zip(w)
+                    .filter(|(&k, _)| col[k as usize] != usize::MAX)
+                    .map(|(&k, &w)| (col[k as usize], w))
+                    .collect();
+                if !row.is_empty() {
+                    rows.push((row, target - limit[s]));
+                }
+            }
+            let mean_diag = rows.iter().map(|(r, _)| r.iter().map(|(_, w)| w * w).sum::<f64>()).sum::<f64>()
+                / unknowns.len() as f64;
+            let delta = solve_increment(&rows, unknowns.len(), 1e-3 * mean_diag.max(1e-12));
+            for (k, &v) in unknowns.iter().enumerate() {
+                if delta[k].is_finite() {
+                    control.positions[v] += delta[k];
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Fits a control mesh to `input` (a triangle or polygon mesh; polygons are fan-split).
+/// `hints[g]` is what the input says group g's surface is (or `Unknown`). `reconstruct`
+/// must return the control mesh exactly as the decoder will see it (quantised).
+pub fn fit_model(
+    input: &ControlMesh,
+    hints: &[SurfaceHint],
+    opts: &FitOptions,
+    reconstruct: &mut dyn FnMut(&ControlMesh, u8) -> Result<ControlMesh>,
+) -> Result<FitOutcome> {
+    let t_start = Instant::now();
+    let mut report = FitReport::default();
+    input.validate()?;
+    if input.face_count() == 0 {
+        return Err(Error::Mesh("the input has no faces".into()));
+    }
+    // Fan-split polygons: the fit works on the input's triangles.
+    let mut mesh = ControlMesh::new();
+    mesh.positions = input.positions.clone();
+    mesh.groups = input.groups.clone();
+    for f in 0..input.face_count() {
+        let face = input.face(f);
+        for i in 1..face.len() - 1 {
+            mesh.push_face(&[face[0], face[i], face[i + 1]], input.face_groups[f]);
+        }
+    }
+    let diag = mesh.diagonal();
+    let tol = opts.tolerance.unwrap_or(1e-3 * diag);
+    if !(tol > 0.0 && tol.is_finite()) {
+        return Err(Error::Parameter(format!("tolerance must be positive, got {tol}")));
+    }
+    report.tolerance = tol;
+    report.diagonal = diag;
+    let mut hints: Vec<SurfaceHint> = hints.to_vec();
+    hints.resize(mesh.groups.len(), SurfaceHint::Unknown);
+    // 1. Faces.
+    let mut t = Instant::now();
+    let segmented = mesh.groups.len() <= 1;
+    if segmented {
+        let seg_opts = SegmentOptions {
+            sharp_angle_deg: opts.sharp_angle_deg,
+            tolerance: Some(0.25 * tol),
+            ..Default::default()
+        };
+        let (seg, seg_report) = segment(&mesh, &seg_opts)?;
+        report.notes.push(format!("segmented into {} faces: {}", seg.groups.len(), seg_report.summary()));
+        mesh = seg;
+        report.segmented = true;
+    }
+    let tris: Vec<[u32; 3]> = mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
+    let mut plans: Vec<GroupPlan> = (0..mesh.groups.len() as u32)
+        .map(|g| {
+            let kind = if segmented {
+                mesh.groups[g as usize].patch
+            } else {
+                classify_group(&mesh, &tris, g, hints[g as usize], tol)
+            };
+            GroupPlan {
+                kind,
+                cost_factor: 8.0,
+                failures: 0,
+            }
+        })
+        .collect();
+    report.timings.push(("faces", t.elapsed().as_secs_f64()));
+    // 2. Curve network.
+    t = Instant::now();
+    let net = build_curve_network(
+        &mesh,
+        &CurveOptions {
+            simplify_tolerance: Some(tol),
+            ..Default::default()
+        },
+    )?;
+    let mut chain_loop_len = vec![usize::MAX; net.chains.len()];
+    for gl in &net.group_loops {
+        for lp in &gl.loops {
+            for lc in lp {
+                let c = lc.chain as usize;
+                chain_loop_len[c] = chain_loop_len[c].min(lp.len());
+            }
+        }
+    }
+    let group_surfaces: Vec<Option<TriangleSurface>> = (0..mesh.groups.len() as u32)
+        .map(|g| {
+            let t: Vec<[u32; 3]> = tris
+                .iter()
+                .zip(&mesh.face_groups)
+                .filter(|(_, &fg)| fg == g)
+                .map(|(t, _)| *t)
+                .collect();
+            if t.is_empty() {
+                None
+            } else {
+                TriangleSurface::new(mesh.positions.clone(), t).ok()
+            }
+        })
+        .collect();
+    let input_surface = TriangleSurface::new(mesh.positions.clone(), tris.clone())?;
+    let mut chord = chord_allowance(&mesh, &tris);
+    add_curved_edge_allowance(&mesh, &tris, &net, &mut chord);
+    report.timings.push(("curves", t.elapsed().as_secs_f64()));
+    let mut chain_tol = vec![2.0 * tol; net.chains.len()];
+    // Chains of each group, for refinement.
+    let mut group_chains: Vec<Vec<usize>> = vec![Vec::new(); mesh.groups.len()];
+    for (ci, c) in net.chains.iter().enumerate() {
+        for &g in &c.groups {
+            group_chains[g as usize].push(ci);
+        }
+    }
+    let input_samples = sample_surface(
+        &mesh.positions,
+        &tris,
+        SampleCount::Total(opts.error_samples),
+        true,
+        0x5C0D_E000_0000_0001,
+    );
+    let mut best: Option<(FitError, ControlMesh, u8)> = None;
+    let mut levels_tried = opts.default_level;
+    for round in 0..opts.max_rounds.max(1) {
+        report.rounds = round + 1;
+        t = Instant::now();
+        let mut built = build_topology(&mesh, &tris, &net, &plans, &chain_tol, tol, &chain_loop_len);
+        let t_top = t.elapsed().as_secs_f64();
+        t = Instant::now();
+        fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)?;
+        let t_fit = t.elapsed().as_secs_f64();
+        // 6. Error of the decoded surface.
+        t = Instant::now();
+        let level = levels_tried.unwrap_or(4);
+        let decoded = reconstruct(&built.control, level)?;
+        let (surface_mesh, _) = subdivide(
+            &decoded,
+            u32::from(level),
+            &SubdivOptions {
+                limit: true,
+                ..Default::default()
+            },
+        )?;
+        let s_tris: Vec<[u32; 3]> = surface_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
+        let s_surface = TriangleSurface::new(surface_mesh.positions.clone(), s_tris.clone())?;
+        let in_points: Vec<DVec3> = input_samples.iter().map(|s| s.point).collect();
+        let d_in = point_distances(&in_points, &s_surface);
+        let s_samples = sample_surface(
+            &surface_mesh.positions,
+            &s_tris,
+            SampleCount::Total(opts.error_samples),
+            true,
+            0x5C0D_E000_0000_0002,
+        );
+        let out_hits: Vec<(f64, u32)> = s_samples
+            .iter()
+            .map(|s| {
+                let c = input_surface.closest_point(s.point);
+                (c.distance, c.triangle)
+            })
+            .collect();
+        let d_out: Vec<f64> = out_hits.iter().map(|h| h.0).collect();
+        let stats = |d: &[f64]| -> (f64, f64, f64) {
+            let n = d.len().max(1) as f64;
+            (
+                d.iter().copied().fold(0.0, f64::max),
+                (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt(),
+                d.iter().sum::<f64>() / n,
+            )
+        };
+        let (max_in, rms_in, mean_in) = stats(&d_in);
+        let (max_out, rms_out, mean_out) = stats(&d_out);
+        // Excess over the tolerance, after allowing for the input's own chord error.
+        let excess_in: Vec<f64> = input_samples
+            .iter()
+            .zip(&d_in)
+            .map(|(s, &d)| d - chord[s.triangle as usize])
+            .collect();
+        let excess_out: Vec<f64> = out_hits.iter().map(|&(d, t)| d - chord[t as usize]).collect();
+        let worst = excess_in.iter().chain(&excess_out).copied().fold(0.0, f64::max);
+        let err = FitError {
+            max: max_in.max(max_out),
+            rms: rms_in.max(rms_out),
+            mean: mean_in.max(mean_out),
+            max_beyond_chord: worst,
+        };
+        report.timings.push(("topology", t_top));
+        report.timings.push(("fit", t_fit));
+        report.timings.push(("measure", t.elapsed().as_secs_f64()));
+        report.notes.push(format!(
+            "round {}: {} control vertices, level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}",
+            round + 1,
+            built.control.vertex_count(),
+            err.max,
+            err.max / tol,
+            err.max_beyond_chord / tol,
+            err.rms
+        ));
+        let ok = err.max_beyond_chord <= tol;
+        let better = best.as_ref().is_none_or(|(e, _, _)| {
+            let e_ok = e.max_beyond_chord <= tol;
+            (ok && !e_ok) || (ok == e_ok && err.max_beyond_chord < e.max_beyond_chord)
+        });
+        if better || ok {
+            best = Some((err, built.control.clone(), level));
+        }
+        if ok {
+            break;
+        }
+        // Where is the error? Attribute samples beyond the tolerance to groups.
+        let mut bad_group = vec![false; mesh.groups.len()];
+        for (s, &d) in input_samples.iter().zip(&excess_in) {
+            if d > tol {
+                bad_group[mesh.face_groups[s.triangle as usize] as usize] = true;
+            }
+        }
+        for (s, &d) in s_samples.iter().zip(&excess_out) {
+            if d > tol {
+                let g = surface_mesh.face_groups[s.triangle as usize] as usize;
+                if g < bad_group.len() {
+                    bad_group[g] = true;
+                }
+            }
+        }
+        // A first failure at level 4 may be only the piecewise-linear chord error of a
+        // coarse curve: try level 5 once before adding control points.
+        if opts.default_level.is_none() && levels_tried.is_none() && round == 0 {
+            levels_tried = Some(5);
+        }
+        for (g, bad) in bad_group.iter().enumerate() {
+            if !bad {
+                continue;
+            }
+            let plan = &mut plans[g];
+            plan.failures += 1;
+            if matches!(plan.kind, PatchKind::Closed) {
+                plan.cost_factor *= 0.35;
+            } else if plan.failures >= 4 {
+                report
+                    .notes
+                    .push(format!("group {g} ({}) refitted as a closed patch", kind_name(&plan.kind)));
+                plan.kind = PatchKind::Closed;
+                plan.cost_factor = 2.0;
+            }
+            for &c in &group_chains[g] {
+                chain_tol[c] *= 0.5;
+            }
+        }
+    }
+    let Some((err, control, level)) = best else {
+        return Err(Error::Mesh("fitting produced no control mesh".into()));
+    };
+    report.error = err;
+    report.within_tolerance = err.max_beyond_chord <= tol;
+    report.default_level = level;
+    report.control_vertices = control.vertex_count();
+    report.control_faces = control.face_count();
+    for g in &control.groups {
+        *report.patch_kinds.entry(kind_name(&g.patch)).or_insert(0) += 1;
+    }
+    report.timings.push(("total", t_start.elapsed().as_secs_f64()));
+    Ok(FitOutcome {
+        control,
+        default_level: level,
+        report,
+    })
+}

@@ -1,0 +1,70 @@
+//! The whole encoder: fitting (`fit`) plus the bitstream (`codec`). It lives above both so
+//! that neither depends on the other; the fit measures its error on the control mesh exactly
+//! as this module's codec round trip reconstructs it.
+
+use crate::codec::{self, Content, EncodeOptions, Limits};
+use crate::error::Result;
+use crate::fit::encoder::{fit_model, FitOptions, FitReport, SurfaceHint};
+use crate::mesh::ControlMesh;
+
+/// Options of [`encode_fitted`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelEncodeOptions {
+    pub fit: FitOptions,
+    /// Quantisation bits; default: the fewest that keep the quantisation error below a
+    /// quarter of the tolerance.
+    pub quantization_bits: Option<u8>,
+    pub store_group_names: bool,
+}
+
+impl Default for ModelEncodeOptions {
+    fn default() -> Self {
+        ModelEncodeOptions {
+            fit: FitOptions::default(),
+            quantization_bits: None,
+            store_group_names: true,
+        }
+    }
+}
+
+/// Bits per coordinate so that the Euclidean quantisation error `sqrt(3)/2 * R/(2^b - 1)`
+/// stays below `fraction * tolerance` for a box of extent `extent`.
+pub fn bits_for_tolerance(extent: f64, tolerance: f64, fraction: f64) -> u8 {
+    let cells = 3f64.sqrt() / 2.0 * extent / (fraction * tolerance);
+    let bits = (cells + 1.0).log2().ceil();
+    if bits.is_finite() {
+        bits.clamp(6.0, 24.0) as u8
+    } else {
+        24
+    }
+}
+
+/// Fits `input` and encodes the control mesh. Returns the `.scode` bytes and what the fit did.
+pub fn encode_fitted(
+    input: &ControlMesh,
+    hints: &[SurfaceHint],
+    opts: &ModelEncodeOptions,
+) -> Result<(Vec<u8>, FitReport)> {
+    let extent = input
+        .bounding_box()
+        .map(|(lo, hi)| (hi - lo).max_element())
+        .unwrap_or(1.0);
+    let tol = opts.fit.tolerance.unwrap_or(1e-3 * input.diagonal());
+    let bits = opts
+        .quantization_bits
+        .unwrap_or_else(|| bits_for_tolerance(extent, tol, 0.25));
+    let encode_opts = |level: u8| EncodeOptions {
+        quantization_bits: bits,
+        content: Content::ControlMesh {
+            default_level: level,
+        },
+        store_group_names: opts.store_group_names,
+    };
+    let mut reconstruct = |control: &ControlMesh, level: u8| -> Result<ControlMesh> {
+        let bytes = codec::encode(control, &encode_opts(level))?;
+        Ok(codec::decode(&bytes, &Limits::default())?.mesh)
+    };
+    let outcome = fit_model(input, hints, &opts.fit, &mut reconstruct)?;
+    let bytes = codec::encode(&outcome.control, &encode_opts(outcome.default_level))?;
+    Ok((bytes, outcome.report))
+}
