@@ -27,7 +27,9 @@ fn main() {
                         Some(scode::io::faces_json::SurfaceType::Plane) => SurfaceHint::Plane,
                         Some(scode::io::faces_json::SurfaceType::Cylinder) => SurfaceHint::Cylinder,
                         Some(scode::io::faces_json::SurfaceType::Cone) => SurfaceHint::Cone,
-                        Some(scode::io::faces_json::SurfaceType::Unknown) | None => SurfaceHint::Unknown,
+                        Some(scode::io::faces_json::SurfaceType::Unknown) | None => {
+                            SurfaceHint::Unknown
+                        }
                         Some(_) => SurfaceHint::Freeform,
                     })
                     .collect()

@@ -9,7 +9,10 @@ use scode::io::{self, ReadReport};
 use scode::subdiv::{self, SubdivOptions};
 use scode::ControlMesh;
 
-use super::{DecodeArgs, EncodeArgs, InfoArgs, SubdivideArgs};
+use super::{DecodeArgs, EncodeArgs, InfoArgs, SegmentArgs, SubdivideArgs};
+use scode::fit::encoder::SurfaceHint;
+use scode::io::faces_json::{self, SurfaceType};
+use scode::pipeline::{encode_fitted, ModelEncodeOptions};
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| scode::Error::io(path, e).into())
@@ -58,32 +61,138 @@ fn load_control_mesh(path: &Path) -> Result<(ControlMesh, Option<Content>)> {
     }
 }
 
+/// Surface types of the input's groups from a `<name>.faces.json` sidecar, if there is one.
+fn sidecar_hints(input: &Path, mesh: &ControlMesh) -> Result<Vec<SurfaceHint>> {
+    let Some(side) = faces_json::sidecar_path_for(input) else {
+        return Ok(Vec::new());
+    };
+    let faces = faces_json::read_faces_json(&side)?;
+    println!("using surface types from {}", side.display());
+    Ok(faces_json::face_info_for_groups(mesh, &faces)
+        .iter()
+        .map(|fi| match fi.map(|f| &f.surface) {
+            Some(SurfaceType::Plane) => SurfaceHint::Plane,
+            Some(SurfaceType::Cylinder) => SurfaceHint::Cylinder,
+            Some(SurfaceType::Cone) => SurfaceHint::Cone,
+            Some(SurfaceType::Unknown) | None => SurfaceHint::Unknown,
+            Some(_) => SurfaceHint::Freeform,
+        })
+        .collect())
+}
+
+/// A spinner on stderr while a long step runs (hidden when stderr is not a terminal).
+fn spinner(message: &str) -> indicatif::ProgressBar {
+    let bar = if std::io::IsTerminal::is_terminal(&std::io::stderr())
+        && std::env::var_os("CI").is_none()
+    {
+        indicatif::ProgressBar::new_spinner()
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_message(message.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
 pub fn encode(args: &EncodeArgs) -> Result<()> {
     let output = args.output.path()?;
-    if !args.raw {
-        bail!(
-            "the fitting encoder is not available in this build yet; use --raw to store {} \
-             as the control mesh itself",
-            args.input.display()
-        );
-    }
     let t0 = Instant::now();
     let (mesh, report) = io::read_mesh(&args.input)?;
     let t_read = t0.elapsed();
     print_read_report(&args.input, &report);
-    let opts = EncodeOptions {
-        quantization_bits: args.bits,
-        content: Content::RawMesh,
-        store_group_names: !args.no_names,
-    };
     let t1 = Instant::now();
-    let bytes = codec::encode(&mesh, &opts)
-        .with_context(|| format!("cannot encode {}", args.input.display()))?;
+    let bytes = if args.raw {
+        if args.tolerance.is_some() {
+            bail!("--tolerance applies to fitting; with --raw use --bits to set the precision");
+        }
+        let opts = EncodeOptions {
+            quantization_bits: args.bits.unwrap_or(10),
+            content: Content::RawMesh,
+            store_group_names: !args.no_names,
+        };
+        codec::encode(&mesh, &opts)
+            .with_context(|| format!("cannot encode {}", args.input.display()))?
+    } else {
+        let hints = if args.no_sidecar {
+            Vec::new()
+        } else {
+            sidecar_hints(&args.input, &mesh)?
+        };
+        let mut opts = ModelEncodeOptions {
+            quantization_bits: args.bits,
+            store_group_names: !args.no_names,
+            ..Default::default()
+        };
+        opts.fit.tolerance = args.tolerance.map(|t| {
+            if args.relative {
+                t * mesh.diagonal()
+            } else {
+                t
+            }
+        });
+        let bar = spinner(&format!("fitting {}", args.input.display()));
+        let result = encode_fitted(&mesh, &hints, &opts);
+        bar.finish_and_clear();
+        let (bytes, fit) =
+            result.with_context(|| format!("cannot fit {}", args.input.display()))?;
+        let kinds: Vec<String> = fit
+            .patch_kinds
+            .iter()
+            .map(|(k, n)| format!("{n} {k}"))
+            .collect();
+        println!(
+            "fitted {} faces ({}) with {} control vertices and {} control faces{}",
+            fit.patch_kinds.values().sum::<usize>(),
+            kinds.join(", "),
+            fit.control_vertices,
+            fit.control_faces,
+            if fit.segmented {
+                " (segmented: the input had no groups)"
+            } else {
+                ""
+            }
+        );
+        let d = fit.diagonal.max(f64::MIN_POSITIVE);
+        println!(
+            "decoded surface at level {} vs input: max {:.4e} ({:.2e} of the diagonal), rms {:.4e}, mean {:.4e}; \
+             tolerance {:.4e} {}",
+            fit.default_level,
+            fit.error.max,
+            fit.error.max / d,
+            fit.error.rms,
+            fit.error.mean,
+            fit.tolerance,
+            if fit.within_tolerance {
+                "met (beyond the input's own chord error)".to_string()
+            } else {
+                format!(
+                    "NOT met: {:.2}x the tolerance beyond the input's chord error after {} rounds",
+                    fit.error.max_beyond_chord / fit.tolerance,
+                    fit.rounds
+                )
+            }
+        );
+        if args.verbose {
+            for note in &fit.notes {
+                println!("  {note}");
+            }
+            let mut totals: std::collections::BTreeMap<&str, f64> = Default::default();
+            for (stage, secs) in &fit.timings {
+                *totals.entry(stage).or_default() += secs;
+            }
+            let t: Vec<String> = totals
+                .iter()
+                .map(|(k, v)| format!("{k} {:.1} ms", v * 1e3))
+                .collect();
+            println!("  fit timings: {}", t.join(", "));
+        }
+        bytes
+    };
     let t_encode = t1.elapsed();
     write_file(output, &bytes)?;
     let nv = mesh.vertex_count().max(1);
     println!(
-        "wrote {}: {} bytes ({:.2} bits per vertex, {} vertices, {} faces, {} groups)",
+        "wrote {}: {} bytes ({:.3} bits per input vertex; input {} vertices, {} faces, {} groups)",
         output.display(),
         bytes.len(),
         bytes.len() as f64 * 8.0 / nv as f64,
@@ -118,11 +227,15 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
         (Content::ControlMesh { default_level }, None) => u32::from(default_level),
     };
     let t1 = Instant::now();
-    let (mesh, normals) = if level == 0 && !args.limit {
+    let limit = match decoded.header.content {
+        Content::RawMesh => args.limit,
+        Content::ControlMesh { .. } => !args.no_limit,
+    };
+    let (mesh, normals) = if level == 0 && !limit {
         (decoded.mesh, None)
     } else {
         let opts = SubdivOptions {
-            limit: args.limit,
+            limit,
             ..Default::default()
         };
         subdiv::subdivide(&decoded.mesh, level, &opts)
@@ -175,7 +288,12 @@ pub fn info(args: &InfoArgs) -> Result<()> {
     let info = codec::inspect(&bytes, &Limits::default())
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     let h = &info.header;
-    println!("{}: .scode v{}.{}", args.file.display(), h.version_major, h.version_minor);
+    println!(
+        "{}: .scode v{}.{}",
+        args.file.display(),
+        h.version_major,
+        h.version_minor
+    );
     match h.content {
         Content::RawMesh => println!("  content: raw mesh (decodes to the stored mesh)"),
         Content::ControlMesh { default_level } => {
@@ -184,18 +302,17 @@ pub fn info(args: &InfoArgs) -> Result<()> {
     }
     println!(
         "  {} vertices, {} faces, {} groups, {} sharp edges, {} corners",
-        h.vertex_count,
-        h.face_count,
-        h.group_count,
-        info.sharp_edge_count,
-        info.corner_count
+        h.vertex_count, h.face_count, h.group_count, info.sharp_edge_count, info.corner_count
     );
     println!(
         "  quantisation: {} bits, bounding box min ({:.6}, {:.6}, {:.6}), extent {:.6}",
         h.quantization_bits, h.bbox_min[0], h.bbox_min[1], h.bbox_min[2], h.bbox_extent
     );
     let nv = (h.vertex_count as f64).max(1.0);
-    println!("  {:<14} {:>10} {:>10} {:>12}", "section", "bytes", "raw bytes", "bits/vertex");
+    println!(
+        "  {:<14} {:>10} {:>10} {:>12}",
+        "section", "bytes", "raw bytes", "bits/vertex"
+    );
     for s in &info.sections {
         println!(
             "  {:<14} {:>10} {:>10} {:>12.3}",
@@ -217,6 +334,57 @@ pub fn info(args: &InfoArgs) -> Result<()> {
             println!("  group {i}: {name}");
         }
     }
+    if let Some(reference) = &args.against {
+        let decoded = codec::decode(&bytes, &Limits::default())?;
+        let (level, limit) = match decoded.header.content {
+            Content::RawMesh => (0, false),
+            Content::ControlMesh { default_level } => (u32::from(default_level), true),
+        };
+        let (surface, _) = subdiv::subdivide(
+            &decoded.mesh,
+            level,
+            &SubdivOptions {
+                limit,
+                ..Default::default()
+            },
+        )?;
+        let (input, _) = io::read_mesh(reference)?;
+        let r = scode::metrics::hausdorff(&surface, &input, &Default::default())?;
+        let d = r.diagonal.max(f64::MIN_POSITIVE);
+        println!(
+            "  against {} (decoded at level {level}):",
+            reference.display()
+        );
+        println!(
+            "    decoded -> input: max {:.4e}, rms {:.4e}; input -> decoded: max {:.4e}, rms {:.4e}",
+            r.max_a_to_b, r.rms_a_to_b, r.max_b_to_a, r.rms_b_to_a
+        );
+        println!(
+            "    symmetric: max {:.4e} ({:.3e} of the diagonal), rms {:.4e} ({:.3e})",
+            r.max,
+            r.max / d,
+            r.rms,
+            r.rms / d
+        );
+    }
+    Ok(())
+}
+
+pub fn segment(args: &SegmentArgs) -> Result<()> {
+    let output = args.output.path()?;
+    let (mesh, report) = io::read_mesh(&args.input)?;
+    print_read_report(&args.input, &report);
+    let opts = scode::fit::segment::SegmentOptions {
+        sharp_angle_deg: args.sharp_angle,
+        ..Default::default()
+    };
+    let bar = spinner(&format!("segmenting {}", args.input.display()));
+    let result = scode::fit::segment::segment(&mesh, &opts);
+    bar.finish_and_clear();
+    let (faces, seg) =
+        result.with_context(|| format!("cannot segment {}", args.input.display()))?;
+    io::write_mesh(output, &faces, None)?;
+    println!("wrote {}: {}", output.display(), seg.summary());
     Ok(())
 }
 
@@ -225,7 +393,10 @@ fn print_mesh_summary(mesh: &ControlMesh, list_groups: bool) {
     for f in mesh.faces() {
         *degrees.entry(f.len()).or_insert(0usize) += 1;
     }
-    let degrees: Vec<String> = degrees.iter().map(|(d, n)| format!("{n} of degree {d}")).collect();
+    let degrees: Vec<String> = degrees
+        .iter()
+        .map(|(d, n)| format!("{n} of degree {d}"))
+        .collect();
     println!(
         "  {} vertices, {} faces ({}), {} groups, {} sharp edges, {} corners",
         mesh.vertex_count(),
@@ -253,7 +424,10 @@ fn print_mesh_summary(mesh: &ControlMesh, list_groups: bool) {
             counts[g as usize] += 1;
         }
         for (i, g) in mesh.groups.iter().enumerate() {
-            println!("  group {i} {:?}: {} faces, {:?}", g.name, counts[i], g.patch);
+            println!(
+                "  group {i} {:?}: {} faces, {:?}",
+                g.name, counts[i], g.patch
+            );
         }
     }
 }

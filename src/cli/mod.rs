@@ -25,11 +25,19 @@ pub struct Cli {
 pub enum Command {
     /// Compress a mesh into a .scode file.
     ///
+    /// By default the model is fitted: every CAD face (OBJ group, PLY face id, glTF
+    /// primitive; an ungrouped mesh is segmented first) becomes a subdivision patch, and the
+    /// coarse control mesh is stored. The encoder measures the decoded surface against the
+    /// input and adds control points until --tolerance holds. A `<name>.faces.json` sidecar
+    /// next to the input (as in the corpus) supplies each face's surface type.
+    ///
     /// With --raw the input mesh itself is stored as the control mesh (no fitting): a
     /// Draco-class lossy-by-quantisation coder. Faces keep their degree (quads and n-gons are
     /// not triangulated), OBJ groups, `l` sharp edges and corner tags are kept.
     ///
-    /// Example: scode encode --raw part.obj part.scode
+    /// Examples: scode encode part.obj part.scode
+    ///           scode encode --tolerance 0.002 --relative part.obj -o part.scode
+    ///           scode encode --raw part.obj part.scode
     #[command(verbatim_doc_comment)]
     Encode(EncodeArgs),
     /// Decompress a .scode file into a mesh (format chosen by the output extension).
@@ -50,6 +58,12 @@ pub enum Command {
     /// Example: scode subdivide control.obj --level 3 -o smooth.obj
     #[command(verbatim_doc_comment)]
     Subdivide(SubdivideArgs),
+    /// Split a mesh without groups into CAD-face-like regions (planes, cylinders, cones,
+    /// spheres, tori, freeform) and write them as groups, so a person can look at them.
+    ///
+    /// Example: scode segment part.stl -o faces.obj
+    #[command(verbatim_doc_comment)]
+    Segment(SegmentArgs),
 }
 
 /// The output file of a command: positional or `-o`, exactly one of them.
@@ -89,8 +103,20 @@ pub struct EncodeArgs {
     #[arg(long)]
     pub raw: bool,
     /// Quantisation bits per coordinate (4..=24). Each extra bit halves the position error.
-    #[arg(long, default_value_t = 10, value_name = "BITS")]
-    pub bits: u8,
+    /// Default: 10 with --raw; when fitting, the fewest bits that keep the quantisation error
+    /// below a quarter of the tolerance.
+    #[arg(long, value_name = "BITS")]
+    pub bits: Option<u8>,
+    /// Largest allowed distance between input and decoded surface, in model units (or as a
+    /// fraction of the bounding-box diagonal with --relative). Default: 1e-3 of the diagonal.
+    #[arg(long, value_name = "DIST")]
+    pub tolerance: Option<f64>,
+    /// Read --tolerance as a fraction of the bounding-box diagonal.
+    #[arg(long)]
+    pub relative: bool,
+    /// Ignore the `.faces.json` sidecar next to the input.
+    #[arg(long)]
+    pub no_sidecar: bool,
     /// Do not store group (CAD face) names; groups themselves are always kept.
     #[arg(long)]
     pub no_names: bool,
@@ -108,9 +134,13 @@ pub struct DecodeArgs {
     /// Subdivision level for control-mesh files (default: the file's own default level).
     #[arg(long, value_name = "N")]
     pub level: Option<u32>,
-    /// Move output vertices to the limit surface and write normals.
+    /// Move output vertices to the limit surface and write normals (always on for fitted
+    /// control meshes unless --no-limit).
     #[arg(long)]
     pub limit: bool,
+    /// Keep level-N positions instead of limit positions for fitted control meshes.
+    #[arg(long, conflicts_with = "limit")]
+    pub no_limit: bool,
     /// Refuse files larger than this many bytes (a decoder safety limit).
     #[arg(long, value_name = "BYTES")]
     pub max_bytes: Option<u64>,
@@ -123,6 +153,21 @@ pub struct InfoArgs {
     /// List every group (CAD face) instead of a summary.
     #[arg(long)]
     pub groups: bool,
+    /// Measure a .scode file against this mesh: max and RMS distance both ways between the
+    /// decoded surface (default level) and the mesh.
+    #[arg(long, value_name = "MESH")]
+    pub against: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct SegmentArgs {
+    /// A mesh without CAD-face groups (.stl .obj .ply .off ...).
+    pub input: PathBuf,
+    #[command(flatten)]
+    pub output: OutputArg,
+    /// Edges whose dihedral angle exceeds this many degrees split faces.
+    #[arg(long, default_value_t = 30.0, value_name = "DEG")]
+    pub sharp_angle: f64,
 }
 
 #[derive(Args, Debug)]
@@ -145,5 +190,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Decode(a) => commands::decode(&a),
         Command::Info(a) => commands::info(&a),
         Command::Subdivide(a) => commands::subdivide(&a),
+        Command::Segment(a) => commands::segment(&a),
     }
 }

@@ -40,9 +40,15 @@ pub enum VertexRole {
 /// The surface a group approximates, as far as collapse validity is concerned.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SurfaceRef {
-    Plane { normal: DVec3 },
-    Cylinder { axis: Axis },
-    Cone { axis: Axis },
+    Plane {
+        normal: DVec3,
+    },
+    Cylinder {
+        axis: Axis,
+    },
+    Cone {
+        axis: Axis,
+    },
     /// Freeform: triangles are compared with their normal before the collapse.
     Free,
 }
@@ -504,9 +510,9 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
         .iter()
         .filter(|&&v| {
             input.roles[v as usize] == VertexRole::Interior
-                && st.vfaces[v as usize]
-                    .first()
-                    .is_some_and(|&f| input.rules[input.face_groups[f as usize] as usize].remove_all_interior)
+                && st.vfaces[v as usize].first().is_some_and(|&f| {
+                    input.rules[input.face_groups[f as usize] as usize].remove_all_interior
+                })
         })
         .count();
     Decimated {
@@ -634,7 +640,11 @@ mod tests {
         let strict = run(0.0);
         assert_eq!(strict.vertices.len(), p.len());
         let loose = run(1e9);
-        assert!(loose.vertices.len() < p.len() - 20, "{}", loose.vertices.len());
+        assert!(
+            loose.vertices.len() < p.len() - 20,
+            "{}",
+            loose.vertices.len()
+        );
         assert_eq!(euler(&loose.triangles), 1);
     }
 

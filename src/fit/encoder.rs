@@ -131,11 +131,13 @@ struct GroupPlan {
 
 /// The chain's frame: cylinder/cone axis of the lowest-index framed group next to it.
 fn chain_frame(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<Axis> {
-    chain_groups.iter().find_map(|&g| match plans[g as usize].kind {
-        PatchKind::Boundary(BoundarySurface::Cylinder { axis })
-        | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
-        _ => None,
-    })
+    chain_groups
+        .iter()
+        .find_map(|&g| match plans[g as usize].kind {
+            PatchKind::Boundary(BoundarySurface::Cylinder { axis })
+            | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
+            _ => None,
+        })
 }
 
 fn kind_name(k: &PatchKind) -> &'static str {
@@ -148,7 +150,11 @@ fn kind_name(k: &PatchKind) -> &'static str {
 }
 
 /// Area-weighted vertex normals over the faces of one group.
-fn group_points_normals(mesh: &ControlMesh, tris: &[[u32; 3]], group: u32) -> (Vec<DVec3>, Vec<DVec3>) {
+fn group_points_normals(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    group: u32,
+) -> (Vec<DVec3>, Vec<DVec3>) {
     let mut normal: BTreeMap<u32, DVec3> = BTreeMap::new();
     for (f, t) in tris.iter().enumerate() {
         if mesh.face_groups[f] != group {
@@ -179,20 +185,30 @@ fn classify_group(
         return PatchKind::Closed;
     }
     let within = |r: &super::primitives::PrimitiveFit| r.residuals.max <= 0.25 * tol;
-    let try_plane = || fit_plane(&points).filter(within).map(|_| PatchKind::Boundary(BoundarySurface::Plane));
+    let try_plane = || {
+        fit_plane(&points)
+            .filter(within)
+            .map(|_| PatchKind::Boundary(BoundarySurface::Plane))
+    };
     let try_cyl = || {
-        fit_cylinder(&points, &normals).filter(within).and_then(|f| match f.primitive {
-            Primitive::Cylinder { axis, .. } => {
-                Some(PatchKind::Boundary(BoundarySurface::Cylinder { axis }))
-            }
-            _ => None,
-        })
+        fit_cylinder(&points, &normals)
+            .filter(within)
+            .and_then(|f| match f.primitive {
+                Primitive::Cylinder { axis, .. } => {
+                    Some(PatchKind::Boundary(BoundarySurface::Cylinder { axis }))
+                }
+                _ => None,
+            })
     };
     let try_cone = || {
-        fit_cone(&points, &normals).filter(within).and_then(|f| match f.primitive {
-            Primitive::Cone { axis, .. } => Some(PatchKind::Boundary(BoundarySurface::Cone { axis })),
-            _ => None,
-        })
+        fit_cone(&points, &normals)
+            .filter(within)
+            .and_then(|f| match f.primitive {
+                Primitive::Cone { axis, .. } => {
+                    Some(PatchKind::Boundary(BoundarySurface::Cone { axis }))
+                }
+                _ => None,
+            })
     };
     let kind = match hint {
         SurfaceHint::Plane => try_plane(),
@@ -232,7 +248,11 @@ fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<usize> {
         let len2 = ab.length_squared();
         let (mut worst, mut at) = (-1.0, a);
         for (i, &p) in points.iter().enumerate().take(b).skip(a + 1) {
-            let t = if len2 > 0.0 { ((p - pa).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+            let t = if len2 > 0.0 {
+                ((p - pa).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let d = (p - (pa + ab * t)).length();
             if d > worst {
                 worst = d;
@@ -249,7 +269,12 @@ fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<usize> {
 }
 
 /// Control points (indices into `chain.vertices`) of one chain.
-fn chain_controls(points: &[DVec3], frame: Option<Axis>, tol: f64, min_interior: usize) -> Vec<usize> {
+fn chain_controls(
+    points: &[DVec3],
+    frame: Option<Axis>,
+    tol: f64,
+    min_interior: usize,
+) -> Vec<usize> {
     let n = points.len();
     let mut keep: Vec<usize> = match frame {
         None => douglas_peucker(points, tol),
@@ -277,7 +302,10 @@ fn chain_controls(points: &[DVec3], frame: Option<Axis>, tol: f64, min_interior:
                 })
                 .collect();
             let rmax = param.iter().map(|q| q.z).fold(0.0, f64::max);
-            let scaled: Vec<DVec3> = param.iter().map(|q| DVec3::new(q.x * rmax, q.y, q.z)).collect();
+            let scaled: Vec<DVec3> = param
+                .iter()
+                .map(|q| DVec3::new(q.x * rmax, q.y, q.z))
+                .collect();
             let mut k = douglas_peucker(&scaled, tol);
             let max_step = 60f64.to_radians();
             let mut out = vec![0];
@@ -290,7 +318,9 @@ fn chain_controls(points: &[DVec3], frame: Option<Axis>, tol: f64, min_interior:
                     let target = param[a].x + (param[b].x - param[a].x) * s as f64 / pieces as f64;
                     let best = (a + 1..b)
                         .min_by(|&i, &j| {
-                            (param[i].x - target).abs().total_cmp(&(param[j].x - target).abs())
+                            (param[i].x - target)
+                                .abs()
+                                .total_cmp(&(param[j].x - target).abs())
                         })
                         .unwrap_or(a);
                     if best > *out.last().unwrap_or(&0) {
@@ -320,7 +350,11 @@ fn closest_on_polyline(p: DVec3, line: &[DVec3]) -> DVec3 {
     for w in line.windows(2) {
         let ab = w[1] - w[0];
         let len2 = ab.length_squared();
-        let t = if len2 > 0.0 { ((p - w[0]).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if len2 > 0.0 {
+            ((p - w[0]).dot(ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let q = w[0] + ab * t;
         let d = (p - q).length_squared();
         if d < best.0 {
@@ -333,11 +367,7 @@ fn closest_on_polyline(p: DVec3, line: &[DVec3]) -> DVec3 {
 /// Linearised least squares: find `delta` for the `unknowns` (control ids) minimising
 /// `sum_r |sum_k w_rk delta_k - residual_r|^2 + mu |delta|^2`, by conjugate gradients on the
 /// normal equations (three right-hand sides, one matrix, Jacobi-preconditioned).
-fn solve_increment(
-    rows: &[(Vec<(usize, f64)>, DVec3)],
-    n_unknowns: usize,
-    mu: f64,
-) -> Vec<DVec3> {
+fn solve_increment(rows: &[(Vec<(usize, f64)>, DVec3)], n_unknowns: usize, mu: f64) -> Vec<DVec3> {
     let mut diag = vec![mu; n_unknowns];
     for (row, _) in rows {
         for &(k, w) in row {
@@ -433,10 +463,19 @@ pub fn chord_allowance(mesh: &ControlMesh, tris: &[[u32; 3]]) -> Vec<f64> {
 /// Facets along a curved CAD edge end at the edge's chord while the decoded patch follows
 /// the curve: give every triangle on a chain edge at least that edge's sagitta
 /// `L/2 tan(theta/4)`, `theta` the mean turning angle of the chain at the edge's ends.
-fn add_curved_edge_allowance(mesh: &ControlMesh, tris: &[[u32; 3]], net: &CurveNetwork, chord: &mut [f64]) {
+fn add_curved_edge_allowance(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    net: &CurveNetwork,
+    chord: &mut [f64],
+) {
     let mut edge_sag: BTreeMap<(u32, u32), f64> = BTreeMap::new();
     for chain in &net.chains {
-        let p: Vec<DVec3> = chain.vertices.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let p: Vec<DVec3> = chain
+            .vertices
+            .iter()
+            .map(|&v| mesh.positions[v as usize])
+            .collect();
         let n = p.len();
         let turn = |i: usize| -> f64 {
             if i == 0 || i + 1 >= n {
@@ -494,7 +533,11 @@ fn build_topology(
         roles[c.vertex as usize] = VertexRole::Keep;
     }
     for (ci, chain) in net.chains.iter().enumerate() {
-        let points: Vec<DVec3> = chain.vertices.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let points: Vec<DVec3> = chain
+            .vertices
+            .iter()
+            .map(|&v| mesh.positions[v as usize])
+            .collect();
         let frame = chain_frame(&chain.groups, plans);
         let min_interior = if chain_loop_len[ci] < 3 { 2 } else { 0 };
         let keep = chain_controls(&points, frame, chain_tol[ci], min_interior);
@@ -525,7 +568,9 @@ fn build_topology(
                         .unwrap_or(DVec3::Z);
                     SurfaceRef::Plane { normal }
                 }
-                PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => SurfaceRef::Cylinder { axis },
+                PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => {
+                    SurfaceRef::Cylinder { axis }
+                }
                 PatchKind::Boundary(BoundarySurface::Cone { axis }) => SurfaceRef::Cone { axis },
             };
             GroupRule {
@@ -566,7 +611,10 @@ fn build_topology(
         let face = control.face(f);
         for k in 0..face.len() {
             let e = edge_key(face[k], face[(k + 1) % face.len()]);
-            edge_faces.entry(e).or_default().push(control.face_groups[f]);
+            edge_faces
+                .entry(e)
+                .or_default()
+                .push(control.face_groups[f]);
         }
     }
     for (&(a, b), groups) in &edge_faces {
@@ -600,7 +648,10 @@ fn build_topology(
             }
         }
     }
-    Built { control, edge_chain }
+    Built {
+        control,
+        edge_chain,
+    }
 }
 
 /// Step 5: least-squares fit of the Cartesian crease curves, then of closed-patch interiors.
@@ -666,12 +717,17 @@ fn fit_geometry(
                 // Interior control point of a Cartesian chain.
                 !control.corners.contains(&(v as u32))
                     && on_sharp[v]
-                    && sample_chain.get(v).copied().flatten().is_some_and(|c| chain_frame_of(c).is_none())
+                    && sample_chain
+                        .get(v)
+                        .copied()
+                        .flatten()
+                        .is_some_and(|c| chain_frame_of(c).is_none())
                     && !multi_chain[v]
             } else {
                 !on_sharp[v]
                     && !mixed[v]
-                    && sample_group[v].is_some_and(|g| matches!(plans[g as usize].kind, PatchKind::Closed))
+                    && sample_group[v]
+                        .is_some_and(|g| matches!(plans[g as usize].kind, PatchKind::Closed))
             };
             if movable {
                 col[v] = unknowns.len();
@@ -685,7 +741,15 @@ fn fit_geometry(
             net.chains
                 .iter()
                 .enumerate()
-                .map(|(i, c)| (i, c.vertices.iter().map(|&v| mesh.positions[v as usize]).collect()))
+                .map(|(i, c)| {
+                    (
+                        i,
+                        c.vertices
+                            .iter()
+                            .map(|&v| mesh.positions[v as usize])
+                            .collect(),
+                    )
+                })
                 .collect()
         } else {
             BTreeMap::new()
@@ -704,12 +768,16 @@ fn fit_geometry(
                     }
                 } else {
                     match sample_group[s] {
-                        Some(g) if !mixed[s] && sample_chain[s].is_none() => match &group_surfaces[g as usize] {
-                            Some(surface) if matches!(plans[g as usize].kind, PatchKind::Closed) => {
-                                surface.closest_point(limit[s]).point
+                        Some(g) if !mixed[s] && sample_chain[s].is_none() => {
+                            match &group_surfaces[g as usize] {
+                                Some(surface)
+                                    if matches!(plans[g as usize].kind, PatchKind::Closed) =>
+                                {
+                                    surface.closest_point(limit[s]).point
+                                }
+                                _ => continue,
                             }
-                            _ => continue,
-                        },
+                        }
                         _ => continue,
                     }
                 };
@@ -724,7 +792,10 @@ fn fit_geometry(
                     rows.push((row, target - limit[s]));
                 }
             }
-            let mean_diag = rows.iter().map(|(r, _)| r.iter().map(|(_, w)| w * w).sum::<f64>()).sum::<f64>()
+            let mean_diag = rows
+                .iter()
+                .map(|(r, _)| r.iter().map(|(_, w)| w * w).sum::<f64>())
+                .sum::<f64>()
                 / unknowns.len() as f64;
             let delta = solve_increment(&rows, unknowns.len(), 1e-3 * mean_diag.max(1e-12));
             for (k, &v) in unknowns.iter().enumerate() {
@@ -765,7 +836,9 @@ pub fn fit_model(
     let diag = mesh.diagonal();
     let tol = opts.tolerance.unwrap_or(1e-3 * diag);
     if !(tol > 0.0 && tol.is_finite()) {
-        return Err(Error::Parameter(format!("tolerance must be positive, got {tol}")));
+        return Err(Error::Parameter(format!(
+            "tolerance must be positive, got {tol}"
+        )));
     }
     report.tolerance = tol;
     report.diagonal = diag;
@@ -781,7 +854,11 @@ pub fn fit_model(
             ..Default::default()
         };
         let (seg, seg_report) = segment(&mesh, &seg_opts)?;
-        report.notes.push(format!("segmented into {} faces: {}", seg.groups.len(), seg_report.summary()));
+        report.notes.push(format!(
+            "segmented into {} faces: {}",
+            seg.groups.len(),
+            seg_report.summary()
+        ));
         mesh = seg;
         report.segmented = true;
     }
@@ -858,7 +935,8 @@ pub fn fit_model(
     for round in 0..opts.max_rounds.max(1) {
         report.rounds = round + 1;
         t = Instant::now();
-        let mut built = build_topology(&mesh, &tris, &net, &plans, &chain_tol, tol, &chain_loop_len);
+        let mut built =
+            build_topology(&mesh, &tris, &net, &plans, &chain_tol, tol, &chain_loop_len);
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
         fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)?;
@@ -910,8 +988,15 @@ pub fn fit_model(
             .zip(&d_in)
             .map(|(s, &d)| d - chord[s.triangle as usize])
             .collect();
-        let excess_out: Vec<f64> = out_hits.iter().map(|&(d, t)| d - chord[t as usize]).collect();
-        let worst = excess_in.iter().chain(&excess_out).copied().fold(0.0, f64::max);
+        let excess_out: Vec<f64> = out_hits
+            .iter()
+            .map(|&(d, t)| d - chord[t as usize])
+            .collect();
+        let worst = excess_in
+            .iter()
+            .chain(&excess_out)
+            .copied()
+            .fold(0.0, f64::max);
         let err = FitError {
             max: max_in.max(max_out),
             rms: rms_in.max(rms_out),
@@ -970,9 +1055,10 @@ pub fn fit_model(
             if matches!(plan.kind, PatchKind::Closed) {
                 plan.cost_factor *= 0.35;
             } else if plan.failures >= 4 {
-                report
-                    .notes
-                    .push(format!("group {g} ({}) refitted as a closed patch", kind_name(&plan.kind)));
+                report.notes.push(format!(
+                    "group {g} ({}) refitted as a closed patch",
+                    kind_name(&plan.kind)
+                ));
                 plan.kind = PatchKind::Closed;
                 plan.cost_factor = 2.0;
             }
@@ -992,7 +1078,9 @@ pub fn fit_model(
     for g in &control.groups {
         *report.patch_kinds.entry(kind_name(&g.patch)).or_insert(0) += 1;
     }
-    report.timings.push(("total", t_start.elapsed().as_secs_f64()));
+    report
+        .timings
+        .push(("total", t_start.elapsed().as_secs_f64()));
     Ok(FitOutcome {
         control,
         default_level: level,

@@ -1,0 +1,115 @@
+//! The `scode` binary end to end: encode (fitted and raw), info, decode, subdivide, errors.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn scode(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_scode"))
+        .args(args)
+        .output()
+        .unwrap();
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.success(), text)
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("scode-cli-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn example() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("corpus/boss_plate.obj")
+        .to_string_lossy()
+        .into_owned()
+}
+
+#[test]
+fn encode_info_decode_roundtrip() {
+    let fitted = tmp("boss.scode");
+    let (ok, text) = scode(&["encode", &example(), fitted.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    assert!(text.contains("met"), "{text}");
+    let (ok, text) = scode(&["info", fitted.to_str().unwrap(), "--against", &example()]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("control mesh (default decode level"),
+        "{text}"
+    );
+    assert!(text.contains("symmetric: max"), "{text}");
+    let out = tmp("boss_decoded.obj");
+    let (ok, text) = scode(&[
+        "decode",
+        fitted.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let (decoded, _) = scode::io::read_mesh(&out).unwrap();
+    assert!(
+        decoded.face_count() > 1000,
+        "decoded surface has {} faces",
+        decoded.face_count()
+    );
+    assert_eq!(decoded.groups.len(), 8);
+
+    let raw = tmp("boss_raw.scode");
+    let (ok, text) = scode(&["encode", "--raw", &example(), "-o", raw.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    let back = tmp("boss_raw.ply");
+    let (ok, text) = scode(&["decode", raw.to_str().unwrap(), back.to_str().unwrap()]);
+    assert!(ok, "{text}");
+    let (mesh, _) = scode::io::read_mesh(&back).unwrap();
+    assert_eq!(mesh.face_count(), 288);
+    assert_eq!(mesh.groups.len(), 8);
+}
+
+#[test]
+fn subdivide_a_hand_made_control_mesh() {
+    let control = tmp("tetra.obj");
+    std::fs::write(
+        &control,
+        "v 1 1 1\nv 1 -1 -1\nv -1 1 -1\nv -1 -1 1\nf 1 2 3\nf 1 4 2\nf 1 3 4\nf 2 4 3\nl 1 2\n",
+    )
+    .unwrap();
+    let out = tmp("tetra_l3.obj");
+    let (ok, text) = scode(&[
+        "subdivide",
+        control.to_str().unwrap(),
+        "--level",
+        "3",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let (mesh, _) = scode::io::read_mesh(&out).unwrap();
+    assert_eq!(mesh.face_count(), 4 * 64);
+    assert_eq!(
+        mesh.sharp_edges.len(),
+        8,
+        "the sharp edge splits into 2^3 sharp edges"
+    );
+}
+
+#[test]
+fn errors_name_the_file_and_cause() {
+    let (ok, text) = scode(&["decode", "/nonexistent/x.scode", "out.obj"]);
+    assert!(!ok);
+    assert!(text.contains("/nonexistent/x.scode"), "{text}");
+    let garbage = tmp("garbage.scode");
+    std::fs::write(&garbage, b"not an scode file at all").unwrap();
+    let (ok, text) = scode(&["decode", garbage.to_str().unwrap(), "out.obj"]);
+    assert!(!ok);
+    assert!(
+        text.contains("garbage.scode") && text.contains("section"),
+        "{text}"
+    );
+    let (ok, text) = scode(&["encode", &example()]);
+    assert!(!ok);
+    assert!(text.contains("no output file"), "{text}");
+    let (ok, text) = scode(&["encode", &example(), "a.scode", "-o", "b.scode"]);
+    assert!(!ok);
+    assert!(text.contains("two different outputs"), "{text}");
+}
