@@ -7,13 +7,10 @@
 //! measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
 //! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use glam::DVec3;
-use scode::mesh::{edge_key, ControlMesh, PatchKind};
 use scode::subdiv::Refinement;
 
 fn corpus_dir() -> Option<PathBuf> {
@@ -26,60 +23,6 @@ fn corpus_dir() -> Option<PathBuf> {
     }
     let abs = PathBuf::from("/work/shared/corpus");
     abs.is_dir().then_some(abs)
-}
-
-/// Minimal OBJ reader (v / f / g); edges between groups become sharp. Copy of the test
-/// helper, to be replaced by `scode::io` at merge.
-fn parse_obj(text: &str) -> ControlMesh {
-    let mut m = ControlMesh::new();
-    let mut group_ids: BTreeMap<String, u32> = BTreeMap::new();
-    let mut current = None;
-    for line in text.lines() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => {
-                let c: Vec<f64> = it.take(3).map(|s| s.parse().unwrap()).collect();
-                m.push_vertex(DVec3::new(c[0], c[1], c[2]));
-            }
-            Some("g") => {
-                let name = it.next().unwrap_or("").to_string();
-                let next = group_ids.len() as u32;
-                let id = *group_ids.entry(name.clone()).or_insert(next);
-                if id == next {
-                    m.push_group(name, PatchKind::Closed);
-                }
-                current = Some(id);
-            }
-            Some("f") => {
-                let idx: Vec<u32> = it
-                    .map(|s| s.split('/').next().unwrap().parse::<u32>().unwrap() - 1)
-                    .collect();
-                let g = *current.get_or_insert_with(|| m.push_group("default", PatchKind::Closed));
-                m.push_face(&idx, g);
-            }
-            _ => {}
-        }
-    }
-    let mut edge_group: BTreeMap<(u32, u32), u32> = BTreeMap::new();
-    let mut sharp = Vec::new();
-    for f in 0..m.face_count() {
-        let face = m.face(f).to_vec();
-        let g = m.face_groups[f];
-        for i in 0..face.len() {
-            let k = edge_key(face[i], face[(i + 1) % face.len()]);
-            match edge_group.get(&k) {
-                Some(&g2) if g2 != g => sharp.push(k),
-                Some(_) => {}
-                None => {
-                    edge_group.insert(k, g);
-                }
-            }
-        }
-    }
-    for (a, b) in sharp {
-        m.set_sharp(a, b);
-    }
-    m
 }
 
 /// CPU time of the calling thread (the sequential build runs everything on it).
@@ -127,11 +70,17 @@ fn bench_model<M: Measurement>(c: &mut Criterion<M>, name: &str, rel: &str, max_
         eprintln!("corpus not found, skipping");
         return;
     };
-    let Ok(text) = std::fs::read_to_string(dir.join(rel)) else {
-        eprintln!("{rel} not found, skipping");
-        return;
+    let mesh = match scode::io::read_mesh(&dir.join(rel)) {
+        Ok((mut mesh, _)) => {
+            // CAD-face boundaries are the control mesh's sharp edges.
+            mesh.sharpen_group_boundaries();
+            mesh
+        }
+        Err(e) => {
+            eprintln!("{rel}: {e}; skipping");
+            return;
+        }
     };
-    let mesh = parse_obj(&text);
     let all = if cfg!(feature = "parallel") {
         rayon::current_num_threads()
     } else {

@@ -2,9 +2,12 @@
 //! that neither depends on the other; the fit measures its error on the control mesh exactly
 //! as this module's codec round trip reconstructs it.
 
+use std::path::Path;
+
 use crate::codec::{self, Content, EncodeOptions, Limits};
 use crate::error::Result;
 use crate::fit::encoder::{fit_model, FitOptions, FitReport, SurfaceHint};
+use crate::io::faces_json::{self, SurfaceType};
 use crate::mesh::ControlMesh;
 
 /// Options of [`encode_fitted`].
@@ -25,6 +28,34 @@ impl Default for ModelEncodeOptions {
             store_group_names: true,
         }
     }
+}
+
+/// What a surface type from a STEP file or a sidecar means for the fit.
+pub fn hint_for(surface: &SurfaceType) -> SurfaceHint {
+    match surface {
+        SurfaceType::Plane => SurfaceHint::Plane,
+        SurfaceType::Cylinder => SurfaceHint::Cylinder,
+        SurfaceType::Cone => SurfaceHint::Cone,
+        SurfaceType::Unknown => SurfaceHint::Unknown,
+        _ => SurfaceHint::Freeform,
+    }
+}
+
+/// Per-group surface hints from the `<name>.faces.json` sidecar next to `input`, matched by
+/// group name; `None` when there is no sidecar.
+pub fn sidecar_hints(
+    input: &Path,
+    mesh: &ControlMesh,
+) -> Result<Option<(std::path::PathBuf, Vec<SurfaceHint>)>> {
+    let Some(side) = faces_json::sidecar_path_for(input) else {
+        return Ok(None);
+    };
+    let faces = faces_json::read_faces_json(&side)?;
+    let hints = faces_json::face_info_for_groups(mesh, &faces)
+        .iter()
+        .map(|fi| fi.map_or(SurfaceHint::Unknown, |f| hint_for(&f.surface)))
+        .collect();
+    Ok(Some((side, hints)))
 }
 
 /// Bits per coordinate so that the Euclidean quantisation error `sqrt(3)/2 * R/(2^b - 1)`

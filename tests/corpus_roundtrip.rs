@@ -7,7 +7,6 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use glam::DVec3;
 use scode::codec::{decode, encode_with_map, inspect, EncodeOptions, Limits};
 use scode::mesh::{edge_key, BoundarySurface, ControlMesh, PatchKind};
 
@@ -16,67 +15,6 @@ fn corpus_dir() -> Option<PathBuf> {
     [local, PathBuf::from("/work/shared/corpus")]
         .into_iter()
         .find(|p| p.is_dir())
-}
-
-fn parse_obj(text: &str) -> ControlMesh {
-    let mut m = ControlMesh::new();
-    let mut group_ids: BTreeMap<String, u32> = BTreeMap::new();
-    let mut current: Option<u32> = None;
-    for line in text.lines() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => {
-                let c: Vec<f64> = it.take(3).map(|s| s.parse().unwrap()).collect();
-                m.push_vertex(DVec3::new(c[0], c[1], c[2]));
-            }
-            Some("g") => {
-                let name = it.collect::<Vec<_>>().join(" ");
-                let next = group_ids.len() as u32;
-                let id = *group_ids.entry(name.clone()).or_insert(next);
-                if id == next {
-                    m.push_group(name, PatchKind::Closed);
-                }
-                current = Some(id);
-            }
-            Some("f") => {
-                let g = *current.get_or_insert_with(|| m.push_group("", PatchKind::Closed));
-                let n = m.vertex_count() as i64;
-                let f: Vec<u32> = it
-                    .map(|s| {
-                        let i: i64 = s.split('/').next().unwrap().parse().unwrap();
-                        (if i < 0 { n + i } else { i - 1 }) as u32
-                    })
-                    .collect();
-                m.push_face(&f, g);
-            }
-            _ => {}
-        }
-    }
-    m
-}
-
-fn parse_off(text: &str) -> ControlMesh {
-    let mut tokens = text
-        .lines()
-        .map(|l| l.split('#').next().unwrap())
-        .flat_map(|l| l.split_whitespace())
-        .skip(1);
-    let mut next = || tokens.next().unwrap();
-    let nv: usize = next().parse().unwrap();
-    let nf: usize = next().parse().unwrap();
-    let _ne: usize = next().parse().unwrap();
-    let mut m = ControlMesh::new();
-    for _ in 0..nv {
-        let c: Vec<f64> = (0..3).map(|_| next().parse().unwrap()).collect();
-        m.push_vertex(DVec3::new(c[0], c[1], c[2]));
-    }
-    let g = m.push_group("", PatchKind::Closed);
-    for _ in 0..nf {
-        let k: usize = next().parse().unwrap();
-        let f: Vec<u32> = (0..k).map(|_| next().parse().unwrap()).collect();
-        m.push_face(&f, g);
-    }
-    m
 }
 
 /// Marks groups whose CAD surface is a plane (crude scan of the `.faces.json` sidecar:
@@ -226,13 +164,8 @@ fn corpus_meshes_round_trip() {
     }
 
     for p in files {
-        let text = std::fs::read_to_string(&p).unwrap();
         let name = p.file_name().unwrap().to_string_lossy().to_string();
-        let mut m = if name.ends_with(".off") {
-            parse_off(&text)
-        } else {
-            parse_obj(&text)
-        };
+        let (mut m, _) = scode::io::read_mesh(&p).unwrap();
         m.validate().unwrap();
         if std::env::var("STRIP_GROUPS").is_ok() {
             m.groups.truncate(1);

@@ -4,10 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use scode::codec::{self, Content, EncodeOptions, Limits};
-use scode::fit::encoder::SurfaceHint;
-use scode::io::faces_json::{self, SurfaceType};
 use scode::metrics::{hausdorff, DistanceOptions, SampleCount};
-use scode::pipeline::{encode_fitted, ModelEncodeOptions};
+use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 use scode::subdiv::{subdivide, SubdivOptions};
 
 fn corpus_dir() -> Option<PathBuf> {
@@ -15,23 +13,6 @@ fn corpus_dir() -> Option<PathBuf> {
     [local, PathBuf::from("/work/shared/corpus")]
         .into_iter()
         .find(|p| p.is_dir())
-}
-
-fn hints(path: &Path, mesh: &scode::ControlMesh) -> Vec<SurfaceHint> {
-    let Some(side) = faces_json::sidecar_path_for(path) else {
-        return Vec::new();
-    };
-    let faces = faces_json::read_faces_json(&side).unwrap();
-    faces_json::face_info_for_groups(mesh, &faces)
-        .iter()
-        .map(|fi| match fi.map(|f| &f.surface) {
-            Some(SurfaceType::Plane) => SurfaceHint::Plane,
-            Some(SurfaceType::Cylinder) => SurfaceHint::Cylinder,
-            Some(SurfaceType::Cone) => SurfaceHint::Cone,
-            Some(SurfaceType::Unknown) | None => SurfaceHint::Unknown,
-            Some(_) => SurfaceHint::Freeform,
-        })
-        .collect()
 }
 
 /// Every edge of the decoded triangle mesh has exactly two faces (the inputs are closed).
@@ -51,7 +32,10 @@ fn assert_watertight(mesh: &scode::ControlMesh, name: &str) {
 fn check_model(path: &Path, min_ratio: f64) {
     let name = path.file_name().unwrap().to_string_lossy().to_string();
     let (input, _) = scode::io::read_mesh(path).unwrap();
-    let hints = hints(path, &input);
+    let hints = sidecar_hints(path, &input)
+        .unwrap()
+        .map(|(_, h)| h)
+        .unwrap_or_default();
     let opts = ModelEncodeOptions::default();
     let (bytes, report) = encode_fitted(&input, &hints, &opts).unwrap();
     let tol = report.tolerance;

@@ -10,9 +10,7 @@ use scode::subdiv::{self, SubdivOptions};
 use scode::ControlMesh;
 
 use super::{DecodeArgs, EncodeArgs, InfoArgs, SegmentArgs, SubdivideArgs};
-use scode::fit::encoder::SurfaceHint;
-use scode::io::faces_json::{self, SurfaceType};
-use scode::pipeline::{encode_fitted, ModelEncodeOptions};
+use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| scode::Error::io(path, e).into())
@@ -61,25 +59,6 @@ fn load_control_mesh(path: &Path) -> Result<(ControlMesh, Option<Content>)> {
     }
 }
 
-/// Surface types of the input's groups from a `<name>.faces.json` sidecar, if there is one.
-fn sidecar_hints(input: &Path, mesh: &ControlMesh) -> Result<Vec<SurfaceHint>> {
-    let Some(side) = faces_json::sidecar_path_for(input) else {
-        return Ok(Vec::new());
-    };
-    let faces = faces_json::read_faces_json(&side)?;
-    println!("using surface types from {}", side.display());
-    Ok(faces_json::face_info_for_groups(mesh, &faces)
-        .iter()
-        .map(|fi| match fi.map(|f| &f.surface) {
-            Some(SurfaceType::Plane) => SurfaceHint::Plane,
-            Some(SurfaceType::Cylinder) => SurfaceHint::Cylinder,
-            Some(SurfaceType::Cone) => SurfaceHint::Cone,
-            Some(SurfaceType::Unknown) | None => SurfaceHint::Unknown,
-            Some(_) => SurfaceHint::Freeform,
-        })
-        .collect())
-}
-
 /// A spinner on stderr while a long step runs (hidden when stderr is not a terminal).
 fn spinner(message: &str) -> indicatif::ProgressBar {
     let bar = if std::io::IsTerminal::is_terminal(&std::io::stderr())
@@ -113,10 +92,12 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         codec::encode(&mesh, &opts)
             .with_context(|| format!("cannot encode {}", args.input.display()))?
     } else {
-        let hints = if args.no_sidecar {
-            Vec::new()
-        } else {
-            sidecar_hints(&args.input, &mesh)?
+        let hints = match sidecar_hints(&args.input, &mesh)? {
+            Some((side, hints)) if !args.no_sidecar => {
+                println!("using surface types from {}", side.display());
+                hints
+            }
+            _ => Vec::new(),
         };
         let mut opts = ModelEncodeOptions {
             quantization_bits: args.bits,

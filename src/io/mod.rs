@@ -312,6 +312,14 @@ pub(crate) mod test_support {
         }
         found
     }
+
+    /// Reads a corpus mesh (by path relative to the corpus) with the real readers; `None`
+    /// (with a message) when the corpus is missing.
+    pub fn load_corpus(rel: &str) -> Option<crate::mesh::ControlMesh> {
+        let dir = corpus_dir()?;
+        let (mesh, _) = super::read_mesh(&dir.join(rel)).expect("corpus mesh reads");
+        Some(mesh)
+    }
 }
 
 #[cfg(test)]

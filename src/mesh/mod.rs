@@ -155,6 +155,28 @@ impl ControlMesh {
         self.sharp_edges.contains(&edge_key(a, b))
     }
 
+    /// Flags every edge shared by faces of two different groups sharp: the CAD-face
+    /// boundaries of a tessellated B-rep are exactly the creases of its control mesh.
+    pub fn sharpen_group_boundaries(&mut self) {
+        let mut first: std::collections::BTreeMap<(u32, u32), u32> = Default::default();
+        let mut sharp = Vec::new();
+        for f in 0..self.face_count() {
+            let g = self.face_groups[f];
+            let face = self.face(f);
+            for k in 0..face.len() {
+                let e = edge_key(face[k], face[(k + 1) % face.len()]);
+                match first.get(&e) {
+                    Some(&h) if h != g => sharp.push(e),
+                    Some(_) => {}
+                    None => {
+                        first.insert(e, g);
+                    }
+                }
+            }
+        }
+        self.sharp_edges.extend(sharp);
+    }
+
     /// True when every face is a triangle.
     pub fn is_triangle_mesh(&self) -> bool {
         self.faces().all(|f| f.len() == 3)
@@ -266,6 +288,19 @@ mod tests {
         assert!(!m.is_triangle_mesh());
         assert!((m.diagonal() - 2f64.sqrt()).abs() < 1e-12);
         m.validate().unwrap();
+    }
+
+    #[test]
+    fn group_boundaries_become_sharp() {
+        let mut m = quad();
+        m.push_vertex(DVec3::new(2., 0., 0.));
+        let g = m.push_group("face_2", PatchKind::Closed);
+        m.push_face(&[1, 4, 2], g);
+        m.sharpen_group_boundaries();
+        assert_eq!(
+            m.sharp_edges.iter().copied().collect::<Vec<_>>(),
+            vec![(1, 2)]
+        );
     }
 
     #[test]
