@@ -302,6 +302,16 @@ pub fn info(args: &InfoArgs) -> Result<()> {
             s.raw_bytes,
             s.stored_bytes as f64 * 8.0 / nv
         );
+        if s.name == "connectivity" && info.group_bits > 0.0 {
+            let group_bytes = info.group_bits / 8.0;
+            println!(
+                "    {:<12} {:>10.0} {:>10} {:>12.3}",
+                "of it groups",
+                group_bytes,
+                "",
+                info.group_bits / nv
+            );
+        }
     }
     println!(
         "  {:<14} {:>10} {:>10} {:>12.3}",

@@ -152,6 +152,9 @@ pub struct FileInfo {
     pub patch_kinds: Vec<PatchKind>,
     pub component_count: usize,
     pub label_count: usize,
+    /// Of the connectivity section, the bits that code face groups (information content of
+    /// the group symbols as decoded); the rest codes the Face Fixer labels.
+    pub group_bits: f64,
 }
 
 /// A decoded file.
@@ -270,6 +273,8 @@ struct ConnModels {
     groups: Vec<FreqModel>,
     prev: [usize; 2],
     prev_group: usize,
+    /// Bits spent on face groups while decoding (for `inspect`; not part of the format).
+    group_bits: f64,
 }
 
 impl ConnModels {
@@ -283,6 +288,7 @@ impl ConnModels {
             groups: vec![FreqModel::new(GROUP_SYMBOLS); 3 * (GROUP_SYMBOLS + 1)],
             prev: [LABEL_CONTEXT_NONE; 2],
             prev_group: GROUP_SYMBOLS,
+            group_bits: 0.0,
         }
     }
 
@@ -386,13 +392,15 @@ impl ConnModels {
         candidates: usize,
     ) -> Result<GroupSym> {
         let c = self.group_ctx(candidates);
-        let s = self.groups[c].decode(dec)?;
+        let (s, cost) = self.groups[c].decode_with_cost(dec)?;
+        self.group_bits += cost;
         self.prev_group = s;
         Ok(match s {
             i if i < GROUP_CANDIDATES => GroupSym::Candidate(i as u8),
             GROUP_CANDIDATES => GroupSym::New,
             _ => {
                 let b = bits_for(u64::from(seen));
+                self.group_bits += f64::from(b);
                 let hi = dec.decode_direct(b.saturating_sub(16))?;
                 let lo = dec.decode_direct(b.min(16))?;
                 let id = (hi << 16.min(b)) | lo;
@@ -1435,6 +1443,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         patch_kinds,
         component_count: rb.faces.iter().filter(|f| f.start).count(),
         label_count: labels.len(),
+        group_bits: models.group_bits,
     };
     Ok((Decoded { header, mesh }, info))
 }

@@ -348,6 +348,12 @@ impl FreqModel {
     }
 
     pub fn decode(&mut self, dec: &mut RangeDecoder) -> Result<usize> {
+        self.decode_with_cost(dec).map(|(s, _)| s)
+    }
+
+    /// Decodes a symbol and also returns its information content in bits under the model
+    /// as it was before the update (what the symbol cost in the stream).
+    pub fn decode_with_cost(&mut self, dec: &mut RangeDecoder) -> Result<(usize, f64)> {
         let (v, r) = dec.decode_freq(self.total);
         let mut cum = 0;
         let mut s = 0;
@@ -356,8 +362,9 @@ impl FreqModel {
             s += 1;
         }
         dec.consume(r, cum, self.counts[s])?;
+        let cost = self.cost(s);
         self.update(s);
-        Ok(s)
+        Ok((s, cost))
     }
 
     pub fn cost(&self, s: usize) -> f64 {

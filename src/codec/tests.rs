@@ -437,3 +437,21 @@ proptest! {
         let _ = decode(&framed, &Limits { verify_checksums: false, ..Limits::default() });
     }
 }
+
+#[test]
+fn inspect_accounts_for_group_bits() {
+    let single = inspect(&encode(&cube(), &opts()).unwrap(), &Limits::default()).unwrap();
+    assert_eq!(single.group_bits, 0.0, "one group costs nothing");
+    let part = cad_part();
+    assert!(part.groups.len() > 1);
+    let bytes = encode(&part, &opts()).unwrap();
+    let info = inspect(&bytes, &Limits::default()).unwrap();
+    let conn = info
+        .sections
+        .iter()
+        .find(|s| s.name == "connectivity")
+        .unwrap();
+    assert!(info.group_bits > 0.0);
+    // The group symbols are part of the connectivity section's range-coded stream.
+    assert!(info.group_bits / 8.0 < conn.stored_bytes as f64, "{info:?}");
+}
