@@ -322,9 +322,7 @@ impl ConnModels {
             Label::M { i, k, l } => {
                 self.m_depth.encode(enc, i);
                 self.m_length.encode(enc, l - 2);
-                let b = bits_for(u64::from(l));
-                enc.encode_direct(k >> 16.min(b), b.saturating_sub(16));
-                enc.encode_direct(k & 0xFFFF, b.min(16));
+                encode_below(enc, k, l);
             }
             _ => {}
         }
@@ -348,10 +346,7 @@ impl ConnModels {
             _ => {
                 let i = self.m_depth.decode(dec, max_degree, "merge_depth")?;
                 let l = 2 + self.m_length.decode(dec, max_extra, "merge_length")?;
-                let b = bits_for(u64::from(l));
-                let hi = dec.decode_direct(b.saturating_sub(16))?;
-                let lo = dec.decode_direct(b.min(16))?;
-                let k = (hi << 16.min(b)) | lo;
+                let k = decode_below(dec, l)?;
                 if k >= l {
                     return Err(Error::format(
                         "connectivity",
@@ -379,9 +374,7 @@ impl ConnModels {
         self.groups[c].encode(enc, s);
         self.prev_group = s;
         if let GroupSym::Explicit(id) = g {
-            let b = bits_for(u64::from(seen));
-            enc.encode_direct(id >> 16.min(b), b.saturating_sub(16));
-            enc.encode_direct(id & 0xFFFF, b.min(16));
+            encode_below(enc, id, seen);
         }
     }
 
@@ -399,11 +392,8 @@ impl ConnModels {
             i if i < GROUP_CANDIDATES => GroupSym::Candidate(i as u8),
             GROUP_CANDIDATES => GroupSym::New,
             _ => {
-                let b = bits_for(u64::from(seen));
-                self.group_bits += f64::from(b);
-                let hi = dec.decode_direct(b.saturating_sub(16))?;
-                let lo = dec.decode_direct(b.min(16))?;
-                let id = (hi << 16.min(b)) | lo;
+                self.group_bits += f64::from(bits_for(u64::from(seen)));
+                let id = decode_below(dec, seen)?;
                 if id >= seen {
                     return Err(Error::format(
                         "connectivity",
@@ -415,6 +405,23 @@ impl ConnModels {
             }
         })
     }
+}
+
+/// A value below `bound` in `bits_for(bound)` direct bits, high part (above 16 bits) first
+/// (spec §4.3; used for merge offsets, §6.2, and explicit group ids, §6.5).
+fn encode_below(enc: &mut RangeEncoder, v: u32, bound: u32) {
+    let b = bits_for(u64::from(bound));
+    enc.encode_direct(v >> 16.min(b), b.saturating_sub(16));
+    enc.encode_direct(v & 0xFFFF, b.min(16));
+}
+
+/// Reads what [`encode_below`] wrote; the caller checks the value against its bound and
+/// names the field.
+fn decode_below(dec: &mut RangeDecoder, bound: u32) -> Result<u32> {
+    let b = bits_for(u64::from(bound));
+    let hi = dec.decode_direct(b.saturating_sub(16))?;
+    let lo = dec.decode_direct(b.min(16))?;
+    Ok((hi << 16.min(b)) | lo)
 }
 
 /// Candidate groups of mesh face `f` (spec §6.4): the distinct groups of the mesh faces
