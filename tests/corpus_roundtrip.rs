@@ -4,18 +4,13 @@
 //! The OBJ/OFF readers here are deliberately minimal (v / f / g only) and local to this test:
 //! the real readers live in `scode::io`.
 
+mod common;
+use common::corpus_dir;
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use scode::codec::{decode, encode_with_map, inspect, EncodeOptions, Limits};
 use scode::mesh::{edge_key, BoundarySurface, ControlMesh, PatchKind};
-
-fn corpus_dir() -> Option<PathBuf> {
-    let local = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus");
-    [local, PathBuf::from("/work/shared/corpus")]
-        .into_iter()
-        .find(|p| p.is_dir())
-}
 
 /// Marks groups whose CAD surface is a plane (crude scan of the `.faces.json` sidecar:
 /// `"tag": N` followed by `"type": "Plane"`), sharp edges between groups, and corners where

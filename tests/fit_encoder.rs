@@ -1,19 +1,14 @@
 //! End-to-end tests of the fitting encoder on real CAD models: fit, encode, decode, and
 //! check what the decoder rebuilds (tolerance, watertightness, size against raw mode).
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::corpus_dir;
+use std::path::Path;
 
 use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::metrics::{hausdorff, DistanceOptions, SampleCount};
 use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 use scode::subdiv::{subdivide, SubdivOptions};
-
-fn corpus_dir() -> Option<PathBuf> {
-    let local = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus");
-    [local, PathBuf::from("/work/shared/corpus")]
-        .into_iter()
-        .find(|p| p.is_dir())
-}
 
 /// Every edge of the decoded triangle mesh has exactly two faces (the inputs are closed).
 fn assert_watertight(mesh: &scode::ControlMesh, name: &str) {

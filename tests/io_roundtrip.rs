@@ -1,22 +1,10 @@
 //! End-to-end: corpus models through every writer and back via the public `scode::io` API.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::corpus_dir;
+use std::path::Path;
 
 use scode::io::{read_mesh, read_mesh_bytes, write_mesh, write_mesh_to, MeshFormat};
-
-fn corpus_dir() -> Option<PathBuf> {
-    let candidates = [
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus"),
-        PathBuf::from("/work/shared/corpus"),
-    ];
-    let found = candidates
-        .into_iter()
-        .find(|p| p.join("MANIFEST.md").is_file());
-    if found.is_none() {
-        eprintln!("corpus not found; skipping");
-    }
-    found
-}
 
 #[test]
 fn corpus_models_survive_every_format() {

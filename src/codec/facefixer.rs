@@ -589,18 +589,10 @@ mod tests {
     }
 
     fn torus(n: u32, m: u32) -> Vec<Vec<u32>> {
-        let mut f = Vec::new();
-        for i in 0..n {
-            for j in 0..m {
-                f.push(vec![
-                    i * m + j,
-                    ((i + 1) % n) * m + j,
-                    ((i + 1) % n) * m + (j + 1) % m,
-                    i * m + (j + 1) % m,
-                ]);
-            }
-        }
-        f
+        crate::codec::samples::torus(n, m)
+            .faces()
+            .map(<[u32]>::to_vec)
+            .collect()
     }
 
     /// Encodes, rebuilds, and checks the rebuilt faces against the input (through the

@@ -407,6 +407,12 @@ impl ConnModels {
     }
 }
 
+/// The edges in label order (spec §7): the one edge each label after the first owns, as the
+/// half-edge the traversal recorded for it.
+fn label_edges(label_edge: &[u32]) -> Vec<u32> {
+    label_edge.iter().copied().filter(|&h| h != NONE).collect()
+}
+
 /// A value below `bound` in `bits_for(bound)` direct bits, high part (above 16 bits) first
 /// (spec §4.3; used for merge offsets, §6.2, and explicit group ids, §6.5).
 fn encode_below(enc: &mut RangeEncoder, v: u32, bound: u32) {
@@ -692,12 +698,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let patches = encode_patches(&groups_new_order, &quant)?;
 
     // Creases section.
-    let edges: Vec<u32> = rb
-        .label_edge
-        .iter()
-        .copied()
-        .filter(|&h| h != NONE)
-        .collect();
+    let edges = label_edges(&rb.label_edge);
     let mut sharp = vec![false; edges.len()];
     let mut matched = BTreeSet::new();
     for (j, &h) in edges.iter().enumerate() {
@@ -1308,12 +1309,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     };
 
     // Creases.
-    let edges: Vec<u32> = rb
-        .label_edge
-        .iter()
-        .copied()
-        .filter(|&h| h != NONE)
-        .collect();
+    let edges = label_edges(&rb.label_edge);
     let mut sharp = vec![false; edges.len()];
     let mut corner = vec![false; coded_count];
     {

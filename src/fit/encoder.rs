@@ -220,6 +220,31 @@ fn classify_group(
     kind.unwrap_or(PatchKind::Closed)
 }
 
+/// The surface a group's collapses must keep facing: the analytic one for boundary patches
+/// (a plane's normal fitted to the group's vertices), none for closed patches.
+fn collapse_surface(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    group: u32,
+    kind: &PatchKind,
+) -> SurfaceRef {
+    match *kind {
+        PatchKind::Closed => SurfaceRef::Free,
+        PatchKind::Boundary(BoundarySurface::Plane) => {
+            let (pts, _) = group_points_normals(mesh, tris, group);
+            let normal = fit_plane(&pts)
+                .and_then(|f| match f.primitive {
+                    Primitive::Plane { normal, .. } => Some(normal),
+                    _ => None,
+                })
+                .unwrap_or(DVec3::Z);
+            SurfaceRef::Plane { normal }
+        }
+        PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => SurfaceRef::Cylinder { axis },
+        PatchKind::Boundary(BoundarySurface::Cone { axis }) => SurfaceRef::Cone { axis },
+    }
+}
+
 /// Cylindrical coordinates about an axis: (theta, h, r).
 fn cyl_coords(axis: &Axis, p: DVec3) -> (f64, f64, f64) {
     let (e1, e2) = axis.direction.any_orthonormal_pair();
@@ -523,6 +548,7 @@ fn build_topology(
     tris: &[[u32; 3]],
     net: &CurveNetwork,
     plans: &[GroupPlan],
+    surfaces: &[SurfaceRef],
     chain_tol: &[f64],
     tol: f64,
     chain_loop_len: &[usize],
@@ -554,29 +580,14 @@ fn build_topology(
     }
     let rules: Vec<GroupRule> = plans
         .iter()
-        .enumerate()
-        .map(|(g, plan)| {
-            let surface = match plan.kind {
-                PatchKind::Closed => SurfaceRef::Free,
-                PatchKind::Boundary(BoundarySurface::Plane) => {
-                    let (pts, _) = group_points_normals(mesh, tris, g as u32);
-                    let normal = fit_plane(&pts)
-                        .and_then(|f| match f.primitive {
-                            Primitive::Plane { normal, .. } => Some(normal),
-                            _ => None,
-                        })
-                        .unwrap_or(DVec3::Z);
-                    SurfaceRef::Plane { normal }
-                }
-                PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => {
-                    SurfaceRef::Cylinder { axis }
-                }
-                PatchKind::Boundary(BoundarySurface::Cone { axis }) => SurfaceRef::Cone { axis },
-            };
+        .zip(surfaces)
+        .map(|(plan, &surface)| {
+            let closed = matches!(plan.kind, PatchKind::Closed);
             GroupRule {
-                remove_all_interior: !matches!(plan.kind, PatchKind::Closed),
+                remove_all_interior: !closed,
                 max_cost: (plan.cost_factor * tol).powi(2),
-                surface,
+                // A boundary patch turned closed is checked like any freeform face.
+                surface: if closed { SurfaceRef::Free } else { surface },
                 max_edge_angle: 80f64.to_radians(),
             }
         })
@@ -877,6 +888,12 @@ pub fn fit_model(
             }
         })
         .collect();
+    // What collapses must respect per group (plane normals are fitted once here).
+    let surfaces: Vec<SurfaceRef> = plans
+        .iter()
+        .enumerate()
+        .map(|(g, plan)| collapse_surface(&mesh, &tris, g as u32, &plan.kind))
+        .collect();
     report.timings.push(("faces", t.elapsed().as_secs_f64()));
     // 2. Curve network.
     t = Instant::now();
@@ -935,8 +952,16 @@ pub fn fit_model(
     for round in 0..opts.max_rounds.max(1) {
         report.rounds = round + 1;
         t = Instant::now();
-        let mut built =
-            build_topology(&mesh, &tris, &net, &plans, &chain_tol, tol, &chain_loop_len);
+        let mut built = build_topology(
+            &mesh,
+            &tris,
+            &net,
+            &plans,
+            &surfaces,
+            &chain_tol,
+            tol,
+            &chain_loop_len,
+        );
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
         fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)?;

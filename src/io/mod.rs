@@ -71,6 +71,16 @@ pub enum MeshFormat {
 const SUPPORTED_EXTENSIONS: &str = ".obj, .ply, .stl, .glb, .gltf, .off";
 
 impl MeshFormat {
+    /// Every format, in a fixed order.
+    pub const ALL: [MeshFormat; 6] = [
+        MeshFormat::Obj,
+        MeshFormat::Off,
+        MeshFormat::Ply,
+        MeshFormat::Stl,
+        MeshFormat::Glb,
+        MeshFormat::Gltf,
+    ];
+
     /// Picks the format from the file extension (case-insensitive).
     pub fn from_path(path: &Path) -> Result<MeshFormat> {
         let ext = path
@@ -356,14 +366,7 @@ mod tests {
 
     #[test]
     fn empty_input_is_an_error_for_every_format() {
-        for format in [
-            MeshFormat::Obj,
-            MeshFormat::Off,
-            MeshFormat::Ply,
-            MeshFormat::Stl,
-            MeshFormat::Glb,
-            MeshFormat::Gltf,
-        ] {
+        for format in MeshFormat::ALL {
             let err = read_mesh_bytes(b"", format, Path::new("empty.x")).unwrap_err();
             assert!(matches!(err, Error::Input { .. }), "{format}: {err}");
         }
@@ -394,14 +397,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 33) as usize
         };
-        for format in [
-            MeshFormat::Obj,
-            MeshFormat::Off,
-            MeshFormat::Ply,
-            MeshFormat::Stl,
-            MeshFormat::Glb,
-            MeshFormat::Gltf,
-        ] {
+        for format in MeshFormat::ALL {
             let mut clean = Vec::new();
             write_mesh_to(&mut clean, format, &mesh, None).unwrap();
             read_mesh_bytes(&clean, format, Path::new("clean")).unwrap();
