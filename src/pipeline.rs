@@ -10,6 +10,9 @@ use crate::fit::encoder::{fit_model, FitOptions, FitReport, SurfaceHint};
 use crate::io::faces_json::{self, SurfaceType};
 use crate::mesh::ControlMesh;
 
+/// Fitted control meshes are never quantised coarser than this.
+const MIN_FITTED_BITS: u8 = 6;
+
 /// Options of [`encode_fitted`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModelEncodeOptions {
@@ -84,18 +87,41 @@ pub fn encode_fitted(
     let bits = opts
         .quantization_bits
         .unwrap_or_else(|| bits_for_tolerance(extent, tol, 0.25));
-    let encode_opts = |level: u8| EncodeOptions {
-        quantization_bits: bits,
+    let mut fit_opts = opts.fit.clone();
+    if opts.quantization_bits.is_some() {
+        // The caller chose the precision: keep it.
+        fit_opts.max_coarser_bits = 0;
+    }
+    let encode_opts = |level: u8, coarser: u8| EncodeOptions {
+        quantization_bits: bits.saturating_sub(coarser).max(MIN_FITTED_BITS.min(bits)),
         content: Content::ControlMesh {
             default_level: level,
         },
         store_group_names: opts.store_group_names,
     };
-    let mut reconstruct = |control: &ControlMesh, level: u8| -> Result<ControlMesh> {
-        let bytes = codec::encode(control, &encode_opts(level))?;
-        Ok(codec::decode(&bytes, &Limits::default())?.mesh)
+    // The codec numbers groups in its own traversal order; the fit attributes errors to
+    // groups by the input's numbering, so give the decoded mesh the input's group order.
+    let mut reconstruct = |control: &ControlMesh, level: u8, coarser: u8| -> Result<ControlMesh> {
+        let (bytes, map) = codec::encode_with_map(control, &encode_opts(level, coarser))?;
+        let mut mesh = codec::decode(&bytes, &Limits::default())?.mesh;
+        let mut old_of_new = vec![0u32; mesh.groups.len()];
+        for (old, &new) in map.group.iter().enumerate() {
+            old_of_new[new as usize] = old as u32;
+        }
+        for g in &mut mesh.face_groups {
+            *g = old_of_new[*g as usize];
+        }
+        let mut groups = mesh.groups.clone();
+        for (old, &new) in map.group.iter().enumerate() {
+            groups[old] = mesh.groups[new as usize].clone();
+        }
+        mesh.groups = groups;
+        Ok(mesh)
     };
-    let outcome = fit_model(input, hints, &opts.fit, &mut reconstruct)?;
-    let bytes = codec::encode(&outcome.control, &encode_opts(outcome.default_level))?;
+    let outcome = fit_model(input, hints, &fit_opts, &mut reconstruct)?;
+    let bytes = codec::encode(
+        &outcome.control,
+        &encode_opts(outcome.default_level, outcome.coarser_bits),
+    )?;
     Ok((bytes, outcome.report))
 }

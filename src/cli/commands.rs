@@ -6,6 +6,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::io::{self, ReadReport};
+use scode::mesh::{BoundarySurface, PatchKind};
 use scode::subdiv::{self, SubdivOptions};
 use scode::ControlMesh;
 
@@ -321,8 +322,32 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         info.total_bytes as f64 * 8.0 / nv
     );
     if args.groups {
-        for (i, name) in info.group_names.iter().enumerate() {
-            println!("  group {i}: {name}");
+        let decoded = codec::decode(&bytes, &Limits::default())?;
+        let mesh = &decoded.mesh;
+        let mut faces_of = vec![0usize; mesh.groups.len()];
+        for &g in &mesh.face_groups {
+            faces_of[g as usize] += 1;
+        }
+        for (i, group) in mesh.groups.iter().enumerate() {
+            let patch = match group.patch {
+                PatchKind::Closed => "closed patch".to_string(),
+                PatchKind::Boundary(BoundarySurface::Plane) => "plane patch".to_string(),
+                PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => {
+                    format!("cylinder patch, axis {}", fmt_axis(&axis))
+                }
+                PatchKind::Boundary(BoundarySurface::Cone { axis }) => {
+                    format!("cone patch, apex/axis {}", fmt_axis(&axis))
+                }
+            };
+            println!(
+                "  group {i}: {:<24} {:>5} control faces, {patch}",
+                if group.name.is_empty() {
+                    "(unnamed)"
+                } else {
+                    &group.name
+                },
+                faces_of[i]
+            );
         }
     }
     if let Some(reference) = &args.against {
@@ -421,4 +446,12 @@ fn print_mesh_summary(mesh: &ControlMesh, list_groups: bool) {
             );
         }
     }
+}
+
+fn fmt_axis(axis: &scode::mesh::Axis) -> String {
+    let (o, d) = (axis.origin, axis.direction);
+    format!(
+        "({:.4}, {:.4}, {:.4}) + t ({:.4}, {:.4}, {:.4})",
+        o.x, o.y, o.z, d.x, d.y, d.z
+    )
 }

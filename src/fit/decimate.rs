@@ -206,6 +206,14 @@ impl Ord for Candidate {
     }
 }
 
+/// Reused neighbour lists, so the inner loop does not allocate.
+#[derive(Default)]
+struct Scratch {
+    nu: Vec<u32>,
+    nv: Vec<u32>,
+    ring: Vec<u32>,
+}
+
 struct State<'a> {
     input: &'a DecimateInput<'a>,
     tris: Vec<[u32; 3]>,
@@ -214,6 +222,9 @@ struct State<'a> {
     quadric: Vec<Quadric>,
     removed: Vec<bool>,
     stamp: Vec<u32>,
+    /// On an edge with a single face. Collapses that pass the link condition never change
+    /// this for surviving vertices, so it is computed once.
+    open_boundary: Vec<bool>,
     min_area2: f64,
 }
 
@@ -255,6 +266,25 @@ impl<'a> State<'a> {
             }
         }
         let mean_area = total_area / input.triangles.len().max(1) as f64;
+        let mut edges: Vec<(u32, u32)> = input
+            .triangles
+            .iter()
+            .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+            .collect();
+        edges.sort_unstable();
+        let mut open_boundary = vec![false; nv];
+        let mut i = 0;
+        while i < edges.len() {
+            let mut j = i + 1;
+            while j < edges.len() && edges[j] == edges[i] {
+                j += 1;
+            }
+            if j - i == 1 {
+                open_boundary[edges[i].0 as usize] = true;
+                open_boundary[edges[i].1 as usize] = true;
+            }
+            i = j;
+        }
         State {
             input,
             tris: input.triangles.to_vec(),
@@ -263,6 +293,7 @@ impl<'a> State<'a> {
             quadric,
             removed: vec![false; nv],
             stamp: vec![0; nv],
+            open_boundary,
             // Doubled-area floor below which a triangle counts as degenerate.
             min_area2: (2.0 * mean_area * 1e-8).powi(2),
         }
@@ -272,46 +303,48 @@ impl<'a> State<'a> {
         self.input.positions[v as usize]
     }
 
-    fn neighbours(&self, u: u32) -> Vec<u32> {
-        let mut n: Vec<u32> = self.vfaces[u as usize]
-            .iter()
-            .flat_map(|&f| self.tris[f as usize])
-            .filter(|&w| w != u)
-            .collect();
-        n.sort_unstable();
-        n.dedup();
-        n
-    }
-
-    /// Faces containing both `u` and `v`.
-    fn edge_faces(&self, u: u32, v: u32) -> Vec<u32> {
-        self.vfaces[u as usize]
-            .iter()
-            .copied()
-            .filter(|&f| self.tris[f as usize].contains(&v))
-            .collect()
-    }
-
-    /// A group-boundary edge: its faces are in different groups, or it has a single face.
-    fn is_group_boundary(&self, u: u32, v: u32) -> bool {
-        let f = self.edge_faces(u, v);
-        match f.as_slice() {
-            [a, b] => self.input.face_groups[*a as usize] != self.input.face_groups[*b as usize],
-            _ => true,
+    /// The vertices sharing a face with `u`, sorted, into `out`.
+    fn neighbours_into(&self, u: u32, out: &mut Vec<u32>) {
+        out.clear();
+        for &f in &self.vfaces[u as usize] {
+            out.extend(self.tris[f as usize].iter().filter(|&&w| w != u));
         }
+        out.sort_unstable();
+        out.dedup();
     }
 
-    /// Cost class and cost of collapsing `u` onto `v`, or `None` when not allowed.
-    fn evaluate(&self, u: u32, v: u32) -> Option<(u8, f64)> {
+    /// Number of faces containing both `u` and `v`, and the first two of them.
+    fn edge_faces(&self, u: u32, v: u32) -> (usize, [u32; 2]) {
+        let mut count = 0;
+        let mut first = [u32::MAX; 2];
+        for &f in &self.vfaces[u as usize] {
+            if self.tris[f as usize].contains(&v) {
+                if count < 2 {
+                    first[count] = f;
+                }
+                count += 1;
+            }
+        }
+        (count, first)
+    }
+
+    /// Cost class and cost of collapsing `u` onto `v`, or `None` when not allowed. `nu` are
+    /// `u`'s neighbours (sorted); `scratch` is reused for `v`'s.
+    fn evaluate(&self, u: u32, v: u32, nu: &[u32], scratch: &mut Vec<u32>) -> Option<(u8, f64)> {
         let role = self.input.roles[u as usize];
-        let edge = self.edge_faces(u, v);
-        if edge.is_empty() || edge.len() > 2 {
+        let (edge_len, edge) = self.edge_faces(u, v);
+        if edge_len == 0 || edge_len > 2 {
             return None;
         }
         let class = match role {
             VertexRole::Keep => return None,
             VertexRole::ChainDrop => {
-                if !self.is_group_boundary(u, v) {
+                // Only along a group boundary: the edge's faces are in different groups, or
+                // it has a single face.
+                let group_boundary = edge_len == 1
+                    || self.input.face_groups[edge[0] as usize]
+                        != self.input.face_groups[edge[1] as usize];
+                if !group_boundary {
                     return None;
                 }
                 0
@@ -327,14 +360,16 @@ impl<'a> State<'a> {
         };
         // Link condition: the common neighbours of u and v are exactly the vertices
         // opposite the edge.
-        let nu = self.neighbours(u);
-        let nv = self.neighbours(v);
-        let common = nu.iter().filter(|w| nv.binary_search(w).is_ok()).count();
-        if common != edge.len() {
+        self.neighbours_into(v, scratch);
+        let common = scratch
+            .iter()
+            .filter(|w| nu.binary_search(w).is_ok())
+            .count();
+        if common != edge_len {
             return None;
         }
         // A vertex on the open boundary must not be pulled onto an interior edge's end.
-        if edge.len() == 2 && self.on_open_boundary(u) && self.on_open_boundary(v) {
+        if edge_len == 2 && self.open_boundary[u as usize] && self.open_boundary[v as usize] {
             return None;
         }
         let pv = self.pos(v);
@@ -395,19 +430,14 @@ impl<'a> State<'a> {
         Some((class, cost))
     }
 
-    fn on_open_boundary(&self, u: u32) -> bool {
-        self.neighbours(u)
-            .iter()
-            .any(|&w| self.edge_faces(u, w).len() == 1)
-    }
-
-    fn best_candidate(&self, u: u32) -> Option<Candidate> {
+    fn best_candidate(&self, u: u32, scratch: &mut Scratch) -> Option<Candidate> {
         if self.removed[u as usize] || self.input.roles[u as usize] == VertexRole::Keep {
             return None;
         }
         let mut best: Option<Candidate> = None;
-        for v in self.neighbours(u) {
-            if let Some((class, cost)) = self.evaluate(u, v) {
+        self.neighbours_into(u, &mut scratch.nu);
+        for &v in &scratch.nu {
+            if let Some((class, cost)) = self.evaluate(u, v, &scratch.nu, &mut scratch.nv) {
                 let c = Candidate {
                     class,
                     cost,
@@ -456,8 +486,9 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
     let mut st = State::new(input);
     let nv = input.positions.len();
     let mut heap = BinaryHeap::new();
+    let mut scratch = Scratch::default();
     for u in 0..nv as u32 {
-        if let Some(c) = st.best_candidate(u) {
+        if let Some(c) = st.best_candidate(u, &mut scratch) {
             heap.push(c);
         }
     }
@@ -466,11 +497,12 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
             continue;
         }
         // Re-validate: the neighbourhood may have changed since the entry was pushed.
-        match st.evaluate(c.u, c.v) {
+        st.neighbours_into(c.u, &mut scratch.nu);
+        match st.evaluate(c.u, c.v, &scratch.nu, &mut scratch.nv) {
             Some((class, cost)) if class == c.class && cost <= c.cost * (1.0 + 1e-12) + 1e-300 => {}
             _ => {
                 st.stamp[c.u as usize] += 1;
-                if let Some(n) = st.best_candidate(c.u) {
+                if let Some(n) = st.best_candidate(c.u, &mut scratch) {
                     heap.push(n);
                 }
                 continue;
@@ -479,17 +511,19 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
         st.collapse(c.u, c.v);
         // The survivor's ring (which now includes u's old ring) and the survivor itself
         // see new neighbourhoods: their best collapses and link conditions changed.
-        let mut ring = st.neighbours(c.v);
+        let mut ring = std::mem::take(&mut scratch.ring);
+        st.neighbours_into(c.v, &mut ring);
         ring.push(c.v);
-        for w in ring {
+        for &w in &ring {
             if st.removed[w as usize] {
                 continue;
             }
             st.stamp[w as usize] += 1;
-            if let Some(n) = st.best_candidate(w) {
+            if let Some(n) = st.best_candidate(w, &mut scratch) {
                 heap.push(n);
             }
         }
+        scratch.ring = ring;
     }
     let mut triangles = Vec::new();
     let mut face_groups = Vec::new();

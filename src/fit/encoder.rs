@@ -36,7 +36,9 @@ use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
 use super::segment::{segment, SegmentOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, PatchKind};
-use crate::metrics::{point_distances, sample_surface, SampleCount, TriangleSurface};
+use crate::metrics::{
+    closest_points, point_distances, sample_surface, SampleCount, SurfaceSample, TriangleSurface,
+};
 use crate::subdiv::{subdivide, Refinement, SubdivOptions};
 
 /// What the input says a group's surface is (a STEP face type or a sidecar entry).
@@ -66,6 +68,9 @@ pub struct FitOptions {
     pub max_rounds: usize,
     /// Surface samples per direction for the error measurement.
     pub error_samples: usize,
+    /// After the fit, try up to this many bits coarser quantisation than the default and
+    /// keep the coarsest that still meets the tolerance (0: keep the default).
+    pub max_coarser_bits: u8,
 }
 
 impl Default for FitOptions {
@@ -76,6 +81,7 @@ impl Default for FitOptions {
             sharp_angle_deg: 30.0,
             max_rounds: 8,
             error_samples: 60_000,
+            max_coarser_bits: 3,
         }
     }
 }
@@ -116,6 +122,9 @@ pub struct FitReport {
 pub struct FitOutcome {
     /// The control mesh to store (before quantisation).
     pub control: ControlMesh,
+    /// How many bits coarser than the caller's default quantisation still meets the
+    /// tolerance (the `reconstruct` argument that was measured last within it).
+    pub coarser_bits: u8,
     pub default_level: u8,
     pub report: FitReport,
 }
@@ -298,6 +307,7 @@ fn chain_controls(
     points: &[DVec3],
     frame: Option<Axis>,
     tol: f64,
+    max_step: f64,
     min_interior: usize,
 ) -> Vec<usize> {
     let n = points.len();
@@ -305,7 +315,9 @@ fn chain_controls(
         None => douglas_peucker(points, tol),
         Some(axis) => {
             // Unwrapped cylindrical coordinates, scaled to lengths, then DP in that space,
-            // plus at most 60 degrees between consecutive control points.
+            // plus at most `max_step` radians between consecutive control points (a plane's
+            // straight interior edges leave an arc's end at up to half that angle from its
+            // chord, so coarse arcs let plane triangles cut across a hole).
             let mut prev = None;
             let mut unwrapped = 0.0;
             let param: Vec<DVec3> = points
@@ -332,7 +344,6 @@ fn chain_controls(
                 .map(|q| DVec3::new(q.x * rmax, q.y, q.z))
                 .collect();
             let mut k = douglas_peucker(&scaled, tol);
-            let max_step = 60f64.to_radians();
             let mut out = vec![0];
             for w in k.windows(2) {
                 let (a, b) = (w[0], w[1]);
@@ -550,6 +561,7 @@ fn build_topology(
     plans: &[GroupPlan],
     surfaces: &[SurfaceRef],
     chain_tol: &[f64],
+    chain_step: &[f64],
     tol: f64,
     chain_loop_len: &[usize],
 ) -> Built {
@@ -566,7 +578,7 @@ fn build_topology(
             .collect();
         let frame = chain_frame(&chain.groups, plans);
         let min_interior = if chain_loop_len[ci] < 3 { 2 } else { 0 };
-        let keep = chain_controls(&points, frame, chain_tol[ci], min_interior);
+        let keep = chain_controls(&points, frame, chain_tol[ci], chain_step[ci], min_interior);
         for (i, &v) in chain.vertices.iter().enumerate() {
             if roles[v as usize] == VertexRole::Keep {
                 continue;
@@ -819,14 +831,102 @@ fn fit_geometry(
     Ok(())
 }
 
+/// Error of a decoded surface against the input, measured both ways.
+struct Measurement {
+    error: FitError,
+    /// Per input group: largest excess over the chord allowance, where, and which way.
+    group_excess: Vec<(f64, DVec3, &'static str)>,
+}
+
+/// Measures decoded surfaces against one input: its samples, BVH and chord allowance are
+/// built once and reused by every round.
+struct ErrorMeter<'a> {
+    mesh: &'a ControlMesh,
+    input_samples: Vec<SurfaceSample>,
+    input_surface: &'a TriangleSurface,
+    chord: &'a [f64],
+    error_samples: usize,
+}
+
+impl ErrorMeter<'_> {
+    /// `decoded` is the control mesh as the decoder sees it, with the input's group order.
+    fn measure(&self, decoded: &ControlMesh, level: u8) -> Result<Measurement> {
+        let (surface_mesh, _) = subdivide(
+            decoded,
+            u32::from(level),
+            &SubdivOptions {
+                limit: true,
+                ..Default::default()
+            },
+        )?;
+        let s_tris: Vec<[u32; 3]> = surface_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
+        let s_surface = TriangleSurface::new(surface_mesh.positions.clone(), s_tris.clone())?;
+        let in_points: Vec<DVec3> = self.input_samples.iter().map(|s| s.point).collect();
+        let d_in = point_distances(&in_points, &s_surface);
+        let s_samples = sample_surface(
+            &surface_mesh.positions,
+            &s_tris,
+            SampleCount::Total(self.error_samples),
+            true,
+            0x5C0D_E000_0000_0002,
+        );
+        let out_points: Vec<DVec3> = s_samples.iter().map(|s| s.point).collect();
+        let out_hits = closest_points(&out_points, self.input_surface);
+        let stats = |d: &mut dyn Iterator<Item = f64>| -> (f64, f64, f64) {
+            let (mut max, mut sq, mut sum, mut n) = (0.0f64, 0.0, 0.0, 0usize);
+            for x in d {
+                max = max.max(x);
+                sq += x * x;
+                sum += x;
+                n += 1;
+            }
+            let n = n.max(1) as f64;
+            (max, (sq / n).sqrt(), sum / n)
+        };
+        let (max_in, rms_in, mean_in) = stats(&mut d_in.iter().copied());
+        let (max_out, rms_out, mean_out) = stats(&mut out_hits.iter().map(|h| h.distance));
+        // Excess over the tolerance, after allowing for the input's own chord error, and
+        // where it is.
+        let mut group_excess = vec![(0.0f64, DVec3::ZERO, "in"); self.mesh.groups.len()];
+        let mut worst = 0.0f64;
+        for (s, &d) in self.input_samples.iter().zip(&d_in) {
+            let e = d - self.chord[s.triangle as usize];
+            worst = worst.max(e);
+            let g = self.mesh.face_groups[s.triangle as usize] as usize;
+            if e > group_excess[g].0 {
+                group_excess[g] = (e, s.point, "input->decoded");
+            }
+        }
+        for (s, h) in s_samples.iter().zip(&out_hits) {
+            let e = h.distance - self.chord[h.triangle as usize];
+            worst = worst.max(e);
+            let g = surface_mesh.face_groups[s.triangle as usize] as usize;
+            if g < group_excess.len() && e > group_excess[g].0 {
+                group_excess[g] = (e, s.point, "decoded->input");
+            }
+        }
+        Ok(Measurement {
+            error: FitError {
+                max: max_in.max(max_out),
+                rms: rms_in.max(rms_out),
+                mean: mean_in.max(mean_out),
+                max_beyond_chord: worst,
+            },
+            group_excess,
+        })
+    }
+}
+
 /// Fits a control mesh to `input` (a triangle or polygon mesh; polygons are fan-split).
 /// `hints[g]` is what the input says group g's surface is (or `Unknown`). `reconstruct`
-/// must return the control mesh exactly as the decoder will see it (quantised).
+/// must return the control mesh exactly as the decoder will see it (quantised `coarser`
+/// bits coarser than the caller's default, stored for decode level `level`), with the
+/// input's group numbering: `reconstruct(control, level, coarser)`.
 pub fn fit_model(
     input: &ControlMesh,
     hints: &[SurfaceHint],
     opts: &FitOptions,
-    reconstruct: &mut dyn FnMut(&ControlMesh, u8) -> Result<ControlMesh>,
+    reconstruct: &mut dyn FnMut(&ControlMesh, u8, u8) -> Result<ControlMesh>,
 ) -> Result<FitOutcome> {
     let t_start = Instant::now();
     let mut report = FitReport::default();
@@ -933,6 +1033,7 @@ pub fn fit_model(
     add_curved_edge_allowance(&mesh, &tris, &net, &mut chord);
     report.timings.push(("curves", t.elapsed().as_secs_f64()));
     let mut chain_tol = vec![2.0 * tol; net.chains.len()];
+    let mut chain_step = vec![60f64.to_radians(); net.chains.len()];
     // Chains of each group, for refinement.
     let mut group_chains: Vec<Vec<usize>> = vec![Vec::new(); mesh.groups.len()];
     for (ci, c) in net.chains.iter().enumerate() {
@@ -940,15 +1041,22 @@ pub fn fit_model(
             group_chains[g as usize].push(ci);
         }
     }
-    let input_samples = sample_surface(
-        &mesh.positions,
-        &tris,
-        SampleCount::Total(opts.error_samples),
-        true,
-        0x5C0D_E000_0000_0001,
-    );
+    let meter = ErrorMeter {
+        mesh: &mesh,
+        input_samples: sample_surface(
+            &mesh.positions,
+            &tris,
+            SampleCount::Total(opts.error_samples),
+            true,
+            0x5C0D_E000_0000_0001,
+        ),
+        input_surface: &input_surface,
+        chord: &chord,
+        error_samples: opts.error_samples,
+    };
     let mut best: Option<(FitError, ControlMesh, u8)> = None;
     let mut levels_tried = opts.default_level;
+    let mut prev_worst: Option<f64> = None;
     for round in 0..opts.max_rounds.max(1) {
         report.rounds = round + 1;
         t = Instant::now();
@@ -959,6 +1067,7 @@ pub fn fit_model(
             &plans,
             &surfaces,
             &chain_tol,
+            &chain_step,
             tol,
             &chain_loop_len,
         );
@@ -969,65 +1078,10 @@ pub fn fit_model(
         // 6. Error of the decoded surface.
         t = Instant::now();
         let level = levels_tried.unwrap_or(4);
-        let decoded = reconstruct(&built.control, level)?;
-        let (surface_mesh, _) = subdivide(
-            &decoded,
-            u32::from(level),
-            &SubdivOptions {
-                limit: true,
-                ..Default::default()
-            },
-        )?;
-        let s_tris: Vec<[u32; 3]> = surface_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
-        let s_surface = TriangleSurface::new(surface_mesh.positions.clone(), s_tris.clone())?;
-        let in_points: Vec<DVec3> = input_samples.iter().map(|s| s.point).collect();
-        let d_in = point_distances(&in_points, &s_surface);
-        let s_samples = sample_surface(
-            &surface_mesh.positions,
-            &s_tris,
-            SampleCount::Total(opts.error_samples),
-            true,
-            0x5C0D_E000_0000_0002,
-        );
-        let out_hits: Vec<(f64, u32)> = s_samples
-            .iter()
-            .map(|s| {
-                let c = input_surface.closest_point(s.point);
-                (c.distance, c.triangle)
-            })
-            .collect();
-        let d_out: Vec<f64> = out_hits.iter().map(|h| h.0).collect();
-        let stats = |d: &[f64]| -> (f64, f64, f64) {
-            let n = d.len().max(1) as f64;
-            (
-                d.iter().copied().fold(0.0, f64::max),
-                (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt(),
-                d.iter().sum::<f64>() / n,
-            )
-        };
-        let (max_in, rms_in, mean_in) = stats(&d_in);
-        let (max_out, rms_out, mean_out) = stats(&d_out);
-        // Excess over the tolerance, after allowing for the input's own chord error.
-        let excess_in: Vec<f64> = input_samples
-            .iter()
-            .zip(&d_in)
-            .map(|(s, &d)| d - chord[s.triangle as usize])
-            .collect();
-        let excess_out: Vec<f64> = out_hits
-            .iter()
-            .map(|&(d, t)| d - chord[t as usize])
-            .collect();
-        let worst = excess_in
-            .iter()
-            .chain(&excess_out)
-            .copied()
-            .fold(0.0, f64::max);
-        let err = FitError {
-            max: max_in.max(max_out),
-            rms: rms_in.max(rms_out),
-            mean: mean_in.max(mean_out),
-            max_beyond_chord: worst,
-        };
+        let decoded = reconstruct(&built.control, level, 0)?;
+        let measured = meter.measure(&decoded, level)?;
+        let err = measured.error;
+        let worst = err.max_beyond_chord;
         report.timings.push(("topology", t_top));
         report.timings.push(("fit", t_fit));
         report.timings.push(("measure", t.elapsed().as_secs_f64()));
@@ -1051,26 +1105,42 @@ pub fn fit_model(
         if ok {
             break;
         }
-        // Where is the error? Attribute samples beyond the tolerance to groups.
-        let mut bad_group = vec![false; mesh.groups.len()];
-        for (s, &d) in input_samples.iter().zip(&excess_in) {
-            if d > tol {
-                bad_group[mesh.face_groups[s.triangle as usize] as usize] = true;
-            }
-        }
-        for (s, &d) in s_samples.iter().zip(&excess_out) {
-            if d > tol {
-                let g = surface_mesh.face_groups[s.triangle as usize] as usize;
-                if g < bad_group.len() {
-                    bad_group[g] = true;
-                }
-            }
-        }
-        // A first failure at level 4 may be only the piecewise-linear chord error of a
-        // coarse curve: try level 5 once before adding control points.
-        if opts.default_level.is_none() && levels_tried.is_none() && round == 0 {
+        // Where is the error?
+        let group_excess = &measured.group_excess;
+        let bad_group: Vec<bool> = group_excess.iter().map(|e| e.0 > tol).collect();
+        let mut worst_groups: Vec<usize> =
+            (0..mesh.groups.len()).filter(|&g| bad_group[g]).collect();
+        worst_groups.sort_by(|&a, &b| group_excess[b].0.total_cmp(&group_excess[a].0));
+        let listed: Vec<String> = worst_groups
+            .iter()
+            .take(4)
+            .map(|&g| {
+                let (d, p, dir) = group_excess[g];
+                format!(
+                    "group {g} '{}' ({}) {:.2} tol {dir} at ({:.4}, {:.4}, {:.4})",
+                    mesh.groups[g].name,
+                    kind_name(&plans[g].kind),
+                    d / tol,
+                    p.x,
+                    p.y,
+                    p.z
+                )
+            })
+            .collect();
+        report.notes.push(format!(
+            "  {} groups beyond tolerance; worst: {}",
+            worst_groups.len(),
+            listed.join("; ")
+        ));
+        // When adding control points stops paying, the rest may be the piecewise-linear
+        // chord error of level 4: go to level 5 (4x the triangles) once.
+        if opts.default_level.is_none()
+            && levels_tried.is_none()
+            && prev_worst.is_some_and(|p| worst > 0.8 * p)
+        {
             levels_tried = Some(5);
         }
+        prev_worst = Some(worst);
         for (g, bad) in bad_group.iter().enumerate() {
             if !bad {
                 continue;
@@ -1089,12 +1159,48 @@ pub fn fit_model(
             }
             for &c in &group_chains[g] {
                 chain_tol[c] *= 0.5;
+                chain_step[c] = (chain_step[c] * 0.6).max(5f64.to_radians());
             }
         }
     }
-    let Some((err, control, level)) = best else {
+    let Some((mut err, control, level)) = best else {
         return Err(Error::Mesh("fitting produced no control mesh".into()));
     };
+    // The quantisation step was chosen for a quarter of the tolerance; the limit surface
+    // averages control points, so coarser steps often still fit. Keep the coarsest that does.
+    let mut coarser_bits = 0;
+    if err.max_beyond_chord <= tol {
+        t = Instant::now();
+        // Binary search over 0..=max (the error grows with the step): at most two or three
+        // measurements.
+        // The chord allowance is for the input's facets, not for quantisation noise: the
+        // plain max error may not grow beyond max(tolerance, the unquantised fit's).
+        let max_cap = tol.max(err.max);
+        let (mut lo, mut hi) = (0u8, opts.max_coarser_bits);
+        while lo < hi {
+            let coarser = (lo + hi).div_ceil(2);
+            let decoded = reconstruct(&control, level, coarser)?;
+            let m = meter.measure(&decoded, level)?;
+            if m.error.max_beyond_chord <= tol && m.error.max <= max_cap {
+                lo = coarser;
+                coarser_bits = coarser;
+                err = m.error;
+            } else {
+                hi = coarser - 1;
+            }
+        }
+        report
+            .timings
+            .push(("quantisation", t.elapsed().as_secs_f64()));
+        if coarser_bits > 0 {
+            report.notes.push(format!(
+                "quantisation: {coarser_bits} bits coarser than the default still meets the tolerance \
+                 (max error {:.3e}, {:.2} tol beyond the input's chord error)",
+                err.max,
+                err.max_beyond_chord / tol
+            ));
+        }
+    }
     report.error = err;
     report.within_tolerance = err.max_beyond_chord <= tol;
     report.default_level = level;
@@ -1108,6 +1214,7 @@ pub fn fit_model(
         .push(("total", t_start.elapsed().as_secs_f64()));
     Ok(FitOutcome {
         control,
+        coarser_bits,
         default_level: level,
         report,
     })

@@ -3,7 +3,7 @@
 use glam::DVec3;
 
 use super::sampling::{sample_surface, SampleCount};
-use super::surface::TriangleSurface;
+use super::surface::{ClosestPoint, TriangleSurface};
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 
@@ -95,9 +95,9 @@ impl DistanceReport {
 /// without the `parallel` feature.
 const CHUNK: usize = 256;
 
-/// Distances from each of `points` to `surface`, in the order of `points`.
-pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
-    let chunk_fn = |chunk: &[DVec3]| -> Vec<f64> {
+/// Closest points on `surface` to each of `points`, in the order of `points`.
+pub fn closest_points(points: &[DVec3], surface: &TriangleSurface) -> Vec<ClosestPoint> {
+    let chunk_fn = |chunk: &[DVec3]| -> Vec<ClosestPoint> {
         let mut out = Vec::with_capacity(chunk.len());
         let mut prev: Option<DVec3> = None;
         for &p in chunk {
@@ -108,20 +108,28 @@ pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> 
             });
             let hit = hit.unwrap_or_else(|| surface.closest_point(p));
             prev = Some(hit.point).filter(|q| q.is_finite());
-            out.push(hit.distance);
+            out.push(hit);
         }
         out
     };
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
-        let parts: Vec<Vec<f64>> = points.par_chunks(CHUNK).map(chunk_fn).collect();
+        let parts: Vec<Vec<ClosestPoint>> = points.par_chunks(CHUNK).map(chunk_fn).collect();
         parts.concat()
     }
     #[cfg(not(feature = "parallel"))]
     {
         points.chunks(CHUNK).flat_map(chunk_fn).collect()
     }
+}
+
+/// Distances from each of `points` to `surface`, in the order of `points`.
+pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
+    closest_points(points, surface)
+        .iter()
+        .map(|h| h.distance)
+        .collect()
 }
 
 /// Statistics of the distances from `points` to `surface` (sequential, ordered reduction).

@@ -10,7 +10,8 @@ mod sampling;
 mod surface;
 
 pub use distance::{
-    hausdorff, one_sided_distances, point_distances, DistanceOptions, DistanceReport, OneSided,
+    closest_points, hausdorff, one_sided_distances, point_distances, DistanceOptions,
+    DistanceReport, OneSided,
 };
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
