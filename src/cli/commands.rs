@@ -376,11 +376,13 @@ pub fn info(args: &InfoArgs) -> Result<()> {
             r.max_a_to_b, r.rms_a_to_b, r.max_b_to_a, r.rms_b_to_a
         );
         println!(
-            "    symmetric: max {:.4e} ({:.3e} of the diagonal), rms {:.4e} ({:.3e})",
+            "    symmetric: max {:.4e} ({:.3e} of the diagonal), rms {:.4e} ({:.3e}), mean {:.4e} ({:.3e})",
             r.max,
             r.max / d,
             r.rms,
-            r.rms / d
+            r.rms / d,
+            r.mean,
+            r.mean / d
         );
     }
     Ok(())

@@ -961,7 +961,9 @@ pub fn fit_model(
     if segmented {
         let seg_opts = SegmentOptions {
             sharp_angle_deg: opts.sharp_angle_deg,
-            tolerance: Some(0.25 * tol),
+            // Region growing merges more with a looser tolerance, and merged regions hide
+            // features a patch cannot follow: cap it.
+            tolerance: Some(0.25 * tol.min(2e-3 * diag)),
             ..Default::default()
         };
         let (seg, seg_report) = segment(&mesh, &seg_opts)?;
