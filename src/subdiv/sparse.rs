@@ -10,7 +10,9 @@
 //! triangle of the three edge midpoints plus three corner zippers). In cylinder and cone
 //! patches two 1-faces whose split edges are opposite sides of a quad form a **belt quad**,
 //! output as a zipper between the two split edges: the inserted edges join corresponding
-//! points of the two boundary curves, i.e. they run along the rulings.
+//! points of the two boundary curves, i.e. they run along the rulings. A cylinder or cone
+//! group whose faces do not all pair into belt quads is output densely (a fan across a
+//! curved face would cut through the solid).
 
 use super::topology::{Base, Level, NONE};
 use super::Refinement;
@@ -34,11 +36,12 @@ pub(crate) const DENSE: u32 = u32::MAX;
 /// base face flat arrays because they are looked up once per output element.
 #[derive(Clone, Debug)]
 pub(crate) struct SparsePlan {
-    /// Per base edge: the output subdivides it (crease edge, or not both of its faces in
-    /// boundary patches). Both sides of an edge agree, which keeps the output conforming.
+    /// Per base edge: the output subdivides it (crease edge, or not both of its faces
+    /// output sparsely). Both sides of an edge agree, which keeps the output conforming.
     pub split: Vec<bool>,
-    /// Per base face: `DENSE` (closed patch), itself (a single sparse face) or the other
-    /// face of its belt quad.
+    /// Per base face: `DENSE` (closed patch, or a cylinder/cone group that does not pair
+    /// into belt quads), itself (a single sparse face of a plane) or the other face of its
+    /// belt quad.
     pub unit: Vec<u32>,
 }
 
@@ -100,6 +103,40 @@ impl SparsePlan {
                     break;
                 }
             }
+        }
+        // A cylinder/cone group is output sparse only if all of its faces pair into belt
+        // quads whose sides stay kept; otherwise the whole group is output densely (a fan
+        // across a curved patch would leave the surface). Iterate until stable: making a
+        // group dense can split a side of a quad in a neighbouring group.
+        let ng = base.group_frame.len();
+        let mut split = split;
+        loop {
+            let mut dense_group = vec![false; ng];
+            for k in 0..nf {
+                if framed(k) && unit[k] != DENSE {
+                    let fe = &l0.face_edges[3 * k..3 * k + 3];
+                    let n_split = fe.iter().filter(|&&e| split[e as usize]).count();
+                    if unit[k] == k as u32 || n_split != 1 {
+                        dense_group[base.group[k] as usize] = true;
+                    }
+                }
+            }
+            if !dense_group.iter().any(|&d| d) {
+                break;
+            }
+            for (k, u) in unit.iter_mut().enumerate() {
+                if dense_group[base.group[k] as usize] {
+                    *u = DENSE;
+                }
+            }
+            let sparse = |f: u32| f != NONE && unit[f as usize] != DENSE;
+            for (e, sp) in split.iter_mut().enumerate() {
+                let [fl, fr] = l0.edge_faces[e];
+                *sp = l0.eclass[e] & eclass::CREASE != 0 || !(sparse(fl) && sparse(fr));
+            }
+        }
+        if unit.iter().all(|&u| u == DENSE) {
+            return None;
         }
         Some(SparsePlan { split, unit })
     }

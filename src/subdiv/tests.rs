@@ -1528,3 +1528,45 @@ fn belt_lod_is_watertight() {
         }
     }
 }
+
+/// A cone whose faces are an apex fan (1-faces sharing vertices, so no belt quads) is
+/// output densely; its planar cap sparsely; together watertight.
+#[test]
+fn unpaired_cone_group_is_dense_and_watertight() {
+    let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.2, -0.4);
+    let apex = v3(0.2, 0.1, -0.3);
+    let axis = rot * DVec3::Z;
+    let mut m = ControlMesh::new();
+    let cone = m.push_group(
+        "cone",
+        PatchKind::Boundary(BoundarySurface::Cone {
+            axis: Axis {
+                origin: apex,
+                direction: axis,
+            },
+        }),
+    );
+    let cap = m.push_group("cap", PatchKind::Boundary(BoundarySurface::Plane));
+    let n = 7;
+    m.push_vertex(apex);
+    for i in 0..n {
+        let th = std::f64::consts::TAU * i as f64 / n as f64;
+        let (s, c) = th.sin_cos();
+        m.push_vertex(apex + axis * 2.0 + (rot * v3(c, s, 0.0)) * 1.2);
+    }
+    for i in 0..n {
+        let (a, b) = (1 + i as u32, 1 + ((i + 1) % n) as u32);
+        m.push_face(&[0, b, a], cone);
+        m.set_sharp(a, b);
+    }
+    let capv: Vec<u32> = (1..=n as u32).collect();
+    m.push_face(&capv, cap);
+    m.corners.insert(0);
+    for level in 1..=4u32 {
+        let (out, _) = subdivide(&m, level, &SubdivOptions::default()).unwrap();
+        check_closed_or_boundary(&out.face_vertices, |_, _| false);
+        let count = |g: u32| out.face_groups.iter().filter(|&&x| x == g).count();
+        assert_eq!(count(cone), n << (2 * level));
+        assert_eq!(count(cap), (n << level) - 2);
+    }
+}
