@@ -12,7 +12,7 @@ use std::path::PathBuf;
 
 use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use scode::subdiv::{subdivide, Refinement, SubdivOptions};
+use scode::subdiv::{Refinement, SubdivOptions};
 
 fn corpus_dir() -> Option<PathBuf> {
     if let Ok(p) = std::env::var("SCODE_CORPUS") {
@@ -131,7 +131,7 @@ fn bench_model<M: Measurement>(c: &mut Criterion<M>, name: &str, rel: &str, max_
             group.bench_with_input(BenchmarkId::new("decode", level), &level, |b, &l| {
                 b.iter(|| {
                     run(&pool, || {
-                        subdivide(&mesh, l, &SubdivOptions::default())
+                        scode::subdiv::subdivide(&mesh, l, &SubdivOptions::default())
                             .unwrap()
                             .0
                     })

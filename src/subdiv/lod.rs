@@ -157,7 +157,11 @@ pub(crate) fn extract(
                     }
                     let [bl, br] = l0.edge_faces[be];
                     let other = if bl as usize == f { br } else { bl };
-                    let lo = if other == NONE { 0 } else { levels[other as usize] };
+                    let lo = if other == NONE {
+                        0
+                    } else {
+                        levels[other as usize]
+                    };
                     let lf = levels[f].max(lo) as u32;
                     let step = 1usize << (n - lf);
                     let forward = l0.edges[be][0] == a;

@@ -14,9 +14,9 @@
 //! group whose faces do not all pair into belt quads is output densely (a fan across a
 //! curved face would cut through the solid).
 
+use super::masks::eclass;
 use super::topology::{Base, Level, NONE};
 use super::Refinement;
-use super::masks::eclass;
 use glam::DVec3;
 
 /// How boundary patches (planes, cylinders, cones) appear in subdivided output.
@@ -214,17 +214,18 @@ pub(crate) fn emit_unit(
     for (s, c) in ch.iter_mut().enumerate() {
         chain(k, s, c);
     }
-    let split: Vec<usize> = (0..3).filter(|&s| ch[s].len() > 2).collect();
+    // An edge counts as split when its chain has points between the corners.
+    let is_split = [ch[0].len() > 2, ch[1].len() > 2, ch[2].len() > 2];
     let c = &l0.faces[3 * k..3 * k + 3];
-    match split.len() {
+    match is_split.iter().filter(|&&x| x).count() {
         0 => out.extend_from_slice(c),
         1 => {
-            let s = split[0];
+            let s = (0..3).find(|&s| is_split[s]).unwrap_or(0);
             zip(&ch[s], &[c[(s + 2) % 3]], true, false, out);
         }
         2 => {
             // u: the unsplit slot; the split edges meet at corner u+2.
-            let u = (0..3).find(|s| !split.contains(s)).unwrap_or(0);
+            let u = (0..3).find(|&s| !is_split[s]).unwrap_or(0);
             q.clear();
             q.extend(ch[(u + 1) % 3].iter().rev());
             zip(&ch[(u + 2) % 3], q, true, true, out);

@@ -827,7 +827,13 @@ fn boundary_patch_lod_is_watertight_and_on_surface() {
         for round in 0..20 {
             // round 0: one level everywhere (nothing is gap-filled)
             let levels: Vec<u8> = (0..m.face_count())
-                .map(|_| if round == 0 { 3 } else { (rng.next() * 4.0) as u8 })
+                .map(|_| {
+                    if round == 0 {
+                        3
+                    } else {
+                        (rng.next() * 4.0) as u8
+                    }
+                })
                 .collect();
             let lod = subdivide_adaptive(
                 &m,
@@ -1315,7 +1321,12 @@ fn plane_patch_has_no_interior_vertices() {
                         .iter()
                         .any(|(&(x, y), &c)| c == 1 && (x == v || y == v))
                 })
-                .map(|&v| (dense.positions[v as usize] * 1e12).round().as_i64vec3().to_array())
+                .map(|&v| {
+                    (dense.positions[v as usize] * 1e12)
+                        .round()
+                        .as_i64vec3()
+                        .to_array()
+                })
                 .collect();
             a.sort();
             border_dense.sort();
@@ -1385,9 +1396,9 @@ fn belt_output_follows_rulings_and_stays_on_the_surface() {
             check_closed_or_boundary(&out.face_vertices, |_, _| false);
             let belt_tris = out.face_groups.iter().filter(|&&g| g == 1).count();
             // each belt quad: a zipper of 2 * 2^level triangles
-            assert_eq!(belt_tris, 2 * n << level, "cone {cone} level {level}");
+            assert_eq!(belt_tris, (2 * n) << level, "cone {cone} level {level}");
             let (verts, edges) = group_vertices_and_border(&out, 1);
-            assert_eq!(verts.len(), 2 * n << level);
+            assert_eq!(verts.len(), (2 * n) << level);
             let h_of = |v: u32| (out.positions[v as usize] - origin).dot(axis);
             let h0 = h_of(0);
             for &v in &verts {
