@@ -363,8 +363,9 @@ impl Refinement {
 
     /// Level-of-detail mesh: base triangle k shown at level `per_face_levels[k]`, from the
     /// finest-level positions `finest` (subdivided or limit) and optional normals, with gap
-    /// filling and stitching (`spec/subdivision.md` §7). Reuse one `Refinement` for many
-    /// extractions (a viewer changing levels per frame).
+    /// filling and stitching (`spec/subdivision.md` §7), boundary patches sparse (§8; both
+    /// faces of a belt quad are shown at the finer of their two levels). Reuse one
+    /// `Refinement` for many extractions (a viewer changing levels per frame).
     pub fn extract_lod(
         &self,
         finest: &[DVec3],
