@@ -1,6 +1,7 @@
 //! Subdivision throughput: output triangles per second at levels 1-5 on corpus models, on
 //! one core and on all cores (rayon pools), for (a) position evaluation on a prebuilt
-//! topology (the encoder / viewer hot path) and (b) topology + positions from scratch.
+//! topology (the encoder / viewer hot path), (b) topology + positions from scratch and
+//! (c) a full decode (`subdivide`: topology, positions and the output mesh).
 //!
 //! Run: `cargo bench --bench subdivide` (wall time, rayon pools of 1 thread and of all
 //! threads) and `cargo bench --bench subdivide --no-default-features` (sequential build,
@@ -11,7 +12,7 @@ use std::path::PathBuf;
 
 use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use scode::subdiv::Refinement;
+use scode::subdiv::{Refinement, SubdivOptions};
 
 fn corpus_dir() -> Option<PathBuf> {
     if let Ok(p) = std::env::var("SCODE_CORPUS") {
@@ -125,6 +126,17 @@ fn bench_model<M: Measurement>(c: &mut Criterion<M>, name: &str, rel: &str, max_
                     })
                 },
             );
+            // What `scode decode` does without `--limit`: topology, positions and the output
+            // mesh (groups, sharp edges, sparse boundary patches).
+            group.bench_with_input(BenchmarkId::new("decode", level), &level, |b, &l| {
+                b.iter(|| {
+                    run(&pool, || {
+                        scode::subdiv::subdivide(&mesh, l, &SubdivOptions::default())
+                            .unwrap()
+                            .0
+                    })
+                })
+            });
             if level >= 3 {
                 let p = r.positions(&mesh.positions).unwrap();
                 group.bench_with_input(

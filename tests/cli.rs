@@ -48,12 +48,29 @@ fn encode_info_decode_roundtrip() {
     ]);
     assert!(ok, "{text}");
     let (decoded, _) = scode::io::read_mesh(&out).unwrap();
+    // the boss plate is all planes and one cylinder: sparse boundary patches by default
     assert!(
-        decoded.face_count() > 1000,
+        decoded.face_count() > 500,
         "decoded surface has {} faces",
         decoded.face_count()
     );
     assert_eq!(decoded.groups.len(), 8);
+    let dense = tmp("boss_decoded_dense.obj");
+    let (ok, text) = scode(&[
+        "decode",
+        "--dense-boundary",
+        fitted.to_str().unwrap(),
+        "-o",
+        dense.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let (dense, _) = scode::io::read_mesh(&dense).unwrap();
+    assert!(
+        dense.face_count() > 4 * decoded.face_count(),
+        "dense {} vs sparse {} faces",
+        dense.face_count(),
+        decoded.face_count()
+    );
 
     let raw = tmp("boss_raw.scode");
     let (ok, text) = scode(&["encode", "--raw", &example(), "-o", raw.to_str().unwrap()]);

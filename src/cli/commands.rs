@@ -218,6 +218,7 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     } else {
         let opts = SubdivOptions {
             limit,
+            boundary_patches: boundary_output(args.dense_boundary),
             ..Default::default()
         };
         subdiv::subdivide(&decoded.mesh, level, &opts)
@@ -236,11 +237,20 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     Ok(())
 }
 
+fn boundary_output(dense: bool) -> subdiv::BoundaryPatchOutput {
+    if dense {
+        subdiv::BoundaryPatchOutput::Dense
+    } else {
+        subdiv::BoundaryPatchOutput::Sparse
+    }
+}
+
 pub fn subdivide(args: &SubdivideArgs) -> Result<()> {
     let output = args.output.path()?;
     let (control, _) = load_control_mesh(&args.input)?;
     let opts = SubdivOptions {
         limit: args.limit,
+        boundary_patches: boundary_output(args.dense_boundary),
         ..Default::default()
     };
     let t0 = Instant::now();

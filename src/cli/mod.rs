@@ -141,6 +141,10 @@ pub struct DecodeArgs {
     /// Keep level-N positions instead of limit positions for fitted control meshes.
     #[arg(long, conflicts_with = "limit")]
     pub no_limit: bool,
+    /// Output boundary patches (planes, cylinders, cones) as the full 1-to-4 grid instead of
+    /// S-CODE's sparse triangulation.
+    #[arg(long)]
+    pub dense_boundary: bool,
     /// Refuse files larger than this many bytes (a decoder safety limit).
     #[arg(long, value_name = "BYTES")]
     pub max_bytes: Option<u64>,
@@ -182,6 +186,9 @@ pub struct SubdivideArgs {
     /// Move output vertices to the limit surface and write normals.
     #[arg(long)]
     pub limit: bool,
+    /// Output boundary patches as the full 1-to-4 grid instead of the sparse triangulation.
+    #[arg(long)]
+    pub dense_boundary: bool,
 }
 
 pub fn run(cli: Cli) -> Result<()> {

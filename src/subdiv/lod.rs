@@ -11,6 +11,7 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 
 use super::masks::normalize_or_zero;
+use super::sparse::{self, BoundaryPatchOutput, SparsePlan, DENSE};
 use super::topology::NONE;
 use super::Refinement;
 
@@ -55,6 +56,7 @@ pub(crate) fn extract(
     pos: &[DVec3],
     normals: Option<&[DVec3]>,
     levels: &[u8],
+    mode: BoundaryPatchOutput,
 ) -> Result<AdaptiveMesh> {
     let n = r.max_level();
     let l0 = r.full(0);
@@ -77,6 +79,20 @@ pub(crate) fn extract(
             "positions do not match the finest level".into(),
         ));
     }
+    let plan = match mode {
+        BoundaryPatchOutput::Sparse => SparsePlan::new(l0, &r.base),
+        BoundaryPatchOutput::Dense => None,
+    };
+    // Both faces of a belt quad are shown at the finer of their two levels.
+    let levels: Vec<u8> = match &plan {
+        Some(pl) => (0..levels.len())
+            .map(|k| match pl.unit[k] {
+                DENSE => levels[k],
+                u => levels[k].max(levels[u as usize]),
+            })
+            .collect(),
+        None => levels.to_vec(),
+    };
     let e0 = l0.ne();
     let span = 1usize << n;
     // x_j along base edge e (j = 0..=2^n), in the stored direction a -> b
@@ -119,7 +135,49 @@ pub(crate) fn extract(
     let mut groups: Vec<u32> = Vec::new();
     let mut centroids: Vec<[u32; 3]> = Vec::new(); // corners of split triangles
     let mut poly: Vec<u32> = Vec::with_capacity(64);
+    let mut bufs = sparse::Chains::default();
+    let mut flat_tris: Vec<u32> = Vec::new();
     for k in 0..l0.nf() {
+        if let Some(pl) = &plan {
+            let u = pl.unit[k];
+            if u != DENSE {
+                if (u as usize) < k {
+                    continue; // emitted with its belt partner
+                }
+                // Chain along edge slot s of base face f: its split points at the finer
+                // of the two levels meeting there (gap-filled positions), else its ends.
+                let mut chain = |f: usize, s: usize, v: &mut Vec<u32>| {
+                    let c = &l0.faces[3 * f..3 * f + 3];
+                    let (a, b) = (c[s], c[(s + 1) % 3]);
+                    let be = l0.face_edges[3 * f + s] as usize;
+                    v.clear();
+                    if !pl.split[be] {
+                        v.extend_from_slice(&[a, b]);
+                        return;
+                    }
+                    let [bl, br] = l0.edge_faces[be];
+                    let other = if bl as usize == f { br } else { bl };
+                    let lo = if other == NONE {
+                        0
+                    } else {
+                        levels[other as usize]
+                    };
+                    let lf = levels[f].max(lo) as u32;
+                    let step = 1usize << (n - lf);
+                    let forward = l0.edges[be][0] == a;
+                    let mut j = 0;
+                    while j <= span {
+                        v.push(x(be, if forward { j } else { span - j }));
+                        j += step;
+                    }
+                };
+                flat_tris.clear();
+                let t = sparse::emit_unit(l0, pl, k, &mut chain, &mut bufs, &mut flat_tris);
+                tris.extend(flat_tris.chunks(3).map(|c| [c[0], c[1], c[2]]));
+                groups.extend(std::iter::repeat_n(r.base.group[k], t));
+                continue;
+            }
+        }
         let m = levels[k] as u32;
         let lm = r.full(m);
         let g = r.base.group[k];

@@ -18,7 +18,8 @@
 //! Layout: `topology` (level 0 build, classification, one refinement step as index
 //! arithmetic), `masks` (weights), `eval` (mask producers shared by positions, limits,
 //! normals and stencils), `frame` (cylindrical coordinates of cylinder/cone patches), `lod`
-//! (extraction, gap filling, stitching), `par` (rayon-or-sequential loops; every output
+//! (extraction, gap filling, stitching), `sparse` (S-CODE's output of boundary patches:
+//! only split edges subdivided, belts along the rulings; `spec/subdivision.md` §8), `par` (rayon-or-sequential loops; every output
 //! element is written by exactly one closure call, so results do not depend on the thread
 //! count). Parallelism is over vertices / edges / faces of a level, which balances better
 //! than over base faces and needs no stitching of per-face results.
@@ -28,6 +29,7 @@ mod frame;
 mod lod;
 mod masks;
 mod par;
+mod sparse;
 mod topology;
 
 #[cfg(test)]
@@ -44,6 +46,7 @@ use crate::mesh::ControlMesh;
 
 pub use lod::{lod_corner_face, AdaptiveMesh};
 pub use masks::{loop_beta, loop_omega};
+pub use sparse::BoundaryPatchOutput;
 
 use masks::{eclass, ValenceTables};
 use topology::{Base, Level};
@@ -62,6 +65,8 @@ pub struct SubdivOptions {
     pub limit: bool,
     /// Refuse to produce more than this many triangles.
     pub max_faces: u64,
+    /// Sparse (S-CODE, default) or dense output of boundary patches.
+    pub boundary_patches: BoundaryPatchOutput,
 }
 
 impl Default for SubdivOptions {
@@ -69,6 +74,7 @@ impl Default for SubdivOptions {
         SubdivOptions {
             limit: false,
             max_faces: DEFAULT_MAX_FACES,
+            boundary_patches: BoundaryPatchOutput::Sparse,
         }
     }
 }
@@ -273,6 +279,46 @@ impl Refinement {
         })
     }
 
+    /// The finest triangles, consuming the refinement (uniform output without a copy).
+    fn into_finest_faces(self) -> Vec<u32> {
+        self.finest_faces
+    }
+
+    /// Level-`max_level` vertex ids along base edge `e`, from its stored first end to its
+    /// second (`2^n + 1` ids), by index arithmetic only: the vertex at position `i` was
+    /// created at level `j = n - 1 - tz(i)` on the level-j descendant `e 2^j + (i >> (tz + 1))`
+    /// of `e` (the descendants of a base edge are consecutive and ordered along it).
+    pub(crate) fn base_edge_chain(&self, e: usize, out: &mut Vec<u32>) {
+        let n = self.max_level;
+        let [a, b] = self.levels[0].edges[e];
+        out.clear();
+        out.push(a);
+        for i in 1..1usize << n {
+            let tz = i.trailing_zeros();
+            let j = n - 1 - tz;
+            let k = i >> (tz + 1);
+            out.push((self.levels[j as usize].nv + (e << j) + k) as u32);
+        }
+        out.push(b);
+    }
+
+    /// Sharp edges of the finest level (the descendants of the control mesh's sharp edges),
+    /// without building the finest level's edge arrays.
+    fn finest_sharp_edges(&self) -> std::collections::BTreeSet<(u32, u32)> {
+        let l0 = &self.levels[0];
+        let mut keys = Vec::new();
+        let mut chain = Vec::new();
+        for e in 0..l0.ne() {
+            if l0.eclass[e] & eclass::SHARP != 0 {
+                self.base_edge_chain(e, &mut chain);
+                keys.extend(chain.windows(2).map(|w| crate::mesh::edge_key(w[0], w[1])));
+            }
+        }
+        keys.sort_unstable();
+        keys.dedup();
+        keys.into_iter().collect()
+    }
+
     pub fn max_level(&self) -> u32 {
         self.max_level
     }
@@ -317,8 +363,9 @@ impl Refinement {
 
     /// Level-of-detail mesh: base triangle k shown at level `per_face_levels[k]`, from the
     /// finest-level positions `finest` (subdivided or limit) and optional normals, with gap
-    /// filling and stitching (`spec/subdivision.md` §7). Reuse one `Refinement` for many
-    /// extractions (a viewer changing levels per frame).
+    /// filling and stitching (`spec/subdivision.md` §7), boundary patches sparse (§8; both
+    /// faces of a belt quad are shown at the finer of their two levels). Reuse one
+    /// `Refinement` for many extractions (a viewer changing levels per frame).
     pub fn extract_lod(
         &self,
         finest: &[DVec3],
@@ -334,7 +381,35 @@ impl Refinement {
                 )));
             }
         }
-        lod::extract(self, finest, normals, per_face_levels)
+        lod::extract(
+            self,
+            finest,
+            normals,
+            per_face_levels,
+            BoundaryPatchOutput::Sparse,
+        )
+    }
+
+    /// [`Refinement::extract_lod`] with a choice of boundary-patch output (the default is
+    /// [`BoundaryPatchOutput::Sparse`]; both faces of a belt quad are shown at the finer of
+    /// their two levels).
+    pub fn extract_lod_with(
+        &self,
+        finest: &[DVec3],
+        normals: Option<&[DVec3]>,
+        per_face_levels: &[u8],
+        boundary_patches: BoundaryPatchOutput,
+    ) -> Result<AdaptiveMesh> {
+        if let Some(nn) = normals {
+            if nn.len() != finest.len() {
+                return Err(Error::Parameter(format!(
+                    "{} normals for {} positions",
+                    nn.len(),
+                    finest.len()
+                )));
+            }
+        }
+        lod::extract(self, finest, normals, per_face_levels, boundary_patches)
     }
 
     /// Number of control points expected by [`Refinement::positions`].
@@ -398,22 +473,31 @@ impl Refinement {
             )));
         }
         let n_out = self.level(m).vertex_count();
-        // One output buffer grows level by level (vertex ids nest): edge points are appended
-        // after the old points they read; new vertex points go through `scratch` (a quarter of
-        // the output size) and are copied back.
+        // Two buffers alternate between levels (level j+1 is written while level j is read),
+        // chosen so that the last step writes into `out`: `out` holds levels m, m-2, ..,
+        // `scratch` levels m-1, m-3, ..; both are reserved once with exact capacity and
+        // written by appending, so nothing is zero-filled or copied back.
         out.clear();
-        out.reserve(n_out);
-        out.extend_from_slice(control);
+        scratch.clear();
+        if m == 0 {
+            out.extend_from_slice(control);
+            return Ok(());
+        }
+        out.reserve_exact(n_out);
+        scratch.reserve_exact(self.level(m - 1).vertex_count());
+        let (t, b) = (&self.tables, &self.base);
         for j in 0..m as usize {
             let l = &self.levels[j];
-            let (t, b) = (&self.tables, &self.base);
-            out.resize(l.nv + l.ne(), DVec3::ZERO);
-            let (old, new) = out.split_at_mut(l.nv);
-            let p: &[DVec3] = old;
-            par::for_each_mut(new, |e, o| *o = eval::eval_edge(l, b, p, e));
-            scratch.clear();
-            par::extend_mapped(scratch, l.nv, |v| eval::eval_vertex(l, t, b, p, v));
-            old.copy_from_slice(scratch);
+            let into_out = (m as usize - 1 - j) % 2 == 0;
+            let (src, dst): (&[DVec3], &mut Vec<DVec3>) = match (j, into_out) {
+                (0, true) => (control, &mut *out),
+                (0, false) => (control, &mut *scratch),
+                (_, true) => (&scratch[..], &mut *out),
+                (_, false) => (&out[..], &mut *scratch),
+            };
+            dst.clear();
+            par::extend_mapped(dst, l.nv, |v| eval::eval_vertex(l, t, b, src, v));
+            par::extend_mapped(dst, l.ne(), |e| eval::eval_edge(l, b, src, e));
         }
         Ok(())
     }
@@ -582,40 +666,73 @@ impl Refinement {
 
 /// Subdivides uniformly to `level` and returns the triangle mesh (groups kept, descendants
 /// of sharp edges flagged sharp, corner tags kept) plus limit normals when `opts.limit`
-/// (then the positions are limit positions too).
+/// (then the positions are limit positions too). Boundary patches are emitted as
+/// `opts.boundary_patches` says (sparse by default, `spec/subdivision.md` §8); the vertices
+/// are then compacted (kept in level-`level` id order).
 pub fn subdivide(
     mesh: &ControlMesh,
     level: u32,
     opts: &SubdivOptions,
 ) -> Result<(ControlMesh, Option<Vec<DVec3>>)> {
     let r = Refinement::with_max_faces(mesh, level, opts.max_faces)?;
-    let p = r.positions(&mesh.positions)?;
+    let mut p = Vec::new();
+    {
+        let mut scratch = Vec::new();
+        r.positions_into(&mesh.positions, level, &mut p, &mut scratch)?;
+    }
     let (positions, normals) = if opts.limit {
-        (
-            r.limit_positions(&p, level)?,
-            Some(r.limit_normals(&p, level)?),
-        )
+        let n = r.limit_normals(&p, level)?;
+        (r.limit_positions(&p, level)?, Some(n))
     } else {
         (p, None)
     };
-    let lv = r.level(level);
-    let nf = lv.face_count();
-    let mut out = ControlMesh {
+    let sharp_edges = r.finest_sharp_edges();
+    let plan = match opts.boundary_patches {
+        BoundaryPatchOutput::Sparse => sparse::SparsePlan::new(&r.levels[0], &r.base),
+        BoundaryPatchOutput::Dense => None,
+    };
+    let groups = mesh.groups.clone();
+    let corners = mesh.corners.clone();
+    let Some(plan) = plan else {
+        // Dense output: the finest triangles as they are (moved, not copied).
+        let q = 1usize << (2 * level);
+        let nf = r.finest_faces.len() / 3;
+        let mut face_groups = Vec::with_capacity(nf);
+        for &g in &r.base.group {
+            face_groups.extend(std::iter::repeat_n(g, q));
+        }
+        let out = ControlMesh {
+            positions,
+            face_offsets: (0..=nf as u32).map(|i| 3 * i).collect(),
+            face_vertices: r.into_finest_faces(),
+            face_groups,
+            groups,
+            sharp_edges,
+            corners,
+        };
+        return Ok((out, normals));
+    };
+    let (tris, face_groups) = sparse::uniform(&r, &plan, level);
+    let (positions, normals, remap) = sparse::compact(&positions, normals.as_deref(), &tris);
+    let nf = tris.len() / 3;
+    let out = ControlMesh {
         positions,
         face_offsets: (0..=nf as u32).map(|i| 3 * i).collect(),
-        face_vertices: lv.triangles().to_vec(),
-        face_groups: (0..nf).map(|f| lv.face_group(f)).collect(),
-        groups: mesh.groups.clone(),
-        corners: mesh.corners.clone(),
-        ..Default::default()
+        face_vertices: tris.iter().map(|&v| remap[v as usize]).collect(),
+        face_groups,
+        groups,
+        sharp_edges: sharp_edges
+            .into_iter()
+            .filter_map(|(a, b)| {
+                let (ra, rb) = (remap[a as usize], remap[b as usize]);
+                (ra != u32::MAX && rb != u32::MAX).then(|| crate::mesh::edge_key(ra, rb))
+            })
+            .collect(),
+        corners: corners
+            .into_iter()
+            .filter_map(|c| remap.get(c as usize).copied().filter(|&x| x != u32::MAX))
+            .collect(),
     };
-    out.sharp_edges = (0..lv.edge_count())
-        .filter(|&e| lv.edge_is_sharp(e))
-        .map(|e| {
-            let [a, b] = lv.edges()[e];
-            crate::mesh::edge_key(a, b)
-        })
-        .collect();
     Ok((out, normals))
 }
 
@@ -646,5 +763,5 @@ pub fn subdivide_adaptive(
     } else {
         (p, None)
     };
-    r.extract_lod(&pos, normals.as_deref(), &levels)
+    r.extract_lod_with(&pos, normals.as_deref(), &levels, opts.boundary_patches)
 }

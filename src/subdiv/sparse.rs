@@ -1,0 +1,313 @@
+//! Sparse output of boundary patches (S-CODE §4.2, `spec/subdivision.md` §8).
+//!
+//! Refinement and positions stay those of the nested 1-to-4 scheme (every point is computed
+//! once for the whole mesh, so neighbours share vertices). Only the *output* of a boundary
+//! patch differs: it uses the level-n vertices that lie on its control faces' **split**
+//! edges (crease edges, and edges shared with a closed patch) and never the vertices inside
+//! a control face or on an edge between two boundary-patch faces. A control triangle with
+//! k split edges becomes a 0-face (itself), a 1-face (fan from the opposite corner), a
+//! 2-face (zipper between the two split edges from their shared corner) or a 3-face (the
+//! triangle of the three edge midpoints plus three corner zippers). In cylinder and cone
+//! patches two 1-faces whose split edges are opposite sides of a quad form a **belt quad**,
+//! output as a zipper between the two split edges: the inserted edges join corresponding
+//! points of the two boundary curves, i.e. they run along the rulings. A cylinder or cone
+//! group whose faces do not all pair into belt quads is output densely (a fan across a
+//! curved face would cut through the solid).
+
+use super::masks::eclass;
+use super::topology::{Base, Level, NONE};
+use super::Refinement;
+use glam::DVec3;
+
+/// How boundary patches (planes, cylinders, cones) appear in subdivided output.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BoundaryPatchOutput {
+    /// S-CODE's scheme: only the patch's split edges are subdivided, no interior vertices.
+    #[default]
+    Sparse,
+    /// The full 1-to-4 grid (every point on the surface, 4^n triangles per control triangle).
+    Dense,
+}
+
+/// Marker in [`SparsePlan::unit`] for base faces that are output densely.
+pub(crate) const DENSE: u32 = u32::MAX;
+
+/// Decisions of the sparse output that depend only on the control mesh; per base edge /
+/// base face flat arrays because they are looked up once per output element.
+#[derive(Clone, Debug)]
+pub(crate) struct SparsePlan {
+    /// Per base edge: the output subdivides it (crease edge, or not both of its faces
+    /// output sparsely). Both sides of an edge agree, which keeps the output conforming.
+    pub split: Vec<bool>,
+    /// Per base face: `DENSE` (closed patch, or a cylinder/cone group that does not pair
+    /// into belt quads), itself (a single sparse face of a plane) or the other face of its
+    /// belt quad.
+    pub unit: Vec<u32>,
+}
+
+impl SparsePlan {
+    /// The plan of a mesh, or `None` when it has no boundary patch.
+    pub fn new(l0: &Level, base: &Base) -> Option<SparsePlan> {
+        if !base.boundary_patch.iter().any(|&b| b) {
+            return None;
+        }
+        let bp = |f: u32| f != NONE && base.boundary_patch[f as usize];
+        let split: Vec<bool> = (0..l0.ne())
+            .map(|e| {
+                let [fl, fr] = l0.edge_faces[e];
+                l0.eclass[e] & eclass::CREASE != 0 || !(bp(fl) && bp(fr))
+            })
+            .collect();
+        let nf = l0.nf();
+        let mut unit: Vec<u32> = (0..nf)
+            .map(|k| {
+                if base.boundary_patch[k] {
+                    k as u32
+                } else {
+                    DENSE
+                }
+            })
+            .collect();
+        // The single split slot of a 1-face, if it is one.
+        let one_face = |k: usize| -> Option<usize> {
+            let fe = &l0.face_edges[3 * k..3 * k + 3];
+            let mut it = (0..3).filter(|&s| split[fe[s] as usize]);
+            let s = it.next()?;
+            it.next().is_none().then_some(s)
+        };
+        let framed = |k: usize| base.group_frame[base.group[k] as usize] != 0;
+        for k in 0..nf {
+            if unit[k] != k as u32 || !framed(k) {
+                continue;
+            }
+            let Some(s) = one_face(k) else { continue };
+            let c = &l0.faces[3 * k..3 * k + 3];
+            let (a, b) = (c[s], c[(s + 1) % 3]);
+            for t in [(s + 1) % 3, (s + 2) % 3] {
+                let e = l0.face_edges[3 * k + t] as usize;
+                let [fl, fr] = l0.edge_faces[e];
+                let k2 = if fl as usize == k { fr } else { fl };
+                if k2 == NONE {
+                    continue;
+                }
+                let k2 = k2 as usize;
+                if unit[k2] != k2 as u32 || base.group[k2] != base.group[k] {
+                    continue;
+                }
+                let Some(s2) = one_face(k2) else { continue };
+                let c2 = &l0.faces[3 * k2..3 * k2 + 3];
+                let (a2, b2) = (c2[s2], c2[(s2 + 1) % 3]);
+                if a2 != a && a2 != b && b2 != a && b2 != b {
+                    unit[k] = k2 as u32;
+                    unit[k2] = k as u32;
+                    break;
+                }
+            }
+        }
+        // A cylinder/cone group is output sparse only if all of its faces pair into belt
+        // quads whose sides stay kept; otherwise the whole group is output densely (a fan
+        // across a curved patch would leave the surface). Iterate until stable: making a
+        // group dense can split a side of a quad in a neighbouring group.
+        let ng = base.group_frame.len();
+        let mut split = split;
+        loop {
+            let mut dense_group = vec![false; ng];
+            for k in 0..nf {
+                if framed(k) && unit[k] != DENSE {
+                    let fe = &l0.face_edges[3 * k..3 * k + 3];
+                    let n_split = fe.iter().filter(|&&e| split[e as usize]).count();
+                    if unit[k] == k as u32 || n_split != 1 {
+                        dense_group[base.group[k] as usize] = true;
+                    }
+                }
+            }
+            if !dense_group.iter().any(|&d| d) {
+                break;
+            }
+            for (k, u) in unit.iter_mut().enumerate() {
+                if dense_group[base.group[k] as usize] {
+                    *u = DENSE;
+                }
+            }
+            let sparse = |f: u32| f != NONE && unit[f as usize] != DENSE;
+            for (e, sp) in split.iter_mut().enumerate() {
+                let [fl, fr] = l0.edge_faces[e];
+                *sp = l0.eclass[e] & eclass::CREASE != 0 || !(sparse(fl) && sparse(fr));
+            }
+        }
+        if unit.iter().all(|&u| u == DENSE) {
+            return None;
+        }
+        Some(SparsePlan { split, unit })
+    }
+}
+
+/// Reusable buffers of [`emit_unit`].
+#[derive(Default)]
+pub(crate) struct Chains {
+    ch: [Vec<u32>; 3],
+    q: Vec<u32>,
+}
+
+/// Appends the triangles of the zipper between chains `p` and `q` (both running the same
+/// way, `p` along the region's counter-clockwise boundary, `p[0]`-`q[0]` and
+/// `p[N]`-`q[M]` already joined): advance along the chain whose next point has the smaller
+/// normalised parameter (`i / N` against `j / M`), ties along `p` if `prefer_p`. With
+/// `shared_start` (`p[0] == q[0]`) the first triangle is `(p0, p1, q1)`.
+fn zip(p: &[u32], q: &[u32], prefer_p: bool, shared_start: bool, out: &mut Vec<u32>) {
+    let (n, m) = (p.len() - 1, q.len() - 1);
+    let (mut i, mut j) = (0, 0);
+    if shared_start {
+        out.extend_from_slice(&[p[0], p[1], q[1]]);
+        (i, j) = (1, 1);
+    }
+    while i < n || j < m {
+        let along_p = if i == n {
+            false
+        } else if j == m {
+            true
+        } else {
+            let (a, b) = ((i + 1) * m, (j + 1) * n);
+            a < b || (a == b && prefer_p)
+        };
+        if along_p {
+            out.extend_from_slice(&[p[i], p[i + 1], q[j]]);
+            i += 1;
+        } else {
+            out.extend_from_slice(&[p[i], q[j + 1], q[j]]);
+            j += 1;
+        }
+    }
+}
+
+/// Emits the sparse triangles of base face `k` (and of its belt partner, which the caller
+/// then skips). `chain(f, s, v)` fills `v` with the output vertices along edge slot `s` of
+/// base face `f`, from corner s to corner s+1, both ends included (just the two corners
+/// when the edge is not split). Returns the number of triangles appended to `out` (flat).
+pub(crate) fn emit_unit(
+    l0: &Level,
+    plan: &SparsePlan,
+    k: usize,
+    chain: &mut impl FnMut(usize, usize, &mut Vec<u32>),
+    bufs: &mut Chains,
+    out: &mut Vec<u32>,
+) -> usize {
+    let start = out.len();
+    let partner = plan.unit[k] as usize;
+    let Chains { ch, q } = bufs;
+    if partner != k {
+        // Belt quad (w0, w1, w2, w3): split sides w0w1 (this face) and w2w3 (partner).
+        let fe = &l0.face_edges[3 * k..3 * k + 3];
+        let s = (0..3).find(|&s| plan.split[fe[s] as usize]).unwrap_or(0);
+        let fe2 = &l0.face_edges[3 * partner..3 * partner + 3];
+        let s2 = (0..3).find(|&s| plan.split[fe2[s] as usize]).unwrap_or(0);
+        chain(k, s, &mut ch[0]);
+        chain(partner, s2, &mut ch[1]);
+        q.clear();
+        q.extend(ch[1].iter().rev());
+        // The control diagonal: slot s+1 shared => diagonal w1-w3 (ties along p).
+        let e_next = fe[(s + 1) % 3];
+        let prefer_p = fe2.contains(&e_next);
+        zip(&ch[0], q, prefer_p, false, out);
+        return (out.len() - start) / 3;
+    }
+    for (s, c) in ch.iter_mut().enumerate() {
+        chain(k, s, c);
+    }
+    // An edge counts as split when its chain has points between the corners.
+    let is_split = [ch[0].len() > 2, ch[1].len() > 2, ch[2].len() > 2];
+    let c = &l0.faces[3 * k..3 * k + 3];
+    match is_split.iter().filter(|&&x| x).count() {
+        0 => out.extend_from_slice(c),
+        1 => {
+            let s = (0..3).find(|&s| is_split[s]).unwrap_or(0);
+            zip(&ch[s], &[c[(s + 2) % 3]], true, false, out);
+        }
+        2 => {
+            // u: the unsplit slot; the split edges meet at corner u+2.
+            let u = (0..3).find(|&s| !is_split[s]).unwrap_or(0);
+            q.clear();
+            q.extend(ch[(u + 1) % 3].iter().rev());
+            zip(&ch[(u + 2) % 3], q, true, true, out);
+        }
+        _ => {
+            let mid = |v: &Vec<u32>| v[(v.len() - 1) / 2];
+            let (m0, m1, m2) = (mid(&ch[0]), mid(&ch[1]), mid(&ch[2]));
+            out.extend_from_slice(&[m0, m1, m2]);
+            for s in 0..3 {
+                let prev = &ch[(s + 2) % 3];
+                let half = (prev.len() - 1) / 2;
+                q.clear();
+                q.extend(prev[half..].iter().rev());
+                let this = &ch[s];
+                zip(&this[..=(this.len() - 1) / 2], q, true, true, out);
+            }
+        }
+    }
+    (out.len() - start) / 3
+}
+
+/// Uniform level-n output with sparse boundary patches: flat triangles (level-n vertex
+/// ids) and the group of each triangle, in base-face order.
+pub(crate) fn uniform(r: &Refinement, plan: &SparsePlan, n: u32) -> (Vec<u32>, Vec<u32>) {
+    let l0 = &r.levels[0];
+    let q = 1usize << (2 * n);
+    let dense = &r.finest_faces;
+    let mut tris = Vec::new();
+    let mut groups = Vec::new();
+    let mut bufs = Chains::default();
+    let mut edge_chain = Vec::new();
+    let mut chain = |f: usize, s: usize, v: &mut Vec<u32>| {
+        let c = &l0.faces[3 * f..3 * f + 3];
+        let (a, b) = (c[s], c[(s + 1) % 3]);
+        let e = l0.face_edges[3 * f + s] as usize;
+        v.clear();
+        if !plan.split[e] {
+            v.extend_from_slice(&[a, b]);
+            return;
+        }
+        r.base_edge_chain(e, &mut edge_chain);
+        if edge_chain[0] == a {
+            v.extend_from_slice(&edge_chain);
+        } else {
+            v.extend(edge_chain.iter().rev());
+        }
+    };
+    for k in 0..l0.nf() {
+        let g = r.base.group[k];
+        let u = plan.unit[k];
+        if u == DENSE {
+            tris.extend_from_slice(&dense[3 * k * q..3 * (k + 1) * q]);
+            groups.extend(std::iter::repeat_n(g, q));
+        } else if u as usize >= k {
+            let t = emit_unit(l0, plan, k, &mut chain, &mut bufs, &mut tris);
+            groups.extend(std::iter::repeat_n(g, t));
+        }
+    }
+    (tris, groups)
+}
+
+/// Keeps the vertices used by `tris` (in id order). Returns the kept positions and normals
+/// and the old-to-new map (`u32::MAX` for dropped vertices).
+pub(crate) fn compact(
+    positions: &[DVec3],
+    normals: Option<&[DVec3]>,
+    tris: &[u32],
+) -> (Vec<DVec3>, Option<Vec<DVec3>>, Vec<u32>) {
+    let mut remap = vec![u32::MAX; positions.len()];
+    for &v in tris {
+        remap[v as usize] = 0;
+    }
+    let mut next = 0u32;
+    let mut kept = Vec::new();
+    for (v, r) in remap.iter_mut().enumerate() {
+        if *r != u32::MAX {
+            *r = next;
+            next += 1;
+            kept.push(v);
+        }
+    }
+    let pos = kept.iter().map(|&v| positions[v]).collect();
+    let nn = normals.map(|n| kept.iter().map(|&v| n[v]).collect());
+    (pos, nn, remap)
+}
