@@ -9,7 +9,7 @@
 //! only the level choice and [`Refinement::extract_lod`] (gap filling + stitching), never a
 //! new refinement.
 
-use std::collections::BTreeMap;
+use std::collections::HashMap;
 
 use glam::{DVec3, Mat4, Vec3, Vec4};
 use scode::codec::{decode, Content, Header, Limits};
@@ -157,10 +157,7 @@ impl Model {
 
     /// Number of level-0 triangles (polygons fan-triangulated).
     pub fn base_triangle_count(&self) -> usize {
-        self.mesh
-            .faces()
-            .map(|f| f.len().saturating_sub(2))
-            .sum()
+        self.mesh.faces().map(|f| f.len().saturating_sub(2)).sum()
     }
 
     /// Raw-mode files store the final surface: they are shown as stored (level 0 only).
@@ -176,7 +173,8 @@ impl Model {
         }
         let base = self.base_triangle_count().max(1) as f64;
         let mut level = 0;
-        while level < scode::subdiv::MAX_LEVEL && base * 4f64.powi(level as i32 + 1) <= max_triangles
+        while level < scode::subdiv::MAX_LEVEL
+            && base * 4f64.powi(level as i32 + 1) <= max_triangles
         {
             level += 1;
         }
@@ -312,9 +310,8 @@ impl Model {
                 .collect();
         }
         let rf = &*rf;
-        let lod = rf
-            .r
-            .extract_lod(&rf.finest, Some(&rf.vertex_tags), levels)?;
+        let lod =
+            rf.r.extract_lod(&rf.finest, Some(&rf.vertex_tags), levels)?;
         let tags = lod
             .normals
             .as_deref()
@@ -373,7 +370,10 @@ impl Model {
                 let p = t.map(|v| rf.finest[v as usize].as_vec3());
                 let c = (p[0] + p[1] + p[2]) / 3.0;
                 let radius = p.iter().map(|q| q.distance(c)).fold(0.0, f32::max) * 1.5;
-                if planes.iter().any(|pl| pl.truncate().dot(c) + pl.w < -radius) {
+                if planes
+                    .iter()
+                    .any(|pl| pl.truncate().dot(c) + pl.w < -radius)
+                {
                     return 0;
                 }
                 let clip = p.map(|q| m * q.extend(1.0));
@@ -460,7 +460,8 @@ fn build_arrays(
     out.indices.reserve(3 * count);
     // slot of (input vertex, its first group); other groups in `extra`
     let mut first: Vec<(u32, u32)> = vec![(NONE, NONE); vertex_count];
-    let mut extra: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+    // lookups only (slots are numbered in triangle order), so the map's order never leaks
+    let mut extra: HashMap<(u32, u32), u32> = HashMap::new();
     let mut centroid_slots: Vec<u32> = Vec::new();
     for t in 0..count {
         let (tri, g) = triangle(t);

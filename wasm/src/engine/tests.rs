@@ -112,7 +112,11 @@ fn vertices_on_the_sharp_equator_are_split_with_one_normal_per_side() {
         let n0 = Vec3::from_slice(&a.normals[3 * a0..3 * a0 + 3]);
         let n1 = Vec3::from_slice(&a.normals[3 * a1..3 * a1 + 3]);
         // top side points up, bottom side down: a crease, not an averaged normal
-        let (up, down) = if a.groups[a0] == 0 { (n0, n1) } else { (n1, n0) };
+        let (up, down) = if a.groups[a0] == 0 {
+            (n0, n1)
+        } else {
+            (n1, n0)
+        };
         assert!(up.z > 0.2 && down.z < -0.2, "{up} {down}");
     }
 }
@@ -188,7 +192,10 @@ fn zooming_in_raises_levels_and_culled_faces_get_level_zero() {
     let mid = at(60.0);
     let near = at(3.0);
     let sum = |l: &[u8]| l.iter().map(|&x| x as u32).sum::<u32>();
-    assert!(sum(&far) < sum(&mid) && sum(&mid) < sum(&near), "{far:?} {mid:?} {near:?}");
+    assert!(
+        sum(&far) < sum(&mid) && sum(&mid) < sum(&near),
+        "{far:?} {mid:?} {near:?}"
+    );
     assert!(near.iter().all(|&l| l <= 4));
     // Looking away from the model: everything culled.
     let view = Mat4::look_at_rh(Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, 10.0), Vec3::Y);
