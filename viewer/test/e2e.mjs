@@ -45,8 +45,8 @@ const corpus = corpusDir();
 // view: camera yaw/pitch (radians) for the screenshots; near: zoom factor of the second shot.
 const models = [{ name: 'boss_plate', input: join(ROOT, 'corpus/boss_plate.obj'), args: [], view: [0.7, 0.6], near: 0.45 }];
 if (corpus) {
-  models.push({ name: 'fandisk', input: join(corpus, 'meshes/fandisk.obj'), args: ['--tolerance', '0.004', '--relative'], view: [3.6, 0.5], near: 0.45 });
-  models.push({ name: 'four_cone', input: join(corpus, 'tess/four_cone_fine.obj'), args: [], view: [0.7, 0.6], near: 0.45 });
+  models.push({ name: 'fandisk', input: join(corpus, 'meshes/fandisk.obj'), args: ['--tolerance', '0.004', '--relative'], view: [3.6, 0.5], near: 0.45, wire: true });
+  models.push({ name: 'four_cone', input: join(corpus, 'tess/four_cone_fine.obj'), args: [], view: [0.7, 0.6], near: 0.6 });
 } else {
   console.log('e2e: ../shared/corpus not found; testing the bundled boss plate only');
 }
@@ -90,7 +90,7 @@ async function main() {
       execFileSync(BIN, ['encode', ...model.args, model.input, file], { stdio: ['ignore', 'ignore', 'inherit'] });
       const { proc, url } = await startServer(file);
       servers.push(proc);
-      const page = await browser.newPage({ viewport: { width: 900, height: 700 } });
+      const page = await browser.newPage({ viewport: { width: 1200, height: 760 } });
       const errors = [];
       page.on('pageerror', (e) => errors.push(String(e)));
       page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
@@ -106,6 +106,15 @@ async function main() {
       await page.screenshot({ path: join(SHOTS, `viewer-${model.name}-far.png`) });
       const near = await page.evaluate((f) => { window.scodeViewer.zoom(f); return window.scodeViewer.renderNow(); }, model.near);
       await page.screenshot({ path: join(SHOTS, `viewer-${model.name}-near.png`) });
+      if (model.wire) {
+        // The same view with the triangles drawn: levels change across the screen, no cracks.
+        // (24 px per edge, so the triangles are big enough to see.)
+        await page.check('#wire');
+        await page.evaluate(() => { window.scodeViewer.state.target = 24; return window.scodeViewer.renderNow(); });
+        await page.screenshot({ path: join(SHOTS, `viewer-${model.name}-near-wire.png`) });
+        await page.uncheck('#wire');
+        await page.evaluate(() => { window.scodeViewer.state.target = 8; });
+      }
       console.log(`e2e: ${model.name}: finest level ${far.maxLevel}; full view ${far.triangles} triangles ` +
         `(levels ${far.levels.min}-${far.levels.max}, mean ${far.levels.mean.toFixed(2)}); zoomed in ` +
         `${near.triangles} triangles (levels ${near.levels.min}-${near.levels.max}, mean ${near.levels.mean.toFixed(2)}); ` +

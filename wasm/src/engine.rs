@@ -13,6 +13,7 @@ use std::collections::HashMap;
 
 use glam::{DVec3, Mat4, Vec3, Vec4};
 use scode::codec::{decode, Content, Header, Limits};
+use scode::mesh::{BoundarySurface, PatchKind};
 use scode::subdiv::Refinement;
 use scode::{ControlMesh, Error, Result};
 
@@ -56,7 +57,9 @@ struct LineEdge {
 /// Unit normals at the finest level, one per (vertex, group) pair: each vertex has a primary
 /// group (that of its first face) stored densely; the few vertices on CAD-face boundaries have
 /// their other groups in a sorted side list. Area-weighted face normals of the finest
-/// triangles, so shading is smooth inside a CAD face and sharp across its boundary.
+/// triangles, so shading is smooth inside a CAD face and sharp across its boundary; a plane
+/// patch gets its one area-weighted normal everywhere (its belts of long thin triangles would
+/// otherwise show the quantised control points' tiny tilts as streaks).
 struct GroupNormals {
     primary_group: Vec<u32>,
     primary: Vec<Vec3>,
@@ -65,7 +68,13 @@ struct GroupNormals {
 }
 
 impl GroupNormals {
-    fn build(nv: usize, triangles: &[u32], group_of: impl Fn(usize) -> u32, pos: &[DVec3]) -> Self {
+    fn build(
+        nv: usize,
+        triangles: &[u32],
+        group_of: impl Fn(usize) -> u32,
+        pos: &[DVec3],
+        is_plane: &[bool],
+    ) -> Self {
         let mut primary_group = vec![NONE; nv];
         let mut extra_keys = Vec::new();
         for (f, t) in triangles.chunks_exact(3).enumerate() {
@@ -83,10 +92,14 @@ impl GroupNormals {
         extra_keys.dedup();
         let mut acc = vec![DVec3::ZERO; nv];
         let mut acc_extra = vec![DVec3::ZERO; extra_keys.len()];
+        let mut plane = vec![DVec3::ZERO; is_plane.len()];
         for (f, t) in triangles.chunks_exact(3).enumerate() {
             let g = group_of(f);
             let (a, b, c) = (pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]);
             let n = (b - a).cross(c - a);
+            if let Some(p) = plane.get_mut(g as usize) {
+                *p += n;
+            }
             for &v in t {
                 if primary_group[v as usize] == g {
                     acc[v as usize] += n;
@@ -95,12 +108,26 @@ impl GroupNormals {
                 }
             }
         }
-        let unit = |n: DVec3| n.normalize_or_zero().as_vec3();
+        let unit = |n: DVec3, g: u32| {
+            let n = match is_plane.get(g as usize) {
+                Some(true) => plane[g as usize],
+                _ => n,
+            };
+            n.normalize_or_zero().as_vec3()
+        };
         GroupNormals {
+            primary: acc
+                .into_iter()
+                .zip(&primary_group)
+                .map(|(n, &g)| unit(n, g))
+                .collect(),
+            extra: acc_extra
+                .into_iter()
+                .zip(&extra_keys)
+                .map(|(n, &(_, g))| unit(n, g))
+                .collect(),
             primary_group,
-            primary: acc.into_iter().map(unit).collect(),
             extra_keys,
-            extra: acc_extra.into_iter().map(unit).collect(),
         }
     }
 
@@ -197,11 +224,18 @@ impl Model {
         let finest = r.positions(&self.mesh.positions)?;
         let n = max_level;
         let top = r.level(n);
+        let is_plane: Vec<bool> = self
+            .mesh
+            .groups
+            .iter()
+            .map(|g| matches!(g.patch, PatchKind::Boundary(BoundarySurface::Plane)))
+            .collect();
         let normals = GroupNormals::build(
             top.vertex_count(),
             top.triangles(),
             |f| top.face_group(f),
             &finest,
+            &is_plane,
         );
         let l0 = r.level(0);
         let base_triangles: Vec<[u32; 3]> = (0..l0.face_count()).map(|f| l0.triangle(f)).collect();
@@ -279,7 +313,7 @@ impl Model {
                     lv.face_group(t),
                 )
             },
-            |v| Source::Finest(v),
+            Source::Finest,
         );
         out.lines = rf.lines(|_| m as u8);
         Ok(out)
