@@ -71,7 +71,7 @@ async function main() {
   const wasm = readFileSync(join(ROOT, 'viewer/pkg/scode_wasm_bg.wasm'));
   const gz = gzipSync(wasm, { level: 9 }).length;
   console.log(`e2e: wasm module ${wasm.length} bytes raw, ${gz} bytes gzipped (limit 102400)`);
-  if (gz > 102400 && !process.env.E2E_IGNORE_SIZE) fail('the gzipped wasm module exceeds 100 KB');
+  if (gz > 102400) fail('the gzipped wasm module exceeds 100 KB');
 
   const work = mkdtempSync(join(tmpdir(), 'scode-e2e-'));
   const browser = await chromium.launch({
