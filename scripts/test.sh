@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Sets up what the tests need on a fresh machine and runs them: formatting, lints, the whole
-# test suite (unit, property, corpus round-trips, spec vectors) and a short fuzzing pass.
-# Usage: scripts/test.sh            (FUZZ_SECONDS=30 by default; FUZZ_SECONDS=0 skips fuzzing)
+# test suite (unit, property, corpus round-trips, spec vectors), the decoder-only and
+# WebAssembly-viewer checks, the viewer's end-to-end test in headless Chromium, and a short
+# fuzzing pass.
+# Usage: scripts/test.sh            (FUZZ_SECONDS=30 by default; FUZZ_SECONDS=0 skips fuzzing;
+#                                    E2E=0 skips the browser test)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -17,12 +20,36 @@ fi
 
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
+cargo fmt --manifest-path wasm/Cargo.toml --all -- --check
+
+echo "== viewer/pkg built from the current decoder sources"
+viewer/build.sh --check
+
+echo "== decoder-only library (no default features)"
+cargo check --lib --no-default-features
 
 echo "== cargo clippy"
 cargo clippy --all-targets -- -D warnings
 
 echo "== cargo test"
 PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test --all-targets
+
+echo "== wasm/ engine (native): clippy and tests"
+WASM_NATIVE_TARGET="${CARGO_TARGET_DIR:-$PWD/target}"
+cargo clippy --manifest-path wasm/Cargo.toml --target-dir "$WASM_NATIVE_TARGET" --workspace --all-targets -- -D warnings
+cargo test --manifest-path wasm/Cargo.toml --target-dir "$WASM_NATIVE_TARGET" --workspace
+
+if [ "${E2E:-1}" != "0" ]; then
+  echo "== viewer end-to-end test (headless Chromium)"
+  if ! command -v chromium >/dev/null 2>&1; then
+    SUDO=""
+    if [ "$(id -u)" != "0" ]; then SUDO="sudo"; fi
+    $SUDO apt-get update -qq && $SUDO apt-get install -y -qq chromium >/dev/null
+  fi
+  (cd viewer/test && npm ci --no-audit --no-fund --loglevel=error)
+  # cargo test built the scode binary (with `scode view`, which embeds viewer/pkg).
+  SCODE_BIN="${CARGO_TARGET_DIR:-target}/debug/scode" node viewer/test/e2e.mjs
+fi
 
 if [ -d fuzz ] && [ "$FUZZ_SECONDS" != "0" ]; then
   echo "== fuzz (${FUZZ_SECONDS}s per target)"

@@ -1,6 +1,7 @@
 //! Argument parsing and command dispatch for the `scode` binary.
 
 mod commands;
+mod view;
 
 use std::path::{Path, PathBuf};
 
@@ -64,6 +65,14 @@ pub enum Command {
     /// Example: scode segment part.stl -o faces.obj
     #[command(verbatim_doc_comment)]
     Segment(SegmentArgs),
+    /// Show a .scode file in the browser: serves the WebGL viewer and the file on localhost
+    /// and prints the URL (opens it unless --no-open). The viewer decodes and subdivides in
+    /// WebAssembly and picks the level of each base triangle from its size on screen.
+    /// Serves until Ctrl-C.
+    ///
+    /// Example: scode view part.scode --port 8765
+    #[command(verbatim_doc_comment)]
+    View(ViewArgs),
 }
 
 /// The output file of a command: positional or `-o`, exactly one of them.
@@ -191,6 +200,18 @@ pub struct SubdivideArgs {
     pub dense_boundary: bool,
 }
 
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    /// The .scode file to show.
+    pub file: PathBuf,
+    /// Local port to listen on (0: any free port).
+    #[arg(long, default_value_t = 8765, value_name = "N")]
+    pub port: u16,
+    /// Only print the URL; do not start a browser.
+    #[arg(long)]
+    pub no_open: bool,
+}
+
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Encode(a) => commands::encode(&a),
@@ -198,5 +219,20 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(a) => commands::info(&a),
         Command::Subdivide(a) => commands::subdivide(&a),
         Command::Segment(a) => commands::segment(&a),
+        Command::View(a) => view_command(&a),
     }
+}
+
+fn view_command(args: &ViewArgs) -> Result<()> {
+    view::check_scode(&args.file)?;
+    let server = view::ViewServer::bind(&args.file, args.port)?;
+    let url = server.url()?;
+    println!("scode view: {} at {url}", args.file.display());
+    println!("(serving until Ctrl-C)");
+    use std::io::Write;
+    std::io::stdout().flush()?;
+    if !args.no_open {
+        view::open_browser(&url);
+    }
+    server.serve()
 }
