@@ -48,6 +48,8 @@ pub mod off;
 pub mod ply;
 pub mod repair;
 pub mod stl;
+#[cfg(feature = "step")]
+pub mod step;
 pub mod weld;
 
 pub use faces_json::{
