@@ -6,8 +6,9 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 
-use glam::DVec3;
+use glam::{DMat4, DVec3};
 use truck_stepio::r#in::alias::{Curve3D, ElementarySurface, Surface, SweptCurve};
 use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace};
 use truck_stepio::r#in::alias::{Invertible, Matrix4, Point3, Transform, Vector3};
@@ -18,12 +19,13 @@ use truck_stepio::r#in::ruststep::ast::Name;
 use truck_stepio::r#in::ruststep::tables::{EntityTable, IntoOwned, PlaceHolder};
 
 use super::text::{self, Records};
-use super::{FaceSurface, SkippedFace};
+use super::{run_with_timeout, FaceSurface, SkippedFace, Watched};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
 use crate::mesh::Axis;
 
 /// One face truck could convert, with its id and exact surface description.
+#[derive(Clone)]
 pub(super) struct ParsedFace {
     pub face_id: u64,
     /// Boundaries index into [`ParsedBody::edges`].
@@ -34,8 +36,11 @@ pub(super) struct ParsedFace {
 
 /// One body's converted faces, with the edges and vertices they use (indices local to the
 /// body, like truck's `CompressedShell`) and their STEP ids.
+#[derive(Clone)]
 pub(super) struct ParsedBody {
     pub name: String,
+    /// From the body's coordinates to the model's (assembly placement; identity for parts).
+    pub placement: DMat4,
     pub step_id: u64,
     pub entity: String,
     pub vertices: Vec<Point3>,
@@ -60,7 +65,7 @@ fn entity_ref<T>(p: &PlaceHolder<T>) -> Option<u64> {
 }
 
 /// Parses the text and converts every body's faces. Errors only when nothing can be read.
-pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result<Parsed> {
+pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result<Loaded> {
     let (text, pcurve, empty) = text::prepass(raw);
     let records = text::scan(&text);
     let mut notes = Vec::new();
@@ -77,24 +82,6 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
     }
     if records.by_id.is_empty() {
         return Err(Error::input(path, "no DATA section with instances"));
-    }
-    // Assemblies: parts are placed by transformations truck-stepio 0.3 does not apply.
-    if let Some(id) = records
-        .ids_named("REPRESENTATION_RELATIONSHIP_WITH_TRANSFORMATION")
-        .next()
-    {
-        let nauo = records
-            .ids_named("NEXT_ASSEMBLY_USAGE_OCCURRENCE")
-            .count();
-        return Err(Error::input(
-            path,
-            format!(
-                "unsupported entity REPRESENTATION_RELATIONSHIP_WITH_TRANSFORMATION #{id} \
-                 (assembly with {nauo} NEXT_ASSEMBLY_USAGE_OCCURRENCE placements): the \
-                 STEP reader does not place assembly components, so their parts would \
-                 overlap at the origin; export the assembly as one part"
-            ),
-        ));
     }
     let face_count = records.ids_named("ADVANCED_FACE").count()
         + records.ids_named("FACE_SURFACE").count();
@@ -187,13 +174,61 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
         }
     }
 
-    let mut bodies = Vec::new();
-    for (k, (id, entity, shells)) in body_shells.into_iter().enumerate() {
-        let name = format!("body{}", k + 1);
+    // Assembly instances: each solid once per placement.
+    let solid_ids: Vec<u64> = body_shells.iter().map(|b| b.0).collect();
+    let instances = records
+        .solid_instances(&solid_ids)
+        .map_err(|e| Error::input(path, format!("assembly structure: {e}")))?;
+    let total: usize = instances.values().map(Vec::len).sum();
+    if total > solid_ids.len() || instances.values().flatten().any(|m| *m != DMat4::IDENTITY) {
+        notes.push(format!(
+            "assembly: {} solids placed as {total} instances",
+            solid_ids.len()
+        ));
+    }
+    Ok(Loaded {
+        table: Arc::new(table),
+        records: Arc::new(records),
+        body_shells,
+        instances,
+        skipped,
+        notes,
+        millimetres_per_unit,
+    })
+}
+
+/// The parsed file, before its faces are converted.
+pub(super) struct Loaded {
+    table: Arc<Table>,
+    records: Arc<Records>,
+    /// `(solid or shell id, entity name, [(shell id, flip)])` per body.
+    body_shells: Vec<(u64, String, Vec<(u64, bool)>)>,
+    instances: BTreeMap<u64, Vec<DMat4>>,
+    skipped: Vec<SkippedFace>,
+    notes: Vec<String>,
+    millimetres_per_unit: Option<f64>,
+}
+
+/// Converts every face of every body, each in a watchdog thread (`face_timeout`): a face
+/// whose conversion panics or hangs is skipped and named, the others are kept.
+pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
+    let Loaded {
+        table,
+        records,
+        body_shells,
+        instances,
+        mut skipped,
+        notes,
+        millimetres_per_unit,
+    } = loaded;
+    let mut bodies: Vec<ParsedBody> = Vec::new();
+    for (id, entity, shells) in body_shells {
+        let name = format!("body{}", bodies.len() + 1);
         let mut body = ParsedBody {
             name: name.clone(),
             step_id: id,
             entity,
+            placement: DMat4::IDENTITY,
             vertices: Vec::new(),
             vertex_ids: Vec::new(),
             edges: Vec::new(),
@@ -213,14 +248,48 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
             };
             for face in &shell.cfs_faces {
                 let face_id = entity_ref(face).unwrap_or(0);
-                match convert_face(&table, &records, face, &mut body, &mut maps) {
-                    Ok((real_id, mut cface, mut info)) => {
+                let (t, r, f, m) = (table.clone(), records.clone(), face.clone(), maps.clone());
+                let (nv, ne) = (body.vertices.len(), body.edges.len());
+                let watched = run_with_timeout("scode-step-convert", opts.face_timeout, move || {
+                    convert_face(&t, &r, &f, &m, nv, ne)
+                });
+                let result = match watched {
+                    Watched::Done(r) => r,
+                    Watched::Panicked(msg) => Err((
+                        format!("{} #{face_id}", records.name_of(face_id)),
+                        format!("the STEP reader (truck) panicked: {msg}"),
+                    )),
+                    Watched::TimedOut => Err((
+                        format!("{} #{face_id}", records.name_of(face_id)),
+                        format!(
+                            "converting the face did not finish within {:.0} s (abandoned)",
+                            opts.face_timeout.as_secs_f64()
+                        ),
+                    )),
+                };
+                match result {
+                    Ok(out) => {
+                        for (vid, p) in out.new_vertices {
+                            maps.vertex.insert(vid, body.vertices.len());
+                            body.vertices.push(p);
+                            body.vertex_ids.push(vid);
+                        }
+                        for (eid, a, b, curve) in out.new_edges {
+                            maps.edge.insert(eid, body.edges.len());
+                            body.edges.push(CompressedEdge {
+                                vertices: (a, b),
+                                curve,
+                            });
+                            body.edge_ids.push(eid);
+                        }
+                        let mut cface = out.face;
                         if flip {
                             cface.orientation = !cface.orientation;
                         }
+                        let mut info = out.info;
                         info.body = bodies.len() as u32;
                         body.faces.push(ParsedFace {
-                            face_id: real_id,
+                            face_id: out.real_id,
                             face: cface,
                             info,
                         });
@@ -234,14 +303,27 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
                 }
             }
         }
-        bodies.push(body);
+        let placements = instances.get(&id).cloned().unwrap_or_default();
+        let n = placements.len();
+        for (k, m) in placements.into_iter().enumerate() {
+            let mut b = body.clone();
+            b.name = format!("body{}", bodies.len() + 1);
+            for f in &mut b.faces {
+                f.info.body = bodies.len() as u32;
+            }
+            if n > 1 {
+                b.entity = format!("{} (instance {} of {n})", b.entity, k + 1);
+            }
+            b.placement = m;
+            bodies.push(b);
+        }
     }
-    Ok(Parsed {
+    Parsed {
         bodies,
         skipped,
         notes,
         millimetres_per_unit,
-    })
+    }
 }
 
 /// `(shell id, flip)` for a CLOSED_SHELL / OPEN_SHELL or an ORIENTED_*_SHELL around one.
@@ -259,7 +341,7 @@ fn resolve_shell(records: &Records, id: u64) -> Option<(u64, bool)> {
 }
 
 /// STEP id -> index in the body, for vertices and edges.
-#[derive(Default)]
+#[derive(Clone, Default)]
 struct IdMaps {
     vertex: BTreeMap<u64, usize>,
     edge: BTreeMap<u64, usize>,
@@ -273,9 +355,10 @@ fn convert_face(
     table: &Table,
     records: &Records,
     face: &PlaceHolder<FaceAnyHolder>,
-    body: &mut ParsedBody,
-    maps: &mut IdMaps,
-) -> std::result::Result<(u64, CompressedFace<Surface>, FaceSurface), FaceError> {
+    maps: &IdMaps,
+    n_vertices: usize,
+    n_edges: usize,
+) -> std::result::Result<FaceOut, FaceError> {
     let face_id = entity_ref(face).unwrap_or(0);
     let here = |id: u64| format!("{} #{id}", records.name_of(id));
     let (orientation, real_id, holder): (bool, u64, FaceSurfaceHolder) =
@@ -329,8 +412,6 @@ fn convert_face(
     let mut new_vertices: Vec<(u64, Point3)> = Vec::new();
     let mut new_edges: Vec<(u64, usize, usize, Curve3D)> = Vec::new();
     let mut boundaries = Vec::new();
-    let n_vertices = body.vertices.len();
-    let n_edges = body.edges.len();
     for bound in &holder.bounds {
         let fb: Option<FaceBoundHolder> = match bound {
             PlaceHolder::Owned(h) => Some(h.clone()),
@@ -420,29 +501,26 @@ fn convert_face(
         }
         boundaries.push(wire);
     }
-    // Commit.
-    for (vid, p) in new_vertices {
-        maps.vertex.insert(vid, body.vertices.len());
-        body.vertices.push(p);
-        body.vertex_ids.push(vid);
-    }
-    for (eid, a, b, curve) in new_edges {
-        maps.edge.insert(eid, body.edges.len());
-        body.edges.push(CompressedEdge {
-            vertices: (a, b),
-            curve,
-        });
-        body.edge_ids.push(eid);
-    }
-    Ok((
+    Ok(FaceOut {
         real_id,
-        CompressedFace {
+        face: CompressedFace {
             surface,
             boundaries,
             orientation,
         },
         info,
-    ))
+        new_vertices,
+        new_edges,
+    })
+}
+
+/// A converted face with the vertices and edges it adds to its body.
+struct FaceOut {
+    real_id: u64,
+    face: CompressedFace<Surface>,
+    info: FaceSurface,
+    new_vertices: Vec<(u64, Point3)>,
+    new_edges: Vec<(u64, usize, usize, Curve3D)>,
 }
 
 fn dv(p: Point3) -> DVec3 {

@@ -57,9 +57,10 @@ pub struct StepOptions {
     /// Convert to millimetres using the file's LENGTH_UNIT (default true). When false, or when
     /// the file names no length unit, positions stay in file units.
     pub to_millimetres: bool,
-    /// Longest time parsing and converting the B-rep may take.
+    /// Longest time parsing the file may take.
     pub timeout: Duration,
-    /// Longest time the tessellation of one face may take; a face over it is skipped.
+    /// Longest time converting one face from STEP to truck, and then tessellating it, may
+    /// take; a face over it is skipped.
     pub face_timeout: Duration,
 }
 
@@ -69,8 +70,8 @@ impl Default for StepOptions {
             chordal_tolerance: None,
             relative_chordal_tolerance: 2.5e-4,
             to_millimetres: true,
-            timeout: Duration::from_secs(120),
-            face_timeout: Duration::from_secs(20),
+            timeout: Duration::from_secs(60),
+            face_timeout: Duration::from_secs(10),
         }
     }
 }
@@ -252,6 +253,7 @@ pub fn read_step_bytes(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<
             ))
         }
     };
+    let parsed = brep::convert(parsed, opts);
     tessellate::tessellate(path, parsed, opts)
 }
 

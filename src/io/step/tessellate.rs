@@ -164,6 +164,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     let snap_tol = 0.05 * chord;
     for (bi, body) in parsed.bodies.iter().enumerate() {
         let first_group = mesh.groups.len() as u32;
+        let place = body.placement;
         for pf in &body.faces {
             let (shell, edges_global, vertices_global) = single_face_shell(body, &pf.face);
             let face_name = format!("{} #{}", pf.info.entity, pf.info.surface_id);
@@ -207,11 +208,11 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                     for (k, p) in pts.iter().enumerate() {
                         let id = if k == 0 || k + 1 == pts.len() {
                             let v = if k == 0 { va } else { vb };
-                            *vertex_pool
-                                .entry((bi, v))
-                                .or_insert_with(|| pool.push(dv(&body.vertices[v])))
+                            *vertex_pool.entry((bi, v)).or_insert_with(|| {
+                                pool.push(place.transform_point3(dv(&body.vertices[v])))
+                            })
                         } else {
-                            pool.push(dv(p))
+                            pool.push(place.transform_point3(dv(p)))
                         };
                         ids.push(id);
                     }
@@ -229,7 +230,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             let boundary = mesh_boundary_vertices(poly);
             let mut map = Vec::with_capacity(positions.len());
             for (i, p) in positions.iter().enumerate() {
-                let p = dv(p);
+                let p = place.transform_point3(dv(p));
                 let hit = nearest(&candidates, p, snap_tol);
                 match hit {
                     Some((id, d)) => {
@@ -270,6 +271,10 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             }
             let mut info = pf.info.clone();
             info.body = bodies_out.len() as u32;
+            if let Some(a) = &mut info.axis {
+                a.origin = place.transform_point3(a.origin);
+                a.direction = place.transform_vector3(a.direction).normalize_or_zero();
+            }
             faces_out.push(info);
         }
         let group_count = mesh.groups.len() as u32 - first_group;
@@ -282,15 +287,16 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
         });
     }
     if mesh.face_count() == 0 {
-        let first = skipped
-            .first()
-            .map(|s| format!("; first skipped: {s}"))
-            .unwrap_or_default();
+        let mut reasons: Vec<String> = skipped.iter().map(|s| format!("{}: {}", s.entity.split(' ').next().unwrap_or(""), s.reason)).collect();
+        reasons.sort();
+        reasons.dedup();
+        reasons.truncate(4);
         return Err(Error::input(
             path,
             format!(
-                "no face could be read ({} skipped){first}",
-                skipped.len()
+                "no face could be read ({} skipped: {})",
+                skipped.len(),
+                reasons.join("; ")
             ),
         ));
     }

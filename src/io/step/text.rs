@@ -8,6 +8,8 @@
 
 use std::collections::BTreeMap;
 
+use glam::{DMat4, DVec3};
+
 /// One instance `#id = NAME(...)` or `#id = ( A(...) B(...) )` of the DATA section.
 ///
 /// Only names and references are kept (not the parameters): every question this module
@@ -122,6 +124,193 @@ impl Records {
             }
         }
         None
+    }
+}
+
+impl Records {
+    /// Top-level arguments of a short simple record (`NAME(a,b,(c,d))` -> `a`, `b`, `(c,d)`).
+    fn args(&self, id: u64) -> Option<Vec<String>> {
+        let p = &self.get(id)?.params;
+        let open = p.find('(')?;
+        let close = p.rfind(')')?;
+        let inner = p.get(open + 1..close)?;
+        let mut out = Vec::new();
+        let mut depth = 0;
+        let mut cur = String::new();
+        let mut in_string = false;
+        for c in inner.chars() {
+            match c {
+                '\'' => in_string = !in_string,
+                '(' if !in_string => depth += 1,
+                ')' if !in_string => depth -= 1,
+                ',' if !in_string && depth == 0 => {
+                    out.push(std::mem::take(&mut cur).trim().to_string());
+                    continue;
+                }
+                _ => {}
+            }
+            cur.push(c);
+        }
+        out.push(cur.trim().to_string());
+        Some(out)
+    }
+
+    /// The three numbers of a CARTESIAN_POINT or DIRECTION.
+    fn triple(&self, id: u64) -> Option<DVec3> {
+        let a = self.args(id)?;
+        let list = a.get(1)?.trim().strip_prefix('(')?.strip_suffix(')')?;
+        let v: Vec<f64> = list
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .ok()?;
+        match v.as_slice() {
+            [x, y, z] => Some(DVec3::new(*x, *y, *z)),
+            [x, y] => Some(DVec3::new(*x, *y, 0.0)),
+            _ => None,
+        }
+    }
+
+    fn reference(&self, arg: &str) -> Option<u64> {
+        arg.trim().strip_prefix('#')?.parse().ok()
+    }
+
+    /// AXIS2_PLACEMENT_3D as the matrix from its local frame to its representation's frame.
+    pub fn placement(&self, id: u64) -> Option<DMat4> {
+        let r = self.get(id)?;
+        if !r.is("AXIS2_PLACEMENT_3D") {
+            return None;
+        }
+        let a = self.args(id)?;
+        let origin = self.triple(self.reference(a.get(1)?)?)?;
+        let z = a
+            .get(2)
+            .and_then(|x| self.reference(x))
+            .and_then(|d| self.triple(d))
+            .unwrap_or(DVec3::Z)
+            .normalize_or_zero();
+        let x = a
+            .get(3)
+            .and_then(|x| self.reference(x))
+            .and_then(|d| self.triple(d))
+            .unwrap_or(DVec3::X);
+        let x = (x - x.dot(z) * z).normalize_or_zero();
+        if z == DVec3::ZERO || x == DVec3::ZERO {
+            return None;
+        }
+        let y = z.cross(x);
+        Some(DMat4::from_cols(
+            x.extend(0.0),
+            y.extend(0.0),
+            z.extend(0.0),
+            origin.extend(1.0),
+        ))
+    }
+
+    /// Where each solid appears in the assembly: for every solid id, one matrix (from the
+    /// solid's coordinates to the root assembly's) per instance, ordered deterministically.
+    /// Representations are linked by REPRESENTATION_RELATIONSHIP_WITH_TRANSFORMATION (child
+    /// `rep_1` into parent `rep_2` through ITEM_DEFINED_TRANSFORMATION: `p_parent =
+    /// M(item_2) * M(item_1)^-1 * p_child`, as Open CASCADE reads it) and by plain
+    /// (SHAPE_)REPRESENTATION_RELATIONSHIPs, which alias two representations of one part.
+    /// A file without transformations gives every solid one identity instance. Errors name
+    /// the entity that cannot be used.
+    pub fn solid_instances(&self, solids: &[u64]) -> std::result::Result<BTreeMap<u64, Vec<DMat4>>, String> {
+        // Union-find over representations linked without a transformation.
+        let mut alias: BTreeMap<u64, u64> = BTreeMap::new();
+        fn find(alias: &BTreeMap<u64, u64>, mut x: u64) -> u64 {
+            while let Some(&p) = alias.get(&x) {
+                if p == x {
+                    break;
+                }
+                x = p;
+            }
+            x
+        }
+        // child group -> [(parent rep, matrix)]
+        let mut links: Vec<(u64, u64, DMat4)> = Vec::new();
+        for (&id, r) in &self.by_id {
+            let is_rel = r.names.iter().any(|n| n.ends_with("REPRESENTATION_RELATIONSHIP"));
+            if !is_rel {
+                continue;
+            }
+            let (Some(&a), Some(&b)) = (r.refs.first(), r.refs.get(1)) else {
+                continue;
+            };
+            if r.is("REPRESENTATION_RELATIONSHIP_WITH_TRANSFORMATION") {
+                let Some(&t) = r.refs.get(2) else {
+                    return Err(format!("{} #{id} has no transformation", r.display_name()));
+                };
+                let tr = self.get(t);
+                if !tr.is_some_and(|x| x.is("ITEM_DEFINED_TRANSFORMATION")) {
+                    return Err(format!(
+                        "unsupported entity {} #{t} (transformation of #{id})",
+                        self.name_of(t)
+                    ));
+                }
+                let refs = &self.by_id[&t].refs;
+                let m = match (
+                    refs.first().and_then(|&x| self.placement(x)),
+                    refs.get(1).and_then(|&x| self.placement(x)),
+                ) {
+                    (Some(m1), Some(m2)) => m2 * m1.inverse(),
+                    _ => {
+                        return Err(format!(
+                            "ITEM_DEFINED_TRANSFORMATION #{t}: its items are not \
+                             AXIS2_PLACEMENT_3D placements"
+                        ))
+                    }
+                };
+                links.push((a, b, m));
+            } else {
+                let (ra, rb) = (find(&alias, a), find(&alias, b));
+                if ra != rb {
+                    alias.insert(ra.max(rb), ra.min(rb));
+                }
+            }
+        }
+        // Parents of each representation group.
+        let mut parents: BTreeMap<u64, Vec<(u64, DMat4)>> = BTreeMap::new();
+        for &(child, parent, m) in &links {
+            parents
+                .entry(find(&alias, child))
+                .or_default()
+                .push((find(&alias, parent), m));
+        }
+        // Representation containing each solid (the first one listing it as an item).
+        let mut out = BTreeMap::new();
+        for &solid in solids {
+            let rep = self
+                .by_id
+                .iter()
+                .find(|(_, r)| {
+                    r.names.iter().any(|n| n.ends_with("REPRESENTATION"))
+                        && r.refs.contains(&solid)
+                })
+                .map(|(&id, _)| id);
+            let mut instances = Vec::new();
+            match rep {
+                None => instances.push(DMat4::IDENTITY),
+                Some(rep) => {
+                    let mut stack = vec![(find(&alias, rep), DMat4::IDENTITY, 0u32)];
+                    while let Some((g, m, depth)) = stack.pop() {
+                        match parents.get(&g) {
+                            Some(ps) if depth < 32 => {
+                                for &(p, t) in ps.iter().rev() {
+                                    stack.push((p, t * m, depth + 1));
+                                }
+                            }
+                            _ => instances.push(m),
+                        }
+                        if instances.len() > 100_000 {
+                            return Err("more than 100000 assembly instances".into());
+                        }
+                    }
+                }
+            }
+            out.insert(solid, instances);
+        }
+        Ok(out)
     }
 }
 
