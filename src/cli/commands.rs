@@ -337,8 +337,11 @@ fn step_info(args: &InfoArgs) -> Result<()> {
         SurfaceHint::Unknown => "classified from the triangles",
     };
     for (b, body) in model.bodies.iter().enumerate() {
-        let faces: Vec<&step::FaceSurface> =
-            model.faces.iter().filter(|f| f.body as usize == b).collect();
+        let faces: Vec<&step::FaceSurface> = model
+            .faces
+            .iter()
+            .filter(|f| f.body as usize == b)
+            .collect();
         println!(
             "  {} ({} #{}): {} faces",
             body.name,
@@ -368,7 +371,12 @@ fn step_info(args: &InfoArgs) -> Result<()> {
                 .map(|a| {
                     format!(
                         " axis ({:.4}, {:.4}, {:.4}) dir ({:.4}, {:.4}, {:.4})",
-                        a.origin.x, a.origin.y, a.origin.z, a.direction.x, a.direction.y, a.direction.z
+                        a.origin.x,
+                        a.origin.y,
+                        a.origin.z,
+                        a.direction.x,
+                        a.direction.y,
+                        a.direction.z
                     )
                 })
                 .unwrap_or_default();

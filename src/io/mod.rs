@@ -47,9 +47,9 @@ pub mod obj;
 pub mod off;
 pub mod ply;
 pub mod repair;
-pub mod stl;
 #[cfg(feature = "step")]
 pub mod step;
+pub mod stl;
 pub mod weld;
 
 pub use faces_json::{

@@ -10,13 +10,13 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3};
 use truck_stepio::r#in::alias::{Curve3D, ElementarySurface, Surface, SweptCurve};
-use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace};
 use truck_stepio::r#in::alias::{Invertible, Matrix4, Point3, Transform, Vector3};
+use truck_stepio::r#in::ruststep::ast::Name;
+use truck_stepio::r#in::ruststep::tables::{EntityTable, IntoOwned, PlaceHolder};
 use truck_stepio::r#in::{
     FaceAnyHolder, FaceBoundHolder, FaceSurfaceHolder, Table, VertexPointHolder,
 };
-use truck_stepio::r#in::ruststep::ast::Name;
-use truck_stepio::r#in::ruststep::tables::{EntityTable, IntoOwned, PlaceHolder};
+use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace};
 
 use super::text::{self, Records};
 use super::{run_with_timeout, FaceSurface, SkippedFace, Watched};
@@ -83,8 +83,8 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
     if records.by_id.is_empty() {
         return Err(Error::input(path, "no DATA section with instances"));
     }
-    let face_count = records.ids_named("ADVANCED_FACE").count()
-        + records.ids_named("FACE_SURFACE").count();
+    let face_count =
+        records.ids_named("ADVANCED_FACE").count() + records.ids_named("FACE_SURFACE").count();
     if face_count == 0 {
         let tess = records
             .by_id
@@ -120,7 +120,7 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
     let table = Table::from_data_section(data);
 
     // Bodies: solids, or every shell when there are none.
-    let mut body_shells: Vec<(u64, String, Vec<(u64, bool)>)> = Vec::new();
+    let mut body_shells: Vec<BodyShells> = Vec::new();
     let mut in_solid = std::collections::BTreeSet::new();
     for (&id, r) in &records.by_id {
         if r.is("MANIFOLD_SOLID_BREP") || r.is("BREP_WITH_VOIDS") {
@@ -197,12 +197,15 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
     })
 }
 
+/// `(solid or shell id, entity name, [(shell id, flip)])`: the shells of one body.
+type BodyShells = (u64, String, Vec<(u64, bool)>);
+
 /// The parsed file, before its faces are converted.
 pub(super) struct Loaded {
     table: Arc<Table>,
     records: Arc<Records>,
     /// `(solid or shell id, entity name, [(shell id, flip)])` per body.
-    body_shells: Vec<(u64, String, Vec<(u64, bool)>)>,
+    body_shells: Vec<BodyShells>,
     instances: BTreeMap<u64, Vec<DMat4>>,
     skipped: Vec<SkippedFace>,
     notes: Vec<String>,
@@ -250,17 +253,18 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
                 let face_id = entity_ref(face).unwrap_or(0);
                 let (t, r, f, m) = (table.clone(), records.clone(), face.clone(), maps.clone());
                 let (nv, ne) = (body.vertices.len(), body.edges.len());
-                let watched = run_with_timeout("scode-step-convert", opts.face_timeout, move || {
-                    convert_face(&t, &r, &f, &m, nv, ne)
-                });
+                let watched =
+                    run_with_timeout("scode-step-convert", opts.face_timeout, move || {
+                        convert_face(&t, &r, &f, &m, nv, ne)
+                    });
                 let result = match watched {
                     Watched::Done(r) => r,
                     Watched::Panicked(msg) => Err((
-                        format!("{} #{face_id}", records.name_of(face_id)),
+                        face_and_surface(&records, face_id),
                         format!("the STEP reader (truck) panicked: {msg}"),
                     )),
                     Watched::TimedOut => Err((
-                        format!("{} #{face_id}", records.name_of(face_id)),
+                        face_and_surface(&records, face_id),
                         format!(
                             "converting the face did not finish within {:.0} s (abandoned)",
                             opts.face_timeout.as_secs_f64()
@@ -323,6 +327,16 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
         skipped,
         notes,
         millimetres_per_unit,
+    }
+}
+
+/// `ADVANCED_FACE #12 on B_SPLINE_SURFACE_WITH_KNOTS #40`: a face and its surface (the
+/// last reference of a face instance), for messages about faces that could not be read.
+fn face_and_surface(records: &Records, face_id: u64) -> String {
+    let face = format!("{} #{face_id}", records.name_of(face_id));
+    match records.get(face_id).and_then(|r| r.refs.last()) {
+        Some(&s) if records.get(s).is_some() => format!("{face} on {} #{s}", records.name_of(s)),
+        _ => face,
     }
 }
 
@@ -474,21 +488,22 @@ fn convert_face(
                         format!("curve of edge #{curve_id} cannot be converted: {e}"),
                     )
                 })?;
-                let mut vertex_index = |p: &PlaceHolder<VertexPointHolder>| -> std::result::Result<usize, FaceError> {
-                    let vid = entity_ref(p).ok_or_else(|| {
-                        (here(curve_id), "inline vertex is not supported".to_string())
-                    })?;
-                    if let Some(&i) = maps.vertex.get(&vid) {
-                        return Ok(i);
-                    }
-                    if let Some(k) = new_vertices.iter().position(|x| x.0 == vid) {
-                        return Ok(n_vertices + k);
-                    }
-                    let vp = EntityTable::<VertexPointHolder>::get_owned(table, vid)
-                        .map_err(|e| (here(vid), format!("vertex cannot be read ({e})")))?;
-                    new_vertices.push((vid, Point3::from(&vp.vertex_geometry)));
-                    Ok(n_vertices + new_vertices.len() - 1)
-                };
+                let mut vertex_index =
+                    |p: &PlaceHolder<VertexPointHolder>| -> std::result::Result<usize, FaceError> {
+                        let vid = entity_ref(p).ok_or_else(|| {
+                            (here(curve_id), "inline vertex is not supported".to_string())
+                        })?;
+                        if let Some(&i) = maps.vertex.get(&vid) {
+                            return Ok(i);
+                        }
+                        if let Some(k) = new_vertices.iter().position(|x| x.0 == vid) {
+                            return Ok(n_vertices + k);
+                        }
+                        let vp = EntityTable::<VertexPointHolder>::get_owned(table, vid)
+                            .map_err(|e| (here(vid), format!("vertex cannot be read ({e})")))?;
+                        new_vertices.push((vid, Point3::from(&vp.vertex_geometry)));
+                        Ok(n_vertices + new_vertices.len() - 1)
+                    };
                 let a = vertex_index(&ec.edge_start)?;
                 let b = vertex_index(&ec.edge_end)?;
                 new_edges.push((curve_id, a, b, curve));
@@ -593,7 +608,11 @@ fn surface_info(surface: &Surface, entity: String, face_id: u64) -> FaceSurface 
                 let ra = radial(a, &axis);
                 let rb = radial(b, &axis);
                 let sa = ra.length();
-                let sb = if sa > 0.0 { rb.dot(ra) / sa } else { rb.length() };
+                let sb = if sa > 0.0 {
+                    rb.dot(ra) / sa
+                } else {
+                    rb.length()
+                };
                 info.radius = Some(sa);
                 if (sa - sb).abs() > 1e-300 {
                     let t = sa / (sa - sb);
@@ -635,4 +654,3 @@ fn radial(p: DVec3, axis: &Axis) -> DVec3 {
     let v = p - axis.origin;
     v - v.dot(axis.direction) * axis.direction
 }
-

@@ -12,7 +12,9 @@ use std::path::Path;
 use glam::DVec3;
 use truck_meshalgo::prelude::{PolygonMesh, RobustMeshableShape};
 use truck_stepio::r#in::alias::{BoundedCurve, ParametricCurve, Point3, PolylineCurve};
-use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace, CompressedShell};
+use truck_topology::compress::{
+    CompressedEdge, CompressedEdgeIndex, CompressedFace, CompressedShell,
+};
 
 use super::brep::{Parsed, ParsedBody};
 use super::{
@@ -135,6 +137,9 @@ impl Pool {
 }
 
 pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Result<StepModel> {
+    if parsed.bodies.iter().all(|b| b.faces.is_empty()) {
+        return Err(no_face_error(path, &parsed.skipped));
+    }
     let scale = parsed.millimetres_per_unit.unwrap_or(1.0);
     let diag = brep_diagonal(&parsed);
     let chord_mm = match opts.chordal_tolerance {
@@ -161,6 +166,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     let mut bodies_out = Vec::new();
     let mut snap_max = 0.0f64;
     let mut unsnapped = 0usize;
+    let mut overlapping = 0usize;
     let snap_tol = 0.05 * chord;
     for (bi, body) in parsed.bodies.iter().enumerate() {
         let first_group = mesh.groups.len() as u32;
@@ -201,7 +207,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             let mut candidates: Vec<(DVec3, u32)> = Vec::new();
             for (local, &ge) in edges_global.iter().enumerate() {
                 let key = (bi, ge);
-                if !edge_pool.contains_key(&key) {
+                if let std::collections::btree_map::Entry::Vacant(slot) = edge_pool.entry(key) {
                     let pts: &Vec<Point3> = &meshed.edges[local].curve;
                     let (va, vb) = body.edges[ge].vertices;
                     let mut ids = Vec::with_capacity(pts.len());
@@ -216,7 +222,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                         };
                         ids.push(id);
                     }
-                    edge_pool.insert(key, ids);
+                    slot.insert(ids);
                 }
                 for &id in &edge_pool[&key] {
                     candidates.push((pool.positions[id as usize], id));
@@ -250,6 +256,11 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                 patch_kind(&pf.info),
             );
             let mut triangles = 0;
+            // Each face must be an oriented 2-manifold for the fit: a triangle that would use
+            // a directed edge twice, or an edge a third time (truck overlaps on some periodic
+            // and trimmed faces, or welding folded a sliver), is dropped and counted.
+            let mut directed: std::collections::BTreeSet<(u32, u32)> = Default::default();
+            let mut uses: BTreeMap<(u32, u32), u8> = BTreeMap::new();
             for tri in poly.faces().triangle_iter() {
                 let mut t = [map[tri[0].pos], map[tri[1].pos], map[tri[2].pos]];
                 if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
@@ -257,6 +268,21 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                 }
                 if !pf.face.orientation {
                     t.swap(1, 2);
+                }
+                let es = [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
+                let clash = es.iter().any(|&(a, b)| {
+                    directed.contains(&(a, b))
+                        || uses
+                            .get(&crate::mesh::edge_key(a, b))
+                            .is_some_and(|&n| n >= 2)
+                });
+                if clash {
+                    overlapping += 1;
+                    continue;
+                }
+                for &(a, b) in &es {
+                    directed.insert((a, b));
+                    *uses.entry(crate::mesh::edge_key(a, b)).or_insert(0) += 1;
                 }
                 mesh.push_face(&t, group);
                 triangles += 1;
@@ -287,18 +313,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
         });
     }
     if mesh.face_count() == 0 {
-        let mut reasons: Vec<String> = skipped.iter().map(|s| format!("{}: {}", s.entity.split(' ').next().unwrap_or(""), s.reason)).collect();
-        reasons.sort();
-        reasons.dedup();
-        reasons.truncate(4);
-        return Err(Error::input(
-            path,
-            format!(
-                "no face could be read ({} skipped: {})",
-                skipped.len(),
-                reasons.join("; ")
-            ),
-        ));
+        return Err(no_face_error(path, &skipped));
     }
     // Compact the pool to the vertices the faces use, in order of first use.
     let mut new_id = vec![u32::MAX; pool.positions.len()];
@@ -312,6 +327,12 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
         *v = new_id[old];
     }
     mesh.positions = positions;
+    let flipped = orient_faces(&mut mesh, &bodies_out);
+    if flipped > 0 {
+        notes.push(format!(
+            "{flipped} faces flipped to agree with their neighbours' orientation"
+        ));
+    }
     for (&(_, _), &id) in &vertex_pool {
         let n = new_id[id as usize];
         if n != u32::MAX {
@@ -340,8 +361,14 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     for f in &mut faces_out {
         scale_surface(f, scale);
     }
-    for g in 0..mesh.groups.len() {
-        mesh.groups[g].patch = patch_kind(&faces_out[g]);
+    for (group, face) in mesh.groups.iter_mut().zip(&faces_out) {
+        group.patch = patch_kind(face);
+    }
+    if overlapping > 0 {
+        notes.push(format!(
+            "dropped {overlapping} triangles that overlapped others of their face (folded \
+             or doubled tessellation)"
+        ));
     }
     if unsnapped > 0 {
         notes.push(format!(
@@ -446,3 +473,129 @@ fn open_edge_count(mesh: &ControlMesh) -> usize {
     count.values().filter(|&&n| n == 1).count()
 }
 
+/// Makes neighbouring faces agree in orientation (truck's per-face orientation is not
+/// reliable on every file), then turns each closed body outward (positive volume). Visits
+/// faces breadth-first over shared edges, in group order, so the result is deterministic.
+/// Returns how many faces were flipped.
+fn orient_faces(mesh: &mut ControlMesh, bodies: &[Body]) -> usize {
+    let ng = mesh.groups.len();
+    let mut tris_of: Vec<Vec<usize>> = vec![Vec::new(); ng];
+    // undirected edge -> (group, directed edge) of every triangle side on it
+    type EdgeUses = Vec<(u32, (u32, u32))>;
+    let mut by_edge: BTreeMap<(u32, u32), EdgeUses> = BTreeMap::new();
+    for f in 0..mesh.face_count() {
+        let g = mesh.face_groups[f];
+        tris_of[g as usize].push(f);
+        let t = mesh.face(f);
+        for k in 0..t.len() {
+            let (a, b) = (t[k], t[(k + 1) % t.len()]);
+            by_edge
+                .entry(crate::mesh::edge_key(a, b))
+                .or_default()
+                .push((g, (a, b)));
+        }
+    }
+    // Directed boundary edges of each group shared with other groups.
+    let mut shared: Vec<Vec<((u32, u32), u32)>> = vec![Vec::new(); ng];
+    for uses in by_edge.values() {
+        for &(g, d) in uses {
+            for &(h, _) in uses {
+                if h != g {
+                    shared[g as usize].push((d, h));
+                }
+            }
+        }
+    }
+    let mut flip = vec![false; ng];
+    let mut visited = vec![false; ng];
+    for start in 0..ng {
+        if visited[start] {
+            continue;
+        }
+        visited[start] = true;
+        let mut queue = std::collections::VecDeque::from([start]);
+        while let Some(g) = queue.pop_front() {
+            for &(_, h) in &shared[g] {
+                let h = h as usize;
+                if visited[h] {
+                    continue;
+                }
+                // Orient h against every visited neighbour.
+                let (mut same, mut opp) = (0, 0);
+                for &((a, b), k) in &shared[h] {
+                    let k = k as usize;
+                    if !visited[k] {
+                        continue;
+                    }
+                    for &(kg, (c, d)) in &by_edge[&crate::mesh::edge_key(a, b)] {
+                        if kg as usize != k {
+                            continue;
+                        }
+                        let (c, d) = if flip[k] { (d, c) } else { (c, d) };
+                        if (c, d) == (a, b) {
+                            same += 1;
+                        } else {
+                            opp += 1;
+                        }
+                    }
+                }
+                flip[h] = same > opp;
+                visited[h] = true;
+                queue.push_back(h);
+            }
+        }
+    }
+    // Outward: positive signed volume per body (meaningful for closed bodies only).
+    for b in bodies {
+        let groups = b.first_group as usize..(b.first_group + b.group_count) as usize;
+        let mut volume = 0.0;
+        for g in groups.clone() {
+            for &f in &tris_of[g] {
+                let t = mesh.face(f);
+                let (p, q, r) = (
+                    mesh.positions[t[0] as usize],
+                    mesh.positions[t[1] as usize],
+                    mesh.positions[t[2] as usize],
+                );
+                let v = p.dot(q.cross(r)) / 6.0;
+                volume += if flip[g] { -v } else { v };
+            }
+        }
+        if volume < 0.0 {
+            for g in groups {
+                flip[g] = !flip[g];
+            }
+        }
+    }
+    let mut count = 0;
+    for (g, tris) in tris_of.iter().enumerate() {
+        if !flip[g] {
+            continue;
+        }
+        count += 1;
+        for &f in tris {
+            let s = mesh.face_offsets[f] as usize;
+            mesh.face_vertices.swap(s + 1, s + 2);
+        }
+    }
+    count
+}
+
+/// The error when no face at all could be read: names the distinct causes.
+fn no_face_error(path: &Path, skipped: &[SkippedFace]) -> Error {
+    let mut reasons: Vec<String> = skipped
+        .iter()
+        .map(|s| format!("{}: {}", s.entity.split(' ').next().unwrap_or(""), s.reason))
+        .collect();
+    reasons.sort();
+    reasons.dedup();
+    reasons.truncate(4);
+    Error::input(
+        path,
+        format!(
+            "no face could be read ({} skipped: {})",
+            skipped.len(),
+            reasons.join("; ")
+        ),
+    )
+}

@@ -30,10 +30,31 @@ impl Record {
     /// The entity name for messages: `NAME` or `(A B C)` for complex instances.
     pub fn display_name(&self) -> String {
         if self.names.len() == 1 {
-            self.names[0].clone()
-        } else {
-            format!("({})", self.names.join(" "))
+            return self.names[0].clone();
         }
+        // Leave out the supertypes every geometric complex instance repeats.
+        const GENERIC: [&str; 8] = [
+            "REPRESENTATION_ITEM",
+            "GEOMETRIC_REPRESENTATION_ITEM",
+            "SURFACE",
+            "CURVE",
+            "BOUNDED_SURFACE",
+            "BOUNDED_CURVE",
+            "B_SPLINE_SURFACE",
+            "B_SPLINE_CURVE",
+        ];
+        let specific: Vec<&str> = self
+            .names
+            .iter()
+            .map(String::as_str)
+            .filter(|n| !GENERIC.contains(n))
+            .collect();
+        let names = if specific.is_empty() {
+            self.names.iter().map(String::as_str).collect()
+        } else {
+            specific
+        };
+        format!("({})", names.join(" "))
     }
 
     pub fn is(&self, name: &str) -> bool {
@@ -215,7 +236,10 @@ impl Records {
     /// (SHAPE_)REPRESENTATION_RELATIONSHIPs, which alias two representations of one part.
     /// A file without transformations gives every solid one identity instance. Errors name
     /// the entity that cannot be used.
-    pub fn solid_instances(&self, solids: &[u64]) -> std::result::Result<BTreeMap<u64, Vec<DMat4>>, String> {
+    pub fn solid_instances(
+        &self,
+        solids: &[u64],
+    ) -> std::result::Result<BTreeMap<u64, Vec<DMat4>>, String> {
         // Union-find over representations linked without a transformation.
         let mut alias: BTreeMap<u64, u64> = BTreeMap::new();
         fn find(alias: &BTreeMap<u64, u64>, mut x: u64) -> u64 {
@@ -230,7 +254,10 @@ impl Records {
         // child group -> [(parent rep, matrix)]
         let mut links: Vec<(u64, u64, DMat4)> = Vec::new();
         for (&id, r) in &self.by_id {
-            let is_rel = r.names.iter().any(|n| n.ends_with("REPRESENTATION_RELATIONSHIP"));
+            let is_rel = r
+                .names
+                .iter()
+                .any(|n| n.ends_with("REPRESENTATION_RELATIONSHIP"));
             if !is_rel {
                 continue;
             }
@@ -284,8 +311,7 @@ impl Records {
                 .by_id
                 .iter()
                 .find(|(_, r)| {
-                    r.names.iter().any(|n| n.ends_with("REPRESENTATION"))
-                        && r.refs.contains(&solid)
+                    r.names.iter().any(|n| n.ends_with("REPRESENTATION")) && r.refs.contains(&solid)
                 })
                 .map(|(&id, _)| id);
             let mut instances = Vec::new();
@@ -352,7 +378,9 @@ pub fn prepass(text: &str) -> (String, usize, usize) {
                 last_sig = b'\'';
             }
             b'/' if bytes.get(i + 1) == Some(&b'*') => {
-                let end = text[i + 2..].find("*/").map_or(bytes.len(), |k| i + 2 + k + 2);
+                let end = text[i + 2..]
+                    .find("*/")
+                    .map_or(bytes.len(), |k| i + 2 + k + 2);
                 i = end;
             }
             b'(' if last_sig == b',' || last_sig == b'(' => {
@@ -372,7 +400,9 @@ pub fn prepass(text: &str) -> (String, usize, usize) {
                     i += 1;
                 }
             }
-            b'.' if text[i..].starts_with(".PCURVE_S1.") || text[i..].starts_with(".PCURVE_S2.") => {
+            b'.' if text[i..].starts_with(".PCURVE_S1.")
+                || text[i..].starts_with(".PCURVE_S2.") =>
+            {
                 out.push_str(&text[start..i]);
                 out.push_str(".CURVE_3D.");
                 pcurve += 1;
@@ -454,7 +484,8 @@ fn find_data_start(text: &str) -> Option<usize> {
     let mut from = 0;
     while let Some(k) = text[from..].find("DATA") {
         let at = from + k;
-        let before_ok = at == 0 || !text.as_bytes()[at - 1].is_ascii_alphanumeric() && text.as_bytes()[at - 1] != b'_';
+        let before_ok = at == 0
+            || !text.as_bytes()[at - 1].is_ascii_alphanumeric() && text.as_bytes()[at - 1] != b'_';
         let rest = text[at + 4..].trim_start();
         if before_ok && (rest.starts_with(';') || rest.starts_with('(')) {
             return text[at..].find(';').map(|e| at + e + 1);
@@ -465,7 +496,11 @@ fn find_data_start(text: &str) -> Option<usize> {
 }
 
 fn parse_statement(stmt: &str) -> Option<(u64, Record)> {
-    let s = stmt.trim();
+    let mut s = stmt.trim();
+    // Comments between statements end up at the start of the next one.
+    while let Some(rest) = s.strip_prefix("/*") {
+        s = rest.split_once("*/").map_or("", |(_, after)| after).trim_start();
+    }
     let s = s.strip_prefix('#')?;
     let eq = s.find('=')?;
     let id: u64 = s[..eq].trim().parse().ok()?;
@@ -558,7 +593,10 @@ ENDSEC;\nEND-ISO-10303-21;\n";
         assert_eq!(r.get(1).unwrap().names, vec!["CARTESIAN_POINT"]);
         // '#9' inside the string is not a reference
         assert!(r.get(1).unwrap().refs.is_empty());
-        assert_eq!(r.get(2).unwrap().display_name(), "(LENGTH_UNIT NAMED_UNIT SI_UNIT)");
+        assert_eq!(
+            r.get(2).unwrap().display_name(),
+            "(LENGTH_UNIT NAMED_UNIT SI_UNIT)"
+        );
         assert_eq!(r.get(4).unwrap().refs, vec![5, 6, 7]);
         assert_eq!(r.ids_named("SURFACE_CURVE").collect::<Vec<_>>(), vec![4]);
         assert_eq!(r.millimetres_per_unit(), Some(1.0));
@@ -583,7 +621,8 @@ ENDSEC;\nEND-ISO-10303-21;\n";
         assert!(out.contains(".CURVE_3D.);"));
         assert!(out.contains("#8 = ANNOTATION_PLANE('n',(#1),#2,$);"));
         // Record parameter lists like PLANE_ANGLE_UNIT() and strings stay as they are.
-        let (same, _, e) = prepass("#1 = ( PLANE_ANGLE_UNIT() SI_UNIT($,.RADIAN.) ); #2 = A(',()');");
+        let (same, _, e) =
+            prepass("#1 = ( PLANE_ANGLE_UNIT() SI_UNIT($,.RADIAN.) ); #2 = A(',()');");
         assert_eq!(e, 0);
         assert!(same.contains("PLANE_ANGLE_UNIT()"));
         assert!(same.contains("',()'"));
