@@ -499,7 +499,10 @@ fn parse_statement(stmt: &str) -> Option<(u64, Record)> {
     let mut s = stmt.trim();
     // Comments between statements end up at the start of the next one.
     while let Some(rest) = s.strip_prefix("/*") {
-        s = rest.split_once("*/").map_or("", |(_, after)| after).trim_start();
+        s = rest
+            .split_once("*/")
+            .map_or("", |(_, after)| after)
+            .trim_start();
     }
     let s = s.strip_prefix('#')?;
     let eq = s.find('=')?;
