@@ -148,7 +148,7 @@ fn model_carries_brep_knowledge() {
     assert_eq!(model.mesh.groups.len(), 10);
     assert_eq!(model.bodies.len(), 1);
     assert_eq!(model.bodies[0].group_count, 10);
-    assert!(model.mesh.groups[0].name.starts_with("body1/face#"));
+    assert!(model.mesh.groups[0].name.starts_with("face#"));
     let hist = model.surface_histogram();
     assert_eq!(hist.get("cone"), Some(&4));
     assert_eq!(hist.get("plane"), Some(&6));

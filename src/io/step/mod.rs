@@ -106,9 +106,10 @@ pub struct FaceSurface {
     pub half_angle: Option<f64>,
 }
 
-/// One body: a solid (MANIFOLD_SOLID_BREP, BREP_WITH_VOIDS) or a free shell when the file
-/// has no solids. Bodies are the second level of grouping: group names start with the body
-/// name, and each body's groups are contiguous.
+/// One body: a solid (MANIFOLD_SOLID_BREP, BREP_WITH_VOIDS; one per assembly instance) or a
+/// free shell when the file has no solids. Bodies are the second level of grouping: with
+/// several bodies, group names start with the body name, and each body's groups are
+/// contiguous.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Body {
     /// `body<k>`, as used in group names.
@@ -160,7 +161,8 @@ impl std::fmt::Display for SkippedFace {
 /// What [`read_step`] read.
 #[derive(Clone, Debug, Default)]
 pub struct StepModel {
-    /// Triangles in one vertex pool, one group per face (`body<k>/face#<id>`); group-boundary
+    /// Triangles in one vertex pool, one group per face (`face#<id>`, or `body<k>/face#<id>`
+    /// when the file has several bodies); group-boundary
     /// edges are sharp, B-rep vertices are corners; analytic faces (plane, cylinder, cone)
     /// already carry their exact [`crate::mesh::BoundarySurface`] as the group's patch kind.
     pub mesh: ControlMesh,

@@ -168,6 +168,8 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     let mut unsnapped = 0usize;
     let mut overlapping = 0usize;
     let snap_tol = 0.05 * chord;
+    // Group names are stored in the file: the body prefix only when there are several.
+    let single_body = parsed.bodies.len() == 1;
     for (bi, body) in parsed.bodies.iter().enumerate() {
         let first_group = mesh.groups.len() as u32;
         let place = body.placement;
@@ -252,7 +254,11 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                 }
             }
             let group = mesh.push_group(
-                format!("{}/face#{}", body.name, pf.face_id),
+                if single_body {
+                    format!("face#{}", pf.face_id)
+                } else {
+                    format!("{}/face#{}", body.name, pf.face_id)
+                },
                 patch_kind(&pf.info),
             );
             let mut triangles = 0;
