@@ -44,6 +44,48 @@ pub fn hint_for(surface: &SurfaceType) -> SurfaceHint {
     }
 }
 
+/// Per-group surface hints of a STEP model: its exact surface types.
+#[cfg(feature = "step")]
+pub fn step_hints(model: &crate::io::step::StepModel) -> Vec<SurfaceHint> {
+    model.faces.iter().map(|f| hint_for(&f.surface)).collect()
+}
+
+/// Reads a STEP file with its tessellation tied to the encode tolerance (a quarter of it,
+/// see [`crate::io::step::StepOptions`]), fits it with the B-rep's surface types, and
+/// encodes it. `tolerance` is in millimetres (the model's output unit) or, with `relative`,
+/// a fraction of the bounding-box diagonal; `None` is 1e-3 of the diagonal.
+#[cfg(feature = "step")]
+pub fn encode_step(
+    path: &Path,
+    tolerance: Option<f64>,
+    relative: bool,
+    opts: &ModelEncodeOptions,
+) -> Result<(crate::io::step::StepModel, Vec<u8>, FitReport)> {
+    let model = crate::io::step::read_step(path, &step_options_for(tolerance, relative))?;
+    let mut opts = opts.clone();
+    opts.fit.tolerance = tolerance.map(|t| {
+        if relative {
+            t * model.mesh.diagonal()
+        } else {
+            t
+        }
+    });
+    let (bytes, report) = encode_fitted(&model.mesh, &step_hints(&model), &opts)?;
+    Ok((model, bytes, report))
+}
+
+/// STEP reading options whose chordal tolerance is a quarter of the encode tolerance.
+#[cfg(feature = "step")]
+pub fn step_options_for(tolerance: Option<f64>, relative: bool) -> crate::io::step::StepOptions {
+    let mut o = crate::io::step::StepOptions::default();
+    match (tolerance, relative) {
+        (Some(t), false) => o.chordal_tolerance = Some(0.25 * t),
+        (Some(t), true) => o.relative_chordal_tolerance = 0.25 * t,
+        (None, _) => {}
+    }
+    o
+}
+
 /// Per-group surface hints from the `<name>.faces.json` sidecar next to `input`, matched by
 /// group name; `None` when there is no sidecar.
 pub fn sidecar_hints(

@@ -11,6 +11,8 @@ use scode::subdiv::{self, SubdivOptions};
 use scode::ControlMesh;
 
 use super::{DecodeArgs, EncodeArgs, InfoArgs, SegmentArgs, SubdivideArgs};
+use scode::fit::encoder::SurfaceHint;
+use scode::io::step;
 use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
@@ -74,12 +76,71 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Reads a STEP file for `encode`, with the tessellation tied to the encode tolerance,
+/// prints what was read and warns about every skipped face.
+fn read_step_input(args: &EncodeArgs) -> Result<(ControlMesh, Vec<SurfaceHint>)> {
+    let opts = scode::pipeline::step_options_for(args.tolerance, args.relative);
+    let bar = spinner(&format!("reading {}", args.input.display()));
+    let result = step::read_step(&args.input, &opts);
+    bar.finish_and_clear();
+    let model = result?;
+    print_step_summary(&args.input, &model, args.verbose);
+    let hints = scode::pipeline::step_hints(&model);
+    Ok((model.mesh, hints))
+}
+
+fn print_step_summary(path: &Path, model: &step::StepModel, verbose: bool) {
+    let hist: Vec<String> = model
+        .surface_histogram()
+        .iter()
+        .map(|(k, n)| format!("{n} {k}"))
+        .collect();
+    println!(
+        "read {}: {} bodies, {} faces ({}), {} B-rep edges, {} corners; tessellated at {:.3e} mm \
+         chordal tolerance: {} vertices, {} triangles{}",
+        path.display(),
+        model.bodies.len(),
+        model.faces.len(),
+        hist.join(", "),
+        model.edges.len(),
+        model.mesh.corners.len(),
+        model.chordal_tolerance,
+        model.mesh.vertex_count(),
+        model.mesh.face_count(),
+        match model.millimetres_per_unit {
+            Some(f) if f != 1.0 => format!(" (converted to mm: x{f})"),
+            Some(_) => String::new(),
+            None => " (no length unit in the file: file units kept)".to_string(),
+        }
+    );
+    for s in &model.skipped {
+        eprintln!("warning: skipped {s}");
+    }
+    if !model.skipped.is_empty() {
+        eprintln!(
+            "warning: {} faces skipped; the rest of the model is encoded",
+            model.skipped.len()
+        );
+    }
+    if verbose {
+        for n in &model.notes {
+            println!("  {n}");
+        }
+    }
+}
+
 pub fn encode(args: &EncodeArgs) -> Result<()> {
     let output = args.output.path()?;
     let t0 = Instant::now();
-    let (mesh, report) = io::read_mesh(&args.input)?;
+    let (mesh, step_hints) = if step::is_step_path(&args.input) {
+        let (mesh, hints) = read_step_input(args)?;
+        (mesh, Some(hints))
+    } else {
+        let (mesh, report) = io::read_mesh(&args.input)?;
+        print_read_report(&args.input, &report);
+        (mesh, None)
+    };
     let t_read = t0.elapsed();
-    print_read_report(&args.input, &report);
     let t1 = Instant::now();
     let bytes = if args.raw {
         if args.tolerance.is_some() {
@@ -93,7 +154,12 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         codec::encode(&mesh, &opts)
             .with_context(|| format!("cannot encode {}", args.input.display()))?
     } else {
-        let hints = match sidecar_hints(&args.input, &mesh)? {
+        let sidecar = match step_hints {
+            Some(_) => None,
+            None => sidecar_hints(&args.input, &mesh)?,
+        };
+        let hints = match sidecar {
+            _ if step_hints.is_some() => step_hints.unwrap_or_default(),
             Some((side, hints)) if !args.no_sidecar => {
                 println!("using surface types from {}", side.display());
                 hints
@@ -269,7 +335,84 @@ pub fn subdivide(args: &SubdivideArgs) -> Result<()> {
     Ok(())
 }
 
+/// `info` on a STEP file: the plan (bodies, faces by surface type and the patch kind each
+/// will become, skipped faces) before anything is fitted.
+fn step_info(args: &InfoArgs) -> Result<()> {
+    let model = step::read_step(&args.file, &step::StepOptions::default())?;
+    print_step_summary(&args.file, &model, true);
+    let kind = |f: &step::FaceSurface| match scode::pipeline::hint_for(&f.surface) {
+        SurfaceHint::Plane => "boundary patch (plane)",
+        SurfaceHint::Cylinder => "boundary patch (cylinder, exact axis)",
+        SurfaceHint::Cone => "boundary patch (cone, exact apex and axis)",
+        SurfaceHint::Freeform => "closed patch",
+        SurfaceHint::Unknown => "classified from the triangles",
+    };
+    for (b, body) in model.bodies.iter().enumerate() {
+        let faces: Vec<&step::FaceSurface> = model
+            .faces
+            .iter()
+            .filter(|f| f.body as usize == b)
+            .collect();
+        println!(
+            "  {} ({} #{}): {} faces",
+            body.name,
+            body.entity,
+            body.step_id,
+            faces.len()
+        );
+        let mut by_type: std::collections::BTreeMap<String, (usize, &str)> = Default::default();
+        for f in &faces {
+            by_type
+                .entry(step::surface_name(&f.surface))
+                .or_insert((0, kind(f)))
+                .0 += 1;
+        }
+        for (t, (n, k)) in by_type {
+            println!("    {n:>5} {t:<12} -> {k}");
+        }
+    }
+    if args.groups {
+        let mut triangles = vec![0usize; model.faces.len()];
+        for &g in &model.mesh.face_groups {
+            triangles[g as usize] += 1;
+        }
+        for (g, f) in model.faces.iter().enumerate() {
+            let axis = f
+                .axis
+                .map(|a| {
+                    format!(
+                        " axis ({:.4}, {:.4}, {:.4}) dir ({:.4}, {:.4}, {:.4})",
+                        a.origin.x,
+                        a.origin.y,
+                        a.origin.z,
+                        a.direction.x,
+                        a.direction.y,
+                        a.direction.z
+                    )
+                })
+                .unwrap_or_default();
+            let radius = f.radius.map(|r| format!(" r {r:.4}")).unwrap_or_default();
+            let angle = f
+                .half_angle
+                .map(|a| format!(" half-angle {:.3} deg", a.to_degrees()))
+                .unwrap_or_default();
+            println!(
+                "  group {g} {}: {} triangles, {} ({}){axis}{radius}{angle} -> {}",
+                model.mesh.groups[g].name,
+                triangles[g],
+                step::surface_name(&f.surface),
+                f.entity,
+                kind(f)
+            );
+        }
+    }
+    Ok(())
+}
+
 pub fn info(args: &InfoArgs) -> Result<()> {
+    if step::is_step_path(&args.file) {
+        return step_info(args);
+    }
     if !is_scode(&args.file) {
         let (mesh, report) = io::read_mesh(&args.file)?;
         print_read_report(&args.file, &report);

@@ -47,6 +47,8 @@ pub mod obj;
 pub mod off;
 pub mod ply;
 pub mod repair;
+#[cfg(feature = "step")]
+pub mod step;
 pub mod stl;
 pub mod weld;
 

@@ -1,0 +1,305 @@
+//! STEP (ISO 10303-21, AP203/AP214/AP242) B-rep input for the encoder.
+//!
+//! [`read_step`] reads the solids and shells of a STEP file with truck (truck-stepio for the
+//! geometry, truck-meshalgo for the tessellation) and returns a [`StepModel`]: one triangle
+//! mesh with one vertex pool for the whole model (watertight where the B-rep is), one group
+//! per B-rep face, the B-rep vertices as corners, the B-rep edges as polylines in the pool,
+//! each face's surface type with its exact axis, apex and radii, and the list of faces that
+//! could not be read and why. The encoder takes the mesh and the surface types from here
+//! instead of re-deriving them from triangles.
+//!
+//! What truck does not do is done here (crates.md, "STEP"):
+//! * **Text pre-passes** ([`text::prepass`]): `.PCURVE_S1.` master flags and empty lists.
+//! * **Ids**: truck forgets STEP ids once it builds a shell, so the walk from shells to faces,
+//!   edges and vertices is our own (mirroring `Table::to_compressed_shell`), and every face
+//!   keeps its `ADVANCED_FACE #id`.
+//! * **Nothing dropped silently**: a face whose surface or edge curve truck cannot convert,
+//!   or whose tessellation fails, panics or hangs, becomes a [`SkippedFace`] naming the face
+//!   id and the entity; the rest of the model is still read.
+//! * **Hangs and panics**: parsing runs in a watchdog thread ([`StepOptions::timeout`]), and
+//!   each face is tessellated in its own watchdog thread ([`StepOptions::face_timeout`]),
+//!   both under `catch_unwind`. A thread that does not finish cannot be stopped; it is
+//!   abandoned (it keeps a core busy until the process ends), which the result says.
+//! * **Welding**: every face is tessellated alone, with the same edge polylines as its
+//!   neighbours; its boundary vertices are snapped to those polyline points, which live
+//!   once in the shared pool, so neighbouring faces share their boundary vertices exactly.
+//! * **Units**: truck ignores them; positions are converted to millimetres from the file's
+//!   LENGTH_UNIT (as Open CASCADE and gmsh do), see [`StepModel::millimetres_per_unit`].
+//!
+//! Not supported (the message names the entity): assembly placements
+//! (NEXT_ASSEMBLY_USAGE_OCCURRENCE with ITEM_DEFINED_TRANSFORMATION: the whole file is
+//! refused, because its parts would land in the wrong place), tessellated-only files
+//! (no ADVANCED_FACE), and the surfaces and curves truck-stepio 0.3 does not convert
+//! (OFFSET_SURFACE, RECTANGULAR_TRIMMED_SURFACE, CURVE_BOUNDED_SURFACE, TRIMMED_CURVE,
+//! COMPOSITE_CURVE, ...: those faces are skipped).
+
+mod brep;
+mod tessellate;
+pub mod text;
+
+use std::path::Path;
+use std::time::Duration;
+
+use crate::error::{Error, Result};
+use crate::io::faces_json::SurfaceType;
+use crate::mesh::{Axis, ControlMesh};
+
+/// Options of [`read_step`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepOptions {
+    /// Chordal tolerance of the tessellation in millimetres (the output unit). `None`:
+    /// `relative_chordal_tolerance` times the bounding-box diagonal.
+    pub chordal_tolerance: Option<f64>,
+    /// Default chordal tolerance as a fraction of the bounding-box diagonal: a quarter of the
+    /// encoder's default tolerance (1e-3 of the diagonal), so the tessellation's own chord
+    /// error takes a small part of the error budget.
+    pub relative_chordal_tolerance: f64,
+    /// Convert to millimetres using the file's LENGTH_UNIT (default true). When false, or when
+    /// the file names no length unit, positions stay in file units.
+    pub to_millimetres: bool,
+    /// Longest time parsing the file may take.
+    pub timeout: Duration,
+    /// Longest time converting one face from STEP to truck, and then tessellating it, may
+    /// take; a face over it is skipped.
+    pub face_timeout: Duration,
+}
+
+impl Default for StepOptions {
+    fn default() -> Self {
+        StepOptions {
+            chordal_tolerance: None,
+            relative_chordal_tolerance: 2.5e-4,
+            to_millimetres: true,
+            timeout: Duration::from_secs(60),
+            face_timeout: Duration::from_secs(10),
+        }
+    }
+}
+
+/// The surface under one B-rep face, as the STEP file defines it (in output units).
+///
+/// It is kept beside the mesh (not only turned into a [`crate::mesh::PatchKind`]) because
+/// spheres and tori also have exact parameters the encoder may use, and because `info`
+/// shows the plan before anything is fitted.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FaceSurface {
+    /// Id of the ADVANCED_FACE (or FACE_SURFACE) instance.
+    pub face_id: u64,
+    /// Id of its surface instance.
+    pub surface_id: u64,
+    /// Index into [`StepModel::bodies`].
+    pub body: u32,
+    /// The surface type, in the vocabulary of the corpus sidecars.
+    pub surface: SurfaceType,
+    /// STEP entity name of the surface (`CYLINDRICAL_SURFACE`, `B_SPLINE_SURFACE_WITH_KNOTS`,
+    /// or a complex instance `(BOUNDED_SURFACE B_SPLINE_SURFACE ...)`).
+    pub entity: String,
+    /// Plane: a point and the normal. Cylinder: a point on the axis and its direction.
+    /// Cone: the apex and the axis direction (pointing from the apex into the cone).
+    /// Sphere, torus: the centre and the axis. Revolution: the axis. Else `None`.
+    pub axis: Option<Axis>,
+    /// Cylinder, sphere: radius; torus: major radius; cone: radius at the placement.
+    pub radius: Option<f64>,
+    /// Torus: minor radius.
+    pub minor_radius: Option<f64>,
+    /// Cone: half angle in radians.
+    pub half_angle: Option<f64>,
+}
+
+/// One body: a solid (MANIFOLD_SOLID_BREP, BREP_WITH_VOIDS; one per assembly instance) or a
+/// free shell when the file has no solids. Bodies are the second level of grouping: with
+/// several bodies, group names start with the body name, and each body's groups are
+/// contiguous.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Body {
+    /// `body<k>`, as used in group names.
+    pub name: String,
+    /// Id of the solid or shell instance.
+    pub step_id: u64,
+    /// Its entity name (`MANIFOLD_SOLID_BREP`, `CLOSED_SHELL`, ...).
+    pub entity: String,
+    /// Groups `first_group..first_group + group_count` belong to this body.
+    pub first_group: u32,
+    pub group_count: u32,
+}
+
+/// A B-rep edge as a polyline of pool vertices, from one B-rep vertex to the other.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BrepEdge {
+    /// Id of the EDGE_CURVE instance.
+    pub step_id: u64,
+    /// Vertices of the mesh along the edge (first and last are corners).
+    pub vertices: Vec<u32>,
+    /// Groups (faces) bounded by this edge: two for an inner edge, one for a seam or an open
+    /// boundary.
+    pub groups: Vec<u32>,
+}
+
+/// A face that is not in the mesh, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SkippedFace {
+    /// Id of the face instance.
+    pub face_id: u64,
+    /// Name of the body (`body<k>`) it belongs to.
+    pub body: String,
+    /// The entity that stopped it (`OFFSET_SURFACE #52`, `TRIMMED_CURVE #80`, or the face's
+    /// own entity when the tessellation failed).
+    pub entity: String,
+    pub reason: String,
+}
+
+impl std::fmt::Display for SkippedFace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "face #{} of {}: {}: {}",
+            self.face_id, self.body, self.entity, self.reason
+        )
+    }
+}
+
+/// What [`read_step`] read.
+#[derive(Clone, Debug, Default)]
+pub struct StepModel {
+    /// Triangles in one vertex pool, one group per face (`face#<id>`, or `body<k>/face#<id>`
+    /// when the file has several bodies); group-boundary
+    /// edges are sharp, B-rep vertices are corners; analytic faces (plane, cylinder, cone)
+    /// already carry their exact [`crate::mesh::BoundarySurface`] as the group's patch kind.
+    pub mesh: ControlMesh,
+    /// Surface of each group (same index).
+    pub faces: Vec<FaceSurface>,
+    pub bodies: Vec<Body>,
+    pub edges: Vec<BrepEdge>,
+    pub skipped: Vec<SkippedFace>,
+    /// Chordal tolerance the faces were tessellated with (output units).
+    pub chordal_tolerance: f64,
+    /// Scale applied to the file's coordinates (`None`: no length unit found, file units kept).
+    pub millimetres_per_unit: Option<f64>,
+    /// What else the reader noticed (pre-pass rewrites, free shells left out, open edges...).
+    pub notes: Vec<String>,
+}
+
+impl StepModel {
+    /// Number of faces by surface type name, in a fixed order.
+    pub fn surface_histogram(&self) -> std::collections::BTreeMap<String, usize> {
+        let mut h = std::collections::BTreeMap::new();
+        for f in &self.faces {
+            *h.entry(surface_name(&f.surface)).or_insert(0) += 1;
+        }
+        h
+    }
+}
+
+/// Short name of a surface type for messages.
+pub fn surface_name(s: &SurfaceType) -> String {
+    match s {
+        SurfaceType::Plane => "plane".into(),
+        SurfaceType::Cylinder => "cylinder".into(),
+        SurfaceType::Cone => "cone".into(),
+        SurfaceType::Sphere => "sphere".into(),
+        SurfaceType::Torus => "torus".into(),
+        SurfaceType::BSplineSurface => "B-spline".into(),
+        SurfaceType::BezierSurface => "Bezier".into(),
+        SurfaceType::SurfaceOfRevolution => "revolution".into(),
+        SurfaceType::SurfaceOfExtrusion => "extrusion".into(),
+        SurfaceType::OffsetSurface => "offset".into(),
+        SurfaceType::Other(n) => n.clone(),
+        SurfaceType::Unknown => "unknown".into(),
+    }
+}
+
+/// True for `.step` / `.stp` (any case).
+pub fn is_step_path(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("step") || e.eq_ignore_ascii_case("stp"))
+}
+
+/// Reads the B-rep solids (or, without solids, the shells) of a STEP file. See the module
+/// documentation for what is supported and how failures are reported.
+pub fn read_step(path: &Path, opts: &StepOptions) -> Result<StepModel> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    read_step_bytes(path, &bytes, opts)
+}
+
+/// [`read_step`] on bytes already in memory; `path` is only used in messages.
+pub fn read_step_bytes(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<StepModel> {
+    let text = String::from_utf8_lossy(bytes).into_owned();
+    if !text.trim_start().starts_with("ISO-10303-21") {
+        return Err(Error::input(
+            path,
+            "not a STEP file: it does not start with `ISO-10303-21;`",
+        ));
+    }
+    let owned_path = path.to_path_buf();
+    let owned_opts = opts.clone();
+    let parsed = run_with_timeout("scode-step-parse", opts.timeout, move || {
+        brep::parse(&owned_path, &text, &owned_opts)
+    });
+    let parsed = match parsed {
+        Watched::Done(r) => r?,
+        Watched::Panicked(msg) => {
+            return Err(Error::input(
+                path,
+                format!("the STEP reader (truck-stepio/ruststep) panicked: {msg}"),
+            ))
+        }
+        Watched::TimedOut => {
+            return Err(Error::input(
+                path,
+                format!(
+                    "reading the B-rep did not finish within {:.0} s (truck can loop forever \
+                     on some files); giving up",
+                    opts.timeout.as_secs_f64()
+                ),
+            ))
+        }
+    };
+    let parsed = brep::convert(parsed, opts);
+    tessellate::tessellate(path, parsed, opts)
+}
+
+/// How a watched computation ended.
+pub(crate) enum Watched<T> {
+    Done(T),
+    Panicked(String),
+    TimedOut,
+}
+
+/// Runs `f` in a new thread and waits at most `timeout`. A thread that does not finish is
+/// abandoned: Rust cannot stop it, so it runs on until it ends or the process exits.
+pub(crate) fn run_with_timeout<T: Send + 'static>(
+    name: &str,
+    timeout: Duration,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Watched<T> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let spawned = std::thread::Builder::new()
+        .name(name.to_string())
+        .stack_size(64 << 20)
+        .spawn(move || {
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+            let _ = tx.send(r);
+        });
+    if let Err(e) = spawned {
+        return Watched::Panicked(format!("cannot start a thread: {e}"));
+    }
+    match rx.recv_timeout(timeout) {
+        Ok(Ok(v)) => Watched::Done(v),
+        Ok(Err(payload)) => Watched::Panicked(panic_message(payload.as_ref())),
+        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => Watched::TimedOut,
+        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+            Watched::Panicked("the worker thread ended without a result".into())
+        }
+    }
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic".to_string()
+    }
+}

@@ -1,0 +1,607 @@
+//! Face-by-face tessellation with truck and welding into one vertex pool.
+//!
+//! Each face is tessellated alone (a one-face shell with only its own edges), so a face
+//! that panics or hangs costs only itself. truck polylines an edge the same way whichever
+//! face it is tessellated with (same curve, same range, same tolerance), so the first face
+//! that uses an edge fixes its polyline in the pool and every later face snaps its boundary
+//! vertices to those pool points: shared boundaries are shared vertices.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use glam::DVec3;
+use truck_meshalgo::prelude::{PolygonMesh, RobustMeshableShape};
+use truck_stepio::r#in::alias::{BoundedCurve, ParametricCurve, Point3, PolylineCurve};
+use truck_topology::compress::{
+    CompressedEdge, CompressedEdgeIndex, CompressedFace, CompressedShell,
+};
+
+use super::brep::{Parsed, ParsedBody};
+use super::{
+    run_with_timeout, Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions, Watched,
+};
+use crate::error::{Error, Result};
+use crate::io::faces_json::SurfaceType;
+use crate::mesh::{Axis, BoundarySurface, ControlMesh, PatchKind};
+
+type MeshedShell = CompressedShell<Point3, PolylineCurve<Point3>, Option<PolygonMesh>>;
+
+fn dv(p: &Point3) -> DVec3 {
+    DVec3::new(p.x, p.y, p.z)
+}
+
+/// Bounding-box diagonal of the B-rep vertices and sampled edge curves (file units).
+fn brep_diagonal(parsed: &Parsed) -> f64 {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for b in &parsed.bodies {
+        for p in &b.vertices {
+            lo = lo.min(dv(p));
+            hi = hi.max(dv(p));
+        }
+        for e in &b.edges {
+            let (t0, t1) = e.curve.range_tuple();
+            if !(t0.is_finite() && t1.is_finite()) {
+                continue;
+            }
+            for k in 0..=16 {
+                let p = e.curve.subs(t0 + (t1 - t0) * k as f64 / 16.0);
+                let p = dv(&p);
+                if p.is_finite() {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+        }
+    }
+    let d = (hi - lo).length();
+    if d.is_finite() {
+        d
+    } else {
+        0.0
+    }
+}
+
+/// One face as a shell of its own (local edge and vertex indices), plus the body-level
+/// index of each local edge.
+fn single_face_shell(
+    body: &ParsedBody,
+    face: &CompressedFace<truck_stepio::r#in::alias::Surface>,
+) -> (
+    CompressedShell<Point3, truck_stepio::r#in::alias::Curve3D, truck_stepio::r#in::alias::Surface>,
+    Vec<usize>,
+    Vec<usize>,
+) {
+    let mut edge_local: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut vertex_local: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut edges_global = Vec::new();
+    let mut vertices_global = Vec::new();
+    let mut boundaries = Vec::new();
+    for wire in &face.boundaries {
+        let mut w = Vec::new();
+        for ei in wire {
+            let local = *edge_local.entry(ei.index).or_insert_with(|| {
+                edges_global.push(ei.index);
+                edges_global.len() - 1
+            });
+            w.push(CompressedEdgeIndex {
+                index: local,
+                orientation: ei.orientation,
+            });
+        }
+        boundaries.push(w);
+    }
+    let mut edges = Vec::new();
+    for &g in &edges_global {
+        let e = &body.edges[g];
+        let mut vl = |v: usize| {
+            *vertex_local.entry(v).or_insert_with(|| {
+                vertices_global.push(v);
+                vertices_global.len() - 1
+            })
+        };
+        let a = vl(e.vertices.0);
+        let b = vl(e.vertices.1);
+        edges.push(CompressedEdge {
+            vertices: (a, b),
+            curve: e.curve.clone(),
+        });
+    }
+    let vertices = vertices_global.iter().map(|&v| body.vertices[v]).collect();
+    (
+        CompressedShell {
+            vertices,
+            edges,
+            faces: vec![CompressedFace {
+                surface: face.surface.clone(),
+                boundaries,
+                orientation: face.orientation,
+            }],
+        },
+        edges_global,
+        vertices_global,
+    )
+}
+
+/// Pool of welded vertices with a lookup of edge polyline points for snapping.
+#[derive(Default)]
+struct Pool {
+    positions: Vec<DVec3>,
+}
+
+impl Pool {
+    fn push(&mut self, p: DVec3) -> u32 {
+        self.positions.push(p);
+        (self.positions.len() - 1) as u32
+    }
+}
+
+pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Result<StepModel> {
+    if parsed.bodies.iter().all(|b| b.faces.is_empty()) {
+        return Err(no_face_error(path, &parsed.skipped));
+    }
+    let scale = parsed.millimetres_per_unit.unwrap_or(1.0);
+    let diag = brep_diagonal(&parsed);
+    let chord_mm = match opts.chordal_tolerance {
+        Some(t) => t,
+        None => opts.relative_chordal_tolerance * diag * scale,
+    };
+    let mut notes = parsed.notes.clone();
+    if !(chord_mm > 0.0 && chord_mm.is_finite()) {
+        return Err(Error::input(
+            path,
+            format!("cannot choose a chordal tolerance (model size {diag}, tolerance {chord_mm})"),
+        ));
+    }
+    // truck panics below its TOLERANCE (1e-6) in file units.
+    let chord = (chord_mm / scale).max(2e-6);
+    let mut skipped = parsed.skipped;
+    let mut pool = Pool::default();
+    // (body, vertex) -> pool id; (body, edge) -> pool ids of its polyline.
+    let mut vertex_pool: BTreeMap<(usize, usize), u32> = BTreeMap::new();
+    let mut edge_pool: BTreeMap<(usize, usize), Vec<u32>> = BTreeMap::new();
+    let mut edge_groups: BTreeMap<(usize, usize), Vec<u32>> = BTreeMap::new();
+    let mut mesh = ControlMesh::new();
+    let mut faces_out: Vec<FaceSurface> = Vec::new();
+    let mut bodies_out = Vec::new();
+    let mut snap_max = 0.0f64;
+    let mut unsnapped = 0usize;
+    let mut overlapping = 0usize;
+    let snap_tol = 0.05 * chord;
+    // Group names are stored in the file: the body prefix only when there are several.
+    let single_body = parsed.bodies.len() == 1;
+    for (bi, body) in parsed.bodies.iter().enumerate() {
+        let first_group = mesh.groups.len() as u32;
+        let place = body.placement;
+        for pf in &body.faces {
+            let (shell, edges_global, vertices_global) = single_face_shell(body, &pf.face);
+            let face_name = format!("{} #{}", pf.info.entity, pf.info.surface_id);
+            let skip = |reason: String| SkippedFace {
+                face_id: pf.face_id,
+                body: body.name.clone(),
+                entity: face_name.clone(),
+                reason,
+            };
+            let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
+                shell.robust_triangulation(chord)
+            });
+            let meshed: MeshedShell = match watched {
+                Watched::Done(m) => m,
+                Watched::Panicked(msg) => {
+                    skipped.push(skip(format!("the tessellator (truck) panicked: {msg}")));
+                    continue;
+                }
+                Watched::TimedOut => {
+                    skipped.push(skip(format!(
+                        "the tessellation did not finish within {:.0} s (abandoned)",
+                        opts.face_timeout.as_secs_f64()
+                    )));
+                    continue;
+                }
+            };
+            let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
+                skipped.push(skip(
+                    "the tessellator (truck) could not triangulate the face".into(),
+                ));
+                continue;
+            };
+            // Pool ids of this face's edge polylines (first use fixes them).
+            let mut candidates: Vec<(DVec3, u32)> = Vec::new();
+            for (local, &ge) in edges_global.iter().enumerate() {
+                let key = (bi, ge);
+                if let std::collections::btree_map::Entry::Vacant(slot) = edge_pool.entry(key) {
+                    let pts: &Vec<Point3> = &meshed.edges[local].curve;
+                    let (va, vb) = body.edges[ge].vertices;
+                    let mut ids = Vec::with_capacity(pts.len());
+                    for (k, p) in pts.iter().enumerate() {
+                        let id = if k == 0 || k + 1 == pts.len() {
+                            let v = if k == 0 { va } else { vb };
+                            *vertex_pool.entry((bi, v)).or_insert_with(|| {
+                                pool.push(place.transform_point3(dv(&body.vertices[v])))
+                            })
+                        } else {
+                            pool.push(place.transform_point3(dv(p)))
+                        };
+                        ids.push(id);
+                    }
+                    slot.insert(ids);
+                }
+                for &id in &edge_pool[&key] {
+                    candidates.push((pool.positions[id as usize], id));
+                }
+            }
+            let _ = &vertices_global;
+            candidates.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.1.cmp(&b.1)));
+            candidates.dedup_by_key(|c| c.1);
+            // Map the face mesh's vertices: snap to edge points, else new pool vertices.
+            let positions = poly.positions();
+            let boundary = mesh_boundary_vertices(poly);
+            let mut map = Vec::with_capacity(positions.len());
+            for (i, p) in positions.iter().enumerate() {
+                let p = place.transform_point3(dv(p));
+                let hit = nearest(&candidates, p, snap_tol);
+                match hit {
+                    Some((id, d)) => {
+                        snap_max = snap_max.max(d);
+                        map.push(id);
+                    }
+                    None => {
+                        if boundary[i] {
+                            unsnapped += 1;
+                        }
+                        map.push(pool.push(p));
+                    }
+                }
+            }
+            let group = mesh.push_group(
+                if single_body {
+                    format!("face#{}", pf.face_id)
+                } else {
+                    format!("{}/face#{}", body.name, pf.face_id)
+                },
+                patch_kind(&pf.info),
+            );
+            let mut triangles = 0;
+            // Each face must be an oriented 2-manifold for the fit: a triangle that would use
+            // a directed edge twice, or an edge a third time (truck overlaps on some periodic
+            // and trimmed faces, or welding folded a sliver), is dropped and counted.
+            let mut directed: std::collections::BTreeSet<(u32, u32)> = Default::default();
+            let mut uses: BTreeMap<(u32, u32), u8> = BTreeMap::new();
+            for tri in poly.faces().triangle_iter() {
+                let mut t = [map[tri[0].pos], map[tri[1].pos], map[tri[2].pos]];
+                if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+                    continue;
+                }
+                if !pf.face.orientation {
+                    t.swap(1, 2);
+                }
+                let es = [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
+                let clash = es.iter().any(|&(a, b)| {
+                    directed.contains(&(a, b))
+                        || uses
+                            .get(&crate::mesh::edge_key(a, b))
+                            .is_some_and(|&n| n >= 2)
+                });
+                if clash {
+                    overlapping += 1;
+                    continue;
+                }
+                for &(a, b) in &es {
+                    directed.insert((a, b));
+                    *uses.entry(crate::mesh::edge_key(a, b)).or_insert(0) += 1;
+                }
+                mesh.push_face(&t, group);
+                triangles += 1;
+            }
+            if triangles == 0 {
+                mesh.groups.pop();
+                skipped.push(skip("the tessellation has no triangles".into()));
+                continue;
+            }
+            for &ge in &edges_global {
+                edge_groups.entry((bi, ge)).or_default().push(group);
+            }
+            let mut info = pf.info.clone();
+            info.body = bodies_out.len() as u32;
+            if let Some(a) = &mut info.axis {
+                a.origin = place.transform_point3(a.origin);
+                a.direction = place.transform_vector3(a.direction).normalize_or_zero();
+            }
+            faces_out.push(info);
+        }
+        let group_count = mesh.groups.len() as u32 - first_group;
+        bodies_out.push(Body {
+            name: body.name.clone(),
+            step_id: body.step_id,
+            entity: body.entity.clone(),
+            first_group,
+            group_count,
+        });
+    }
+    if mesh.face_count() == 0 {
+        return Err(no_face_error(path, &skipped));
+    }
+    // Compact the pool to the vertices the faces use, in order of first use.
+    let mut new_id = vec![u32::MAX; pool.positions.len()];
+    let mut positions = Vec::new();
+    for v in mesh.face_vertices.iter_mut() {
+        let old = *v as usize;
+        if new_id[old] == u32::MAX {
+            new_id[old] = positions.len() as u32;
+            positions.push(pool.positions[old] * scale);
+        }
+        *v = new_id[old];
+    }
+    mesh.positions = positions;
+    let flipped = orient_faces(&mut mesh, &bodies_out);
+    if flipped > 0 {
+        notes.push(format!(
+            "{flipped} faces flipped to agree with their neighbours' orientation"
+        ));
+    }
+    for (&(_, _), &id) in &vertex_pool {
+        let n = new_id[id as usize];
+        if n != u32::MAX {
+            mesh.corners.insert(n);
+        }
+    }
+    mesh.sharpen_group_boundaries();
+    let mut edges = Vec::new();
+    for (key, ids) in &edge_pool {
+        let Some(groups) = edge_groups.get(key) else {
+            continue;
+        };
+        let mut groups = groups.clone();
+        groups.sort_unstable();
+        groups.dedup();
+        let vertices: Vec<u32> = ids.iter().map(|&i| new_id[i as usize]).collect();
+        if vertices.contains(&u32::MAX) {
+            continue;
+        }
+        edges.push(BrepEdge {
+            step_id: parsed.bodies[key.0].edge_ids[key.1],
+            vertices,
+            groups,
+        });
+    }
+    for f in &mut faces_out {
+        scale_surface(f, scale);
+    }
+    for (group, face) in mesh.groups.iter_mut().zip(&faces_out) {
+        group.patch = patch_kind(face);
+    }
+    if overlapping > 0 {
+        notes.push(format!(
+            "dropped {overlapping} triangles that overlapped others of their face (folded \
+             or doubled tessellation)"
+        ));
+    }
+    if unsnapped > 0 {
+        notes.push(format!(
+            "{unsnapped} face-boundary vertices matched no edge point (possible cracks)"
+        ));
+    }
+    notes.push(format!(
+        "boundary vertices snapped to edge polylines (largest move {:.3e})",
+        snap_max * scale
+    ));
+    let open = open_edge_count(&mesh);
+    if open > 0 {
+        notes.push(format!(
+            "{open} mesh edges are open (bounded by one triangle): open shells or skipped faces"
+        ));
+    }
+    mesh.validate()?;
+    Ok(StepModel {
+        mesh,
+        faces: faces_out,
+        bodies: bodies_out,
+        edges,
+        skipped,
+        chordal_tolerance: chord * scale,
+        millimetres_per_unit: parsed.millimetres_per_unit,
+        notes,
+    })
+}
+
+fn scale_surface(f: &mut FaceSurface, s: f64) {
+    if let Some(a) = &mut f.axis {
+        a.origin *= s;
+    }
+    for r in [&mut f.radius, &mut f.minor_radius].into_iter().flatten() {
+        *r *= s;
+    }
+}
+
+/// The patch kind a face's exact surface asks for: boundary patches with the exact axis for
+/// planes, cylinders and cones; closed patches for everything else.
+pub(super) fn patch_kind(f: &FaceSurface) -> PatchKind {
+    match (&f.surface, f.axis) {
+        (SurfaceType::Plane, _) => PatchKind::Boundary(BoundarySurface::Plane),
+        (SurfaceType::Cylinder, Some(axis)) => {
+            PatchKind::Boundary(BoundarySurface::Cylinder { axis })
+        }
+        (SurfaceType::Cone, Some(axis)) => PatchKind::Boundary(BoundarySurface::Cone {
+            axis: Axis {
+                origin: axis.origin,
+                direction: axis.direction,
+            },
+        }),
+        _ => PatchKind::Closed,
+    }
+}
+
+/// Index of the candidate nearest to `p` within `tol`, with its distance. `candidates` is
+/// sorted by x.
+fn nearest(candidates: &[(DVec3, u32)], p: DVec3, tol: f64) -> Option<(u32, f64)> {
+    let start = candidates.partition_point(|c| c.0.x < p.x - tol);
+    let mut best: Option<(u32, f64)> = None;
+    for c in &candidates[start..] {
+        if c.0.x > p.x + tol {
+            break;
+        }
+        let d = c.0.distance(p);
+        if d <= tol && best.is_none_or(|b| d < b.1) {
+            best = Some((c.1, d));
+        }
+    }
+    best
+}
+
+/// Which vertices of a face mesh lie on its boundary (an edge used by one triangle).
+fn mesh_boundary_vertices(poly: &PolygonMesh) -> Vec<bool> {
+    let mut count: BTreeMap<(usize, usize), u32> = BTreeMap::new();
+    for t in poly.faces().triangle_iter() {
+        for k in 0..3 {
+            let (a, b) = (t[k].pos, t[(k + 1) % 3].pos);
+            *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    let mut on = vec![false; poly.positions().len()];
+    for ((a, b), n) in count {
+        if n == 1 {
+            on[a] = true;
+            on[b] = true;
+        }
+    }
+    on
+}
+
+fn open_edge_count(mesh: &ControlMesh) -> usize {
+    let mut count: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+    for f in mesh.faces() {
+        for k in 0..f.len() {
+            *count
+                .entry(crate::mesh::edge_key(f[k], f[(k + 1) % f.len()]))
+                .or_insert(0) += 1;
+        }
+    }
+    count.values().filter(|&&n| n == 1).count()
+}
+
+/// Makes neighbouring faces agree in orientation (truck's per-face orientation is not
+/// reliable on every file), then turns each closed body outward (positive volume). Visits
+/// faces breadth-first over shared edges, in group order, so the result is deterministic.
+/// Returns how many faces were flipped.
+fn orient_faces(mesh: &mut ControlMesh, bodies: &[Body]) -> usize {
+    let ng = mesh.groups.len();
+    let mut tris_of: Vec<Vec<usize>> = vec![Vec::new(); ng];
+    // undirected edge -> (group, directed edge) of every triangle side on it
+    type EdgeUses = Vec<(u32, (u32, u32))>;
+    let mut by_edge: BTreeMap<(u32, u32), EdgeUses> = BTreeMap::new();
+    for f in 0..mesh.face_count() {
+        let g = mesh.face_groups[f];
+        tris_of[g as usize].push(f);
+        let t = mesh.face(f);
+        for k in 0..t.len() {
+            let (a, b) = (t[k], t[(k + 1) % t.len()]);
+            by_edge
+                .entry(crate::mesh::edge_key(a, b))
+                .or_default()
+                .push((g, (a, b)));
+        }
+    }
+    // Directed boundary edges of each group shared with other groups.
+    let mut shared: Vec<Vec<((u32, u32), u32)>> = vec![Vec::new(); ng];
+    for uses in by_edge.values() {
+        for &(g, d) in uses {
+            for &(h, _) in uses {
+                if h != g {
+                    shared[g as usize].push((d, h));
+                }
+            }
+        }
+    }
+    let mut flip = vec![false; ng];
+    let mut visited = vec![false; ng];
+    for start in 0..ng {
+        if visited[start] {
+            continue;
+        }
+        visited[start] = true;
+        let mut queue = std::collections::VecDeque::from([start]);
+        while let Some(g) = queue.pop_front() {
+            for &(_, h) in &shared[g] {
+                let h = h as usize;
+                if visited[h] {
+                    continue;
+                }
+                // Orient h against every visited neighbour.
+                let (mut same, mut opp) = (0, 0);
+                for &((a, b), k) in &shared[h] {
+                    let k = k as usize;
+                    if !visited[k] {
+                        continue;
+                    }
+                    for &(kg, (c, d)) in &by_edge[&crate::mesh::edge_key(a, b)] {
+                        if kg as usize != k {
+                            continue;
+                        }
+                        let (c, d) = if flip[k] { (d, c) } else { (c, d) };
+                        if (c, d) == (a, b) {
+                            same += 1;
+                        } else {
+                            opp += 1;
+                        }
+                    }
+                }
+                flip[h] = same > opp;
+                visited[h] = true;
+                queue.push_back(h);
+            }
+        }
+    }
+    // Outward: positive signed volume per body (meaningful for closed bodies only).
+    for b in bodies {
+        let groups = b.first_group as usize..(b.first_group + b.group_count) as usize;
+        let mut volume = 0.0;
+        for g in groups.clone() {
+            for &f in &tris_of[g] {
+                let t = mesh.face(f);
+                let (p, q, r) = (
+                    mesh.positions[t[0] as usize],
+                    mesh.positions[t[1] as usize],
+                    mesh.positions[t[2] as usize],
+                );
+                let v = p.dot(q.cross(r)) / 6.0;
+                volume += if flip[g] { -v } else { v };
+            }
+        }
+        if volume < 0.0 {
+            for g in groups {
+                flip[g] = !flip[g];
+            }
+        }
+    }
+    let mut count = 0;
+    for (g, tris) in tris_of.iter().enumerate() {
+        if !flip[g] {
+            continue;
+        }
+        count += 1;
+        for &f in tris {
+            let s = mesh.face_offsets[f] as usize;
+            mesh.face_vertices.swap(s + 1, s + 2);
+        }
+    }
+    count
+}
+
+/// The error when no face at all could be read: names the distinct causes.
+fn no_face_error(path: &Path, skipped: &[SkippedFace]) -> Error {
+    let mut reasons: Vec<String> = skipped
+        .iter()
+        .map(|s| format!("{}: {}", s.entity.split(' ').next().unwrap_or(""), s.reason))
+        .collect();
+    reasons.sort();
+    reasons.dedup();
+    reasons.truncate(4);
+    Error::input(
+        path,
+        format!(
+            "no face could be read ({} skipped: {})",
+            skipped.len(),
+            reasons.join("; ")
+        ),
+    )
+}

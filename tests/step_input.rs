@@ -1,0 +1,393 @@
+//! STEP input end to end: read B-rep files, encode them, decode, and compare with the
+//! corpus' fine tessellations of the same files; unsupported entities and broken files are
+//! reported by name instead of panicking or hanging.
+//!
+//! `cargo test --test step_input -- --ignored --nocapture corpus_sweep` prints the table of
+//! every corpus STEP file (what encodes, sizes, errors, and the STEP-vs-mesh comparison).
+#![cfg(feature = "step")]
+
+mod common;
+use common::corpus_dir;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use scode::codec::{self, Content, Limits};
+use scode::io::step::{read_step, read_step_bytes, StepModel, StepOptions};
+use scode::metrics::{point_distances, TriangleSurface};
+use scode::pipeline::{encode_fitted, encode_step, sidecar_hints, ModelEncodeOptions};
+use scode::subdiv::{subdivide, SubdivOptions};
+use scode::ControlMesh;
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// The surface a `.scode` file decodes to (default level, limit positions), as `info
+/// --against` measures it.
+fn decoded_surface(bytes: &[u8]) -> ControlMesh {
+    let decoded = codec::decode(bytes, &Limits::default()).expect("decode");
+    let level = match decoded.header.content {
+        Content::ControlMesh { default_level } => u32::from(default_level),
+        Content::RawMesh => 0,
+    };
+    let (surface, _) = subdivide(
+        &decoded.mesh,
+        level,
+        &SubdivOptions {
+            limit: true,
+            ..Default::default()
+        },
+    )
+    .expect("subdivide");
+    surface
+}
+
+/// Distances between a decoded surface and a reference tessellation.
+struct Comparison {
+    /// Reference vertices (on the exact B-rep surface) to the decoded surface.
+    max_vertices: f64,
+    rms_vertices: f64,
+    /// Symmetric sampled Hausdorff distance (includes the reference's own chord error).
+    hausdorff: f64,
+    rms: f64,
+}
+
+fn compare(decoded: &ControlMesh, reference: &ControlMesh) -> Comparison {
+    let tris = |m: &ControlMesh| -> Vec<[u32; 3]> {
+        m.faces()
+            .flat_map(|f| (1..f.len() - 1).map(move |i| [f[0], f[i], f[i + 1]]))
+            .collect()
+    };
+    let surface = TriangleSurface::new(decoded.positions.clone(), tris(decoded)).unwrap();
+    let d = point_distances(&reference.positions, &surface);
+    let n = d.len().max(1) as f64;
+    let h = scode::metrics::hausdorff(decoded, reference, &Default::default()).unwrap();
+    Comparison {
+        max_vertices: d.iter().copied().fold(0.0, f64::max),
+        rms_vertices: (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt(),
+        hausdorff: h.max,
+        rms: h.rms,
+    }
+}
+
+fn fine_tessellation(corpus: &Path, stem: &str) -> Option<PathBuf> {
+    let p = corpus.join("tess").join(format!("{stem}_fine.obj"));
+    p.is_file().then_some(p)
+}
+
+/// Encodes `file` at 1e-3 of the diagonal of its fine tessellation and checks the decoded
+/// surface against that tessellation: its vertices lie on the exact B-rep surface, so their
+/// distance to the decoded surface is the codec's error (plus our own chord error, which
+/// the fit allows for) and must stay within the tolerance.
+fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
+    let path = corpus.join("step").join(file);
+    let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
+    let fine_path = fine_tessellation(corpus, stem).expect("fine tessellation");
+    let (fine, _) = scode::io::read_mesh(&fine_path).unwrap();
+    let tol = 1e-3 * fine.diagonal();
+    let t0 = Instant::now();
+    let (model, bytes, report) =
+        encode_step(&path, Some(tol), false, &ModelEncodeOptions::default()).unwrap();
+    assert!(report.within_tolerance, "{file}: {:?}", report.error);
+    let surface = decoded_surface(&bytes);
+    let c = compare(&surface, &fine);
+    eprintln!(
+        "{file}: {} faces, {} skipped, {} bytes, tol {tol:.3e}: fine vertices -> decoded max \
+         {:.3e} rms {:.3e}; hausdorff {:.3e} rms {:.3e}; within tolerance (fit): {} [{:.1} s]",
+        model.faces.len(),
+        model.skipped.len(),
+        bytes.len(),
+        c.max_vertices,
+        c.rms_vertices,
+        c.hausdorff,
+        c.rms,
+        report.within_tolerance,
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(model.skipped.is_empty(), "{file}: {:?}", model.skipped);
+    assert!(
+        (model.mesh.diagonal() - fine.diagonal()).abs() < 1e-2 * fine.diagonal(),
+        "{file}: the STEP model and its tessellation differ in size (units?)"
+    );
+    assert!(
+        c.max_vertices <= 1.5 * tol,
+        "{file}: decoded surface is {:.3e} from the fine tessellation (tolerance {tol:.3e})",
+        c.max_vertices
+    );
+    assert!(
+        c.rms_vertices <= 0.25 * tol,
+        "{file}: rms {:.3e}",
+        c.rms_vertices
+    );
+}
+
+#[test]
+fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
+    let Some(corpus) = corpus_dir() else { return };
+    // Planes + cones; planes + cylinders; a solid with voids (inward shells). Files whose
+    // fit does not meet the tolerance yet (an encoder limit, also on their mesh twins) are
+    // in the ignored sweep instead.
+    for file in [
+        "four_cone.step",
+        "bug3883_xr2-ct-214_plate.stp",
+        "tr8_bv1_ec.stp",
+    ] {
+        check_encodes_within_tolerance(&corpus, file);
+    }
+}
+
+#[test]
+fn model_carries_brep_knowledge() {
+    let Some(corpus) = corpus_dir() else { return };
+    let model = read_step(&corpus.join("step/four_cone.step"), &StepOptions::default()).unwrap();
+    // One group per B-rep face, named by body and face id, with the exact surface kinds.
+    assert_eq!(model.faces.len(), 10);
+    assert_eq!(model.mesh.groups.len(), 10);
+    assert_eq!(model.bodies.len(), 1);
+    assert_eq!(model.bodies[0].group_count, 10);
+    assert!(model.mesh.groups[0].name.starts_with("face#"));
+    let hist = model.surface_histogram();
+    assert_eq!(hist.get("cone"), Some(&4));
+    assert_eq!(hist.get("plane"), Some(&6));
+    // Cone apexes: every cone vertex-free sample of the tessellation lies on the cone
+    // described by apex, axis and half angle.
+    for (g, f) in model.faces.iter().enumerate() {
+        let scode::mesh::PatchKind::Boundary(kind) = model.mesh.groups[g].patch else {
+            panic!("face {} is not a boundary patch", f.face_id);
+        };
+        if let scode::mesh::BoundarySurface::Cone { axis } = kind {
+            let half = f.half_angle.unwrap();
+            for (fi, &fg) in model.mesh.face_groups.iter().enumerate() {
+                if fg as usize != g {
+                    continue;
+                }
+                for &v in model.mesh.face(fi) {
+                    let p = model.mesh.positions[v as usize] - axis.origin;
+                    let h = p.dot(axis.direction);
+                    let r = (p - h * axis.direction).length();
+                    assert!(h >= -1e-9, "point behind the apex");
+                    assert!(
+                        (r - h * half.tan()).abs() < 1e-6 * model.mesh.diagonal(),
+                        "point off the cone: r {r}, h {h}"
+                    );
+                }
+            }
+        }
+    }
+    // Watertight: every edge has two triangles; B-rep vertices are corners.
+    assert!(is_closed(&model));
+    assert_eq!(model.mesh.corners.len(), 16);
+    // B-rep edges are chains of the pool whose ends are corners, between two faces.
+    for e in &model.edges {
+        assert!(model.mesh.corners.contains(&e.vertices[0]));
+        assert!(model.mesh.corners.contains(e.vertices.last().unwrap()));
+        assert_eq!(e.groups.len(), 2);
+    }
+}
+
+fn is_closed(model: &StepModel) -> bool {
+    let mut count = std::collections::BTreeMap::new();
+    for f in model.mesh.faces() {
+        for k in 0..f.len() {
+            *count
+                .entry(scode::mesh::edge_key(f[k], f[(k + 1) % f.len()]))
+                .or_insert(0) += 1;
+        }
+    }
+    count.values().all(|&n| n == 2)
+}
+
+#[test]
+fn unsupported_surface_is_named_and_the_rest_encodes() {
+    let path = fixture("cube_offset_face.step");
+    let model = read_step(&path, &StepOptions::default()).unwrap();
+    assert_eq!(model.faces.len(), 5);
+    assert_eq!(model.skipped.len(), 1);
+    let s = &model.skipped[0];
+    assert_eq!(s.face_id, 81);
+    assert!(s.entity.contains("OFFSET_SURFACE #80"), "{s}");
+    assert!(s.to_string().contains("face #81"), "{s}");
+    let (bytes, report) = encode_fitted(
+        &model.mesh,
+        &scode::pipeline::step_hints(&model),
+        &ModelEncodeOptions::default(),
+    )
+    .unwrap();
+    assert!(report.within_tolerance);
+    assert_eq!(
+        codec::decode(&bytes, &Limits::default())
+            .unwrap()
+            .mesh
+            .groups
+            .len(),
+        5
+    );
+}
+
+#[test]
+fn garbage_and_truncated_files_are_errors() {
+    let opts = StepOptions::default();
+    let p = Path::new("garbage.step");
+    let e = read_step_bytes(p, b"\x00\x01 not a step file", &opts).unwrap_err();
+    assert!(e.to_string().contains("not a STEP file"), "{e}");
+    let e = read_step_bytes(p, b"ISO-10303-21;\nHEADER;\nENDSEC;\n", &opts).unwrap_err();
+    assert!(e.to_string().contains("DATA"), "{e}");
+    let text = std::fs::read_to_string(fixture("cube_offset_face.step")).unwrap();
+    // Cut in the middle of the DATA section.
+    let cut = &text[..text.len() / 2];
+    assert!(read_step_bytes(p, cut.as_bytes(), &opts).is_err());
+    // Syntax garbage inside DATA.
+    let bad = text.replace("#48 = ADVANCED_FACE(", "#48 = ADVANCED_FACE((((");
+    assert!(read_step_bytes(p, bad.as_bytes(), &opts).is_err());
+    // Tessellated-only files are refused with the entity named.
+    let tess = "ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\n#1 = TESSELLATED_SHELL('',(#2),$);\n\
+                #2 = COMPLEX_TRIANGULATED_FACE('',#3,0,(),$,(),(),());\nENDSEC;\nEND-ISO-10303-21;\n";
+    let e = read_step_bytes(p, tess.as_bytes(), &opts).unwrap_err();
+    assert!(e.to_string().contains("TESSELLATED_SHELL"), "{e}");
+}
+
+#[test]
+fn slow_import_times_out_with_an_error() {
+    // A valid file made slow to parse by 200k extra points; with a 1 ms budget the reader
+    // must give up with a message instead of waiting.
+    let text = std::fs::read_to_string(fixture("cube_offset_face.step")).unwrap();
+    let mut padding = String::new();
+    for i in 0..200_000 {
+        padding.push_str(&format!(
+            "#{} = CARTESIAN_POINT('',(1.,2.,3.));\n",
+            1000 + i
+        ));
+    }
+    let big = text.replace("ENDSEC;\nEND-ISO", &format!("{padding}ENDSEC;\nEND-ISO"));
+    let opts = StepOptions {
+        timeout: Duration::from_millis(1),
+        ..Default::default()
+    };
+    let t0 = Instant::now();
+    let e = read_step_bytes(Path::new("slow.step"), big.as_bytes(), &opts).unwrap_err();
+    assert!(t0.elapsed() < Duration::from_secs(10));
+    assert!(e.to_string().contains("did not finish"), "{e}");
+    // A face whose tessellation exceeds its budget is skipped and named, not waited for.
+    let opts = StepOptions {
+        face_timeout: Duration::ZERO,
+        ..Default::default()
+    };
+    let e = read_step(&fixture("cube_offset_face.step"), &opts).unwrap_err();
+    assert!(e.to_string().contains("did not finish"), "{e}");
+}
+
+/// Every corpus STEP file: encodes or fails with a named entity; sizes and errors, and the
+/// STEP path against the mesh path (`<name>_fine.obj` with its sidecar) at the same
+/// tolerance. Slow (many minutes): each file runs in its own process (this test binary,
+/// running [`sweep_one`]), because faces whose tessellation hangs leave threads behind that
+/// only the end of the process stops.
+#[test]
+#[ignore]
+fn corpus_sweep() {
+    let Some(corpus) = corpus_dir() else { return };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(corpus.join("step"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    println!(
+        "| file | result | faces by type | skipped | bytes (STEP) | max / rms vs fine (vertices) | hausdorff / rms | bytes (fine.obj) | read+encode s |"
+    );
+    println!("|---|---|---|---|---:|---|---|---:|---:|");
+    for path in files {
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--ignored", "--exact", "sweep_one", "--nocapture"])
+            .env("SCODE_SWEEP_FILE", &path)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("| ")).collect();
+        if rows.is_empty() {
+            println!(
+                "| {} | crashed: {} | | | | | | | |",
+                path.display(),
+                out.status
+            );
+        }
+        for r in rows {
+            println!("{r}");
+        }
+    }
+}
+
+/// One row of [`corpus_sweep`], for the file in `SCODE_SWEEP_FILE` (does nothing without).
+#[test]
+#[ignore]
+fn sweep_one() {
+    let Some(corpus) = corpus_dir() else { return };
+    let Ok(file) = std::env::var("SCODE_SWEEP_FILE") else {
+        return;
+    };
+    let path = PathBuf::from(file);
+    let name = path.file_name().unwrap().to_string_lossy().to_string();
+    let stem = path.file_stem().unwrap().to_string_lossy().to_string();
+    let fine = fine_tessellation(&corpus, &stem).map(|p| {
+        let (m, _) = scode::io::read_mesh(&p).unwrap();
+        (p, m)
+    });
+    let tol = fine.as_ref().map(|(_, m)| 1e-3 * m.diagonal());
+    let t0 = Instant::now();
+    let result = encode_step(&path, tol, false, &ModelEncodeOptions::default());
+    let secs = t0.elapsed().as_secs_f64();
+    let (model, bytes, report) = match result {
+        Ok(r) => r,
+        Err(e) => {
+            println!("| {name} | fails: {e} | | | | | | | {secs:.1} |");
+            return;
+        }
+    };
+    let hist: Vec<String> = model
+        .surface_histogram()
+        .iter()
+        .map(|(k, n)| format!("{n} {k}"))
+        .collect();
+    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
+    let (cmp, hausdorff, mesh_bytes) = match &fine {
+        Some((fine_path, fine_mesh)) => {
+            let c = compare(&decoded_surface(&bytes), fine_mesh);
+            let hints = sidecar_hints(fine_path, fine_mesh)
+                .unwrap()
+                .map(|(_, h)| h)
+                .unwrap_or_default();
+            let mut opts = ModelEncodeOptions::default();
+            opts.fit.tolerance = tol;
+            let mb = encode_fitted(fine_mesh, &hints, &opts)
+                .map(|(b, _)| b.len().to_string())
+                .unwrap_or_else(|e| format!("fails: {e}"));
+            (
+                format!(
+                    "{:.2e} / {:.2e} (tol {:.2e})",
+                    c.max_vertices,
+                    c.rms_vertices,
+                    tol.unwrap_or(0.0)
+                ),
+                format!("{:.2e} / {:.2e}", c.hausdorff, c.rms),
+                mb,
+            )
+        }
+        None => ("no fine tessellation".into(), String::new(), String::new()),
+    };
+    println!(
+        "| {name} | encodes{} | {} | {} | {} | {cmp} | {hausdorff} | {mesh_bytes} | {secs:.1} |",
+        if report.within_tolerance {
+            ""
+        } else {
+            " (fit tolerance NOT met)"
+        },
+        hist.join(", "),
+        if skipped.is_empty() {
+            "0".to_string()
+        } else {
+            skipped.join("; ")
+        },
+        bytes.len(),
+    );
+}
