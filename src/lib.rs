@@ -18,6 +18,8 @@ pub mod codec;
 pub mod metrics;
 
 pub mod pipeline;
+#[cfg(feature = "report")]
+pub mod report;
 
 pub use error::{Error, Result};
 pub use mesh::ControlMesh;
