@@ -430,8 +430,7 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     if let Err(msg) = report::find_draco(opts.draco_dir.as_deref()) {
         eprintln!("warning: {msg}");
     }
-    std::fs::create_dir_all(&args.output)
-        .map_err(|e| scode::Error::io(&args.output, e))?;
+    std::fs::create_dir_all(&args.output).map_err(|e| scode::Error::io(&args.output, e))?;
     let files_dir = args.output.join("files");
     let bars = ReportBars::new();
     let result = report::run_report(&args.inputs, &files_dir, &opts, &|p: Progress| {
@@ -502,7 +501,9 @@ impl ReportBars {
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
         };
         let models = multi.add(indicatif::ProgressBar::new(0));
-        models.set_style(style("models {pos}/{len} [{bar:30}] {elapsed_precise} {msg}"));
+        models.set_style(style(
+            "models {pos}/{len} [{bar:30}] {elapsed_precise} {msg}",
+        ));
         let steps = multi.add(indicatif::ProgressBar::new(0));
         steps.set_style(style("steps  {pos}/{len} [{bar:30}] {msg}"));
         steps.enable_steady_tick(std::time::Duration::from_millis(200));

@@ -325,7 +325,10 @@ mod tests {
             (r.max, max_ab.max(max_ba)),
             (r.rms, rms_ab.max(rms_ba)),
         ] {
-            assert!((got - want).abs() <= 1e-12, "report {got} vs brute force {want}");
+            assert!(
+                (got - want).abs() <= 1e-12,
+                "report {got} vs brute force {want}"
+            );
         }
         // The spike is seen (it is a sampled vertex of B) and is well above the jitter.
         assert!(r.max_b_to_a > 0.25, "{r:?}");

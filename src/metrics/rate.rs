@@ -10,10 +10,7 @@ use crate::mesh::ControlMesh;
 /// plus three u32 indices per triangle (polygons count as fan triangles). The "1x" of a
 /// compression ratio.
 pub fn raw_binary_bytes(mesh: &ControlMesh) -> u64 {
-    let triangles: u64 = mesh
-        .faces()
-        .map(|f| f.len().saturating_sub(2) as u64)
-        .sum();
+    let triangles: u64 = mesh.faces().map(|f| f.len().saturating_sub(2) as u64).sum();
     12 * mesh.vertex_count() as u64 + 12 * triangles
 }
 

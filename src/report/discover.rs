@@ -147,7 +147,13 @@ mod tests {
     fn walks_directories_sorted_and_rejects_non_models() {
         let dir = std::env::temp_dir().join(format!("scode-discover-{}", std::process::id()));
         std::fs::create_dir_all(dir.join("sub")).unwrap();
-        for f in ["b.obj", "a.stl", "notes.md", "sub/c.step", "sub/c.faces.json"] {
+        for f in [
+            "b.obj",
+            "a.stl",
+            "notes.md",
+            "sub/c.step",
+            "sub/c.faces.json",
+        ] {
             std::fs::write(dir.join(f), b"").unwrap();
         }
         let models = discover_models(std::slice::from_ref(&dir)).unwrap();

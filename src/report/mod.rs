@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 pub use discover::{classify, discover_models, ModelInput, ModelSource};
 pub use plot::{corpus_chart, model_chart, render, Chart, Series};
 pub use run::{
-    equal_error, run_report, DracoStatus, EqualError, Measured, ModelReport, PointResult,
-    Progress, Report, ReportOptions,
+    equal_error, run_report, DracoStatus, EqualError, Measured, ModelReport, PointResult, Progress,
+    Report, ReportOptions,
 };
 pub use steps::{
     find_draco, median, run_scode_job, run_scode_job_json, DracoTools, ScodeJob, ScodeJobResult,

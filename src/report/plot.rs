@@ -63,7 +63,9 @@ fn positive(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
 
 /// Log range covering `values` with some margin (one decade around a single value).
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
     if !lo.is_finite() || !hi.is_finite() {
         return (0.1, 10.0);
     }
@@ -71,10 +73,17 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / 10f64.powf(pad), hi * 10f64.powf(pad))
 }
 
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, chart: &Chart) -> std::result::Result<(), String> {
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    chart: &Chart,
+) -> std::result::Result<(), String> {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let all: Vec<(f64, f64)> = chart.series.iter().flat_map(|s| positive(&s.points)).collect();
+    let all: Vec<(f64, f64)> = chart
+        .series
+        .iter()
+        .flat_map(|s| positive(&s.points))
+        .collect();
     let (x0, x1) = log_range(all.iter().map(|p| p.0));
     let (y0, y1) = log_range(all.iter().map(|p| p.1));
     let mut c = ChartBuilder::on(&root)
@@ -87,6 +96,8 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, chart: &Chart) -> std:
     c.configure_mesh()
         .x_desc(&chart.x_label)
         .y_desc(&chart.y_label)
+        .x_labels(12)
+        .y_labels(12)
         .label_style(("sans-serif", 15))
         .axis_desc_style(("sans-serif", 17))
         .x_label_formatter(&|x| format!("{x:.0e}"))
@@ -110,9 +121,8 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, chart: &Chart) -> std:
             .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
             .map_err(err)?;
         if let Some(label) = &s.label {
-            anno.label(label.as_str()).legend(move |(x, y)| {
-                Circle::new((x + 10, y), 4, color.filled())
-            });
+            anno.label(label.as_str())
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
         }
     }
     c.configure_series_labels()
@@ -155,7 +165,11 @@ pub fn render(chart: &Chart, stem: &Path) -> Result<()> {
 
 /// (max error, y) of a model's measured points with settings matching `keep`, in setting
 /// order.
-fn points_of(m: &ModelReport, keep: impl Fn(&Setting) -> bool, y: impl Fn(&super::run::Measured) -> f64) -> Vec<(f64, f64)> {
+fn points_of(
+    m: &ModelReport,
+    keep: impl Fn(&Setting) -> bool,
+    y: impl Fn(&super::run::Measured) -> f64,
+) -> Vec<(f64, f64)> {
     let mut pts: Vec<(f64, f64)> = m
         .points
         .iter()
@@ -187,7 +201,11 @@ pub fn model_chart(m: &ModelReport, draco_levels: &[u8]) -> Chart {
         series.push(Series {
             label: Some(format!("Draco -cl {cl}")),
             color: if k == 0 { RED_ } else { ORANGE_ },
-            points: points_of(m, |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl), bytes),
+            points: points_of(
+                m,
+                |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
+                bytes,
+            ),
             line: true,
         });
     }
@@ -215,16 +233,37 @@ pub fn corpus_chart(report: &Report) -> Chart {
             }
             let label = (!labelled[k]).then_some(label);
             labelled[k] = true;
-            series.push(Series { label, color, points, line });
+            series.push(Series {
+                label,
+                color,
+                points,
+                line,
+            });
         };
-        push(0, "scode (fitted)".into(), BLUE_, points_of(m, |s| matches!(s, Setting::Fitted { .. }), bpv), true);
-        push(1, "scode raw".into(), GREEN_, points_of(m, |s| matches!(s, Setting::Raw { .. }), bpv), false);
+        push(
+            0,
+            "scode (fitted)".into(),
+            BLUE_,
+            points_of(m, |s| matches!(s, Setting::Fitted { .. }), bpv),
+            true,
+        );
+        push(
+            1,
+            "scode raw".into(),
+            GREEN_,
+            points_of(m, |s| matches!(s, Setting::Raw { .. }), bpv),
+            false,
+        );
         if let Some(cl) = cl {
             push(
                 2,
                 format!("Draco -cl {cl}"),
                 RED_,
-                points_of(m, |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl), bpv),
+                points_of(
+                    m,
+                    |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
+                    bpv,
+                ),
                 true,
             );
         }

@@ -37,7 +37,7 @@ impl Setting {
     pub fn label(&self) -> String {
         match self {
             Setting::Fitted { tolerance } => format!("tol {tolerance:.0e}"),
-            Setting::Raw { bits } => format!("raw {bits} bit"),
+            Setting::Raw { bits } => format!("{bits} bit"),
             Setting::Draco { qp, cl } => format!("qp {qp} cl {cl}"),
         }
     }
@@ -239,8 +239,18 @@ pub(crate) fn run_with_timeout(
             String::from_utf8_lossy(&s).into_owned()
         })
     };
-    let out_thread = drain(child.stdout.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
-    let err_thread = drain(child.stderr.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
+    let out_thread = drain(
+        child
+            .stdout
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let err_thread = drain(
+        child
+            .stderr
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
     let status = loop {
         match child.try_wait() {
             Ok(Some(status)) => break status,
@@ -324,11 +334,20 @@ mod tests {
     #[test]
     fn labels_and_parsing() {
         assert_eq!(Setting::Fitted { tolerance: 1e-3 }.label(), "tol 1e-3");
-        assert_eq!(Setting::Fitted { tolerance: 5e-4 }.file_name(), "fitted_5e-4.scode");
+        assert_eq!(
+            Setting::Fitted { tolerance: 5e-4 }.file_name(),
+            "fitted_5e-4.scode"
+        );
         assert_eq!(Setting::Draco { qp: 11, cl: 7 }.label(), "qp 11 cl 7");
         let out = "Encoder options:\n\nEncoded mesh saved to f.drc (35 ms to encode).\n";
         assert_eq!(draco_ms(out, "encode"), Some(35.0));
-        assert_eq!(draco_ms("Decoded geometry saved to f.ply (19 ms to decode)", "decode"), Some(19.0));
+        assert_eq!(
+            draco_ms(
+                "Decoded geometry saved to f.ply (19 ms to decode)",
+                "decode"
+            ),
+            Some(19.0)
+        );
         assert_eq!(draco_ms("nothing", "decode"), None);
         assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(&[4.0, 1.0]), 2.5);
@@ -339,14 +358,19 @@ mod tests {
     #[test]
     fn missing_draco_is_a_message() {
         let e = find_draco(Some(Path::new("/nonexistent-draco-dir"))).unwrap_err();
-        assert!(e.contains("Draco not found") && e.contains("/nonexistent-draco-dir"), "{e}");
+        assert!(
+            e.contains("Draco not found") && e.contains("/nonexistent-draco-dir"),
+            "{e}"
+        );
     }
 
     #[test]
     fn timeouts_and_failures_are_errors() {
         let mut sleep = Command::new("sleep");
         sleep.arg("5");
-        let e = run_with_timeout(sleep, Duration::from_millis(200)).err().unwrap();
+        let e = run_with_timeout(sleep, Duration::from_millis(200))
+            .err()
+            .unwrap();
         assert!(e.contains("timed out"), "{e}");
         let e = run_with_timeout(Command::new("/nonexistent/program"), Duration::from_secs(1))
             .err()

@@ -59,7 +59,10 @@ pub fn summarise(report: &Report) -> Vec<SettingSummary> {
                 ratios,
                 measured: measured.len(),
                 median_bits_per_vertex: median(
-                    &measured.iter().map(|m| m.rd.bits_per_vertex).collect::<Vec<_>>(),
+                    &measured
+                        .iter()
+                        .map(|m| m.rd.bits_per_vertex)
+                        .collect::<Vec<_>>(),
                 ),
                 median_max_error: median(
                     &measured.iter().map(|m| m.rd.max_error).collect::<Vec<_>>(),
@@ -100,7 +103,9 @@ pub fn markdown(
         let (min, max) = sum
             .ratios
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &r| (a.min(r), b.max(r)));
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &r| {
+                (a.min(r), b.max(r))
+            });
         let has = !sum.ratios.is_empty();
         let _ = writeln!(
             s,
@@ -133,7 +138,7 @@ pub fn markdown(
     let _ = writeln!(s, "## Equal-error ratio per model\n");
     let _ = write!(s, "| model | vertices | triangles |");
     for st in &report.scode_settings {
-        let _ = write!(s, " {} |", st.label());
+        let _ = write!(s, " {} {} |", st.codec(), st.label());
     }
     let _ = write!(s, "\n|---|---:|---:|");
     for _ in &report.scode_settings {
@@ -141,7 +146,14 @@ pub fn markdown(
     }
     s.push('\n');
     for m in &report.models {
-        let _ = write!(s, "| [{}](#{}) | {} | {} |", m.name, anchor(&m.name), m.vertices, m.triangles);
+        let _ = write!(
+            s,
+            "| [{}](#{}) | {} | {} |",
+            m.name,
+            anchor(&m.name),
+            m.vertices,
+            m.triangles
+        );
         if let Some(e) = &m.error {
             let _ = write!(s, " {} |", md_cell(e));
             for _ in 1..report.scode_settings.len() {
@@ -324,7 +336,9 @@ pub fn csv(report: &Report) -> String {
                 ),
                 None => (String::new(), String::new()),
             };
-            let r = eq.and_then(|e| e.ratio).map_or(String::new(), |r| format!("{r:.6}"));
+            let r = eq
+                .and_then(|e| e.ratio)
+                .map_or(String::new(), |r| format!("{r:.6}"));
             match &p.outcome {
                 Ok(me) => {
                     let _ = writeln!(
