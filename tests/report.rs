@@ -53,7 +53,10 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
     assert_eq!(header.join(","), scode::report::CSV_HEADER);
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    let measured: Vec<&Vec<&str>> = rows.iter().filter(|r| !r[col("bytes")].is_empty()).collect();
+    let measured: Vec<&Vec<&str>> = rows
+        .iter()
+        .filter(|r| !r[col("bytes")].is_empty())
+        .collect();
     // Two models x (raw 10 bit + one tolerance).
     assert_eq!(measured.len(), 4, "{csv}");
     for r in &measured {
