@@ -25,6 +25,8 @@ pub mod metrics;
 
 #[cfg(feature = "encoder")]
 pub mod pipeline;
+#[cfg(feature = "report")]
+pub mod report;
 
 pub use error::{Error, Result};
 pub use mesh::ControlMesh;

@@ -167,3 +167,63 @@ pub fn encode_fitted(
     )?;
     Ok((bytes, outcome.report))
 }
+
+/// A `.scode` file decoded to the surface a viewer shows by default.
+#[derive(Clone, Debug)]
+pub struct DecodedSurface {
+    /// Raw-mode files: the stored mesh; control-mesh files: the subdivided surface.
+    pub mesh: ControlMesh,
+    /// Limit normals, when the surface was projected to the limit.
+    pub normals: Option<Vec<glam::DVec3>>,
+    /// Subdivision level applied (0 for raw-mode files unless asked otherwise).
+    pub level: u32,
+    /// Whether positions are limit positions.
+    pub limit: bool,
+    pub content: Content,
+}
+
+/// How to turn a decoded `.scode` file into a surface; `None` fields take the file's
+/// defaults: a raw mesh stays as stored (level 0, no limit), a control mesh is subdivided to
+/// its default level and projected to the limit surface.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SurfaceOptions {
+    pub level: Option<u32>,
+    pub limit: Option<bool>,
+    /// How boundary patches are triangulated (sparse, as S-CODE, by default).
+    pub boundary_patches: crate::subdiv::BoundaryPatchOutput,
+}
+
+/// Decodes `bytes` and builds the surface the decoder shows (see [`SurfaceOptions`]). One
+/// implementation for `scode decode`, `scode info --against` and `scode report`, so they all
+/// measure the same surface.
+pub fn decode_surface(
+    bytes: &[u8],
+    limits: &Limits,
+    opts: &SurfaceOptions,
+) -> Result<DecodedSurface> {
+    let decoded = codec::decode(bytes, limits)?;
+    let content = decoded.header.content;
+    let (default_level, default_limit) = match content {
+        Content::RawMesh => (0, false),
+        Content::ControlMesh { default_level } => (u32::from(default_level), true),
+    };
+    let level = opts.level.unwrap_or(default_level);
+    let limit = opts.limit.unwrap_or(default_limit);
+    let (mesh, normals) = if level == 0 && !limit {
+        (decoded.mesh, None)
+    } else {
+        let sopts = crate::subdiv::SubdivOptions {
+            limit,
+            boundary_patches: opts.boundary_patches,
+            ..Default::default()
+        };
+        crate::subdiv::subdivide(&decoded.mesh, level, &sopts)?
+    };
+    Ok(DecodedSurface {
+        mesh,
+        normals,
+        level,
+        limit,
+        content,
+    })
+}

@@ -10,10 +10,12 @@ use scode::mesh::{BoundarySurface, PatchKind};
 use scode::subdiv::{self, SubdivOptions};
 use scode::ControlMesh;
 
-use super::{DecodeArgs, EncodeArgs, InfoArgs, SegmentArgs, SubdivideArgs};
+use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, SubdivideArgs};
 use scode::fit::encoder::SurfaceHint;
 use scode::io::step;
-use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
+use scode::pipeline::{
+    decode_surface, encode_fitted, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
+};
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| scode::Error::io(path, e).into())
@@ -265,40 +267,29 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     if let Some(max) = args.max_bytes {
         limits.max_input_bytes = max;
     }
+    let opts = SurfaceOptions {
+        level: args.level,
+        limit: if args.limit {
+            Some(true)
+        } else if args.no_limit {
+            Some(false)
+        } else {
+            None
+        },
+        boundary_patches: boundary_output(args.dense_boundary),
+    };
     let t0 = Instant::now();
-    let decoded = codec::decode(&bytes, &limits)
+    let surface = decode_surface(&bytes, &limits, &opts)
         .with_context(|| format!("cannot decode {}", args.input.display()))?;
     let t_decode = t0.elapsed();
-    let level = match (decoded.header.content, args.level) {
-        (_, Some(level)) => level,
-        (Content::RawMesh, None) => 0,
-        (Content::ControlMesh { default_level }, None) => u32::from(default_level),
-    };
-    let t1 = Instant::now();
-    let limit = match decoded.header.content {
-        Content::RawMesh => args.limit,
-        Content::ControlMesh { .. } => !args.no_limit,
-    };
-    let (mesh, normals) = if level == 0 && !limit {
-        (decoded.mesh, None)
-    } else {
-        let opts = SubdivOptions {
-            limit,
-            boundary_patches: boundary_output(args.dense_boundary),
-            ..Default::default()
-        };
-        subdiv::subdivide(&decoded.mesh, level, &opts)
-            .with_context(|| format!("cannot subdivide {}", args.input.display()))?
-    };
-    let t_subdiv = t1.elapsed();
-    io::write_mesh(output, &mesh, normals.as_deref())?;
+    io::write_mesh(output, &surface.mesh, surface.normals.as_deref())?;
     println!(
-        "wrote {}: {} vertices, {} faces (level {level}; decode {:.1} ms, subdivide {:.1} ms)",
+        "wrote {}: {} vertices, {} faces (level {}; decode and subdivide {:.1} ms)",
         output.display(),
-        mesh.vertex_count(),
-        mesh.face_count(),
+        surface.mesh.vertex_count(),
+        surface.mesh.face_count(),
+        surface.level,
         t_decode.as_secs_f64() * 1e3,
-        t_subdiv.as_secs_f64() * 1e3
     );
     Ok(())
 }
@@ -504,21 +495,10 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         }
     }
     if let Some(reference) = &args.against {
-        let decoded = codec::decode(&bytes, &Limits::default())?;
-        let (level, limit) = match decoded.header.content {
-            Content::RawMesh => (0, false),
-            Content::ControlMesh { default_level } => (u32::from(default_level), true),
-        };
-        let (surface, _) = subdiv::subdivide(
-            &decoded.mesh,
-            level,
-            &SubdivOptions {
-                limit,
-                ..Default::default()
-            },
-        )?;
+        let surface = decode_surface(&bytes, &Limits::default(), &SurfaceOptions::default())?;
+        let level = surface.level;
         let (input, _) = io::read_mesh(reference)?;
-        let r = scode::metrics::hausdorff(&surface, &input, &Default::default())?;
+        let r = scode::metrics::measure_against_input(&surface.mesh, &input)?;
         let d = r.diagonal.max(f64::MIN_POSITIVE);
         println!(
             "  against {} (decoded at level {level}):",
@@ -609,4 +589,153 @@ fn fmt_axis(axis: &scode::mesh::Axis) -> String {
         "({:.4}, {:.4}, {:.4}) + t ({:.4}, {:.4}, {:.4})",
         o.x, o.y, o.z, d.x, d.y, d.z
     )
+}
+
+pub fn report(args: &ReportArgs) -> Result<()> {
+    use scode::report::{self, Progress, ReportOptions, StepRunner};
+    let mut opts = if args.quick {
+        ReportOptions::quick()
+    } else {
+        ReportOptions::full()
+    };
+    if let Some(t) = &args.tolerances {
+        if t.is_empty() || t.iter().any(|&t| !(t > 0.0 && t < 1.0)) {
+            bail!("--tolerances must be fractions of the diagonal in (0, 1)");
+        }
+        opts.tolerances = t.clone();
+    }
+    if let Some(r) = args.runs {
+        opts.runs = r.max(1);
+    }
+    opts.jobs = args.jobs.max(1);
+    opts.draco_dir = args.draco_dir.clone();
+    opts.step_timeout = std::time::Duration::from_secs(args.timeout_secs);
+    opts.model_timeout = std::time::Duration::from_secs(args.model_timeout_secs);
+    opts.runner = StepRunner::Subprocess {
+        program: std::env::current_exe().context("cannot find the scode executable")?,
+        args: vec!["report-step".into()],
+    };
+    if let Err(msg) = report::find_draco(opts.draco_dir.as_deref()) {
+        eprintln!("warning: {msg}");
+    }
+    std::fs::create_dir_all(&args.output).map_err(|e| scode::Error::io(&args.output, e))?;
+    let files_dir = args.output.join("files");
+    let bars = ReportBars::new();
+    let result = report::run_report(&args.inputs, &files_dir, &opts, &|p: Progress| {
+        bars.update(&p)
+    });
+    bars.finish();
+    let rep = result.context("report failed")?;
+    let files = report::write_report(&rep, &args.output)?;
+    for e in &files.plot_errors {
+        eprintln!("warning: plot not drawn: {e}");
+    }
+    for s in report::summarise(&rep) {
+        let median = (!s.ratios.is_empty()).then(|| report::median(&s.ratios));
+        println!(
+            "{:<10} {:<12} median Draco/scode bytes at equal error: {} ({} of {} models matched)",
+            s.setting.codec(),
+            s.setting.label(),
+            median.map_or("-".into(), |m| format!("{m:.2}")),
+            s.ratios.len(),
+            s.measured
+        );
+    }
+    let failed: usize = rep
+        .models
+        .iter()
+        .map(|m| m.points.iter().filter(|p| p.outcome.is_err()).count())
+        .sum();
+    let unmeasured = rep.models.iter().filter(|m| m.error.is_some()).count();
+    println!(
+        "wrote {} and {} ({} plots; {} models, {} not measured, {} failed steps; {:.0} s)",
+        files.markdown.display(),
+        files.csv.display(),
+        files.plots.len(),
+        rep.models.len(),
+        unmeasured,
+        failed,
+        rep.seconds
+    );
+    Ok(())
+}
+
+/// The child side of `scode report`: one encode, result on stdout after the marker.
+pub fn report_step(job: &str) -> Result<()> {
+    let out = scode::report::run_scode_job_json(job)?;
+    println!("{}{out}", scode::report::RESULT_MARKER);
+    Ok(())
+}
+
+/// Two progress bars on stderr (models and steps), hidden when stderr is not a terminal or
+/// `CI` is set.
+struct ReportBars {
+    multi: indicatif::MultiProgress,
+    models: indicatif::ProgressBar,
+    steps: indicatif::ProgressBar,
+}
+
+impl ReportBars {
+    fn new() -> Self {
+        let visible = std::io::IsTerminal::is_terminal(&std::io::stderr())
+            && std::env::var_os("CI").is_none();
+        let multi = if visible {
+            indicatif::MultiProgress::new()
+        } else {
+            indicatif::MultiProgress::with_draw_target(indicatif::ProgressDrawTarget::hidden())
+        };
+        let style = |t: &str| {
+            indicatif::ProgressStyle::with_template(t)
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        };
+        let models = multi.add(indicatif::ProgressBar::new(0));
+        models.set_style(style(
+            "models {pos}/{len} [{bar:30}] {elapsed_precise} {msg}",
+        ));
+        let steps = multi.add(indicatif::ProgressBar::new(0));
+        steps.set_style(style("steps  {pos}/{len} [{bar:30}] {msg}"));
+        steps.enable_steady_tick(std::time::Duration::from_millis(200));
+        ReportBars {
+            multi,
+            models,
+            steps,
+        }
+    }
+
+    fn update(&self, p: &scode::report::Progress) {
+        use scode::report::Progress;
+        match p {
+            Progress::Planned {
+                models,
+                steps_per_model,
+            } => {
+                self.models.set_length(*models as u64);
+                self.steps.set_length((*models * *steps_per_model) as u64);
+            }
+            Progress::ModelStarted { name, .. } => self.models.set_message(name.clone()),
+            Progress::StepFinished { name, step, ok, .. } => {
+                self.steps.inc(1);
+                self.steps.set_message(format!(
+                    "{name}: {step}{}",
+                    if *ok { "" } else { " (failed)" }
+                ));
+            }
+            Progress::ModelFinished {
+                name,
+                skipped_steps,
+                ..
+            } => {
+                self.models.inc(1);
+                self.steps.inc(*skipped_steps as u64);
+                if !self.multi.is_hidden() {
+                    let _ = self.multi.println(format!("done: {name}"));
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        self.steps.finish_and_clear();
+        self.models.finish_and_clear();
+    }
 }

@@ -73,6 +73,27 @@ pub enum Command {
     /// Example: scode view part.scode --port 8765
     #[command(verbatim_doc_comment)]
     View(ViewArgs),
+    /// Compare scode with Draco at equal error on a set of models: tables and plots.
+    ///
+    /// For every model (OBJ/PLY/STL/glTF/OFF files; STEP files are listed as unsupported)
+    /// runs scode fitted at several tolerances, scode raw at 10 bits and Draco
+    /// (draco_encoder/draco_decoder, -qp 6..14 at -cl 10 and 7), decodes every output and
+    /// measures bytes, bits per vertex, max (Hausdorff) and RMS error against the input, and
+    /// encode/decode times. For each scode point, the smallest Draco file with no larger max
+    /// and RMS error gives the headline ratio Draco bytes / scode bytes.
+    ///
+    /// Writes OUT/report.md (summary table first), OUT/results.csv, OUT/plots/*.png|svg and
+    /// the encoded files under OUT/files/. Each scode encode runs in a child process killed
+    /// after --timeout-secs; failures become error rows. Without Draco the report says so
+    /// and continues.
+    ///
+    /// Examples: scode report ../shared/corpus -o report/
+    ///           scode report --quick a.obj b.obj -o /tmp/r --jobs 2
+    #[command(verbatim_doc_comment)]
+    Report(ReportArgs),
+    /// Internal: one encode of `scode report` in a child process (argument: job JSON).
+    #[command(hide = true, name = "report-step")]
+    ReportStep { job: String },
 }
 
 /// The output file of a command: positional or `-o`, exactly one of them.
@@ -184,6 +205,39 @@ pub struct SegmentArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct ReportArgs {
+    /// Model files and/or directories (searched recursively).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Output directory for report.md, results.csv, plots/ and files/.
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: PathBuf,
+    /// Fitting tolerances as fractions of the bounding-box diagonal, comma separated
+    /// (default 4e-3,2e-3,1e-3,5e-4; with --quick 2e-3).
+    #[arg(long, value_delimiter = ',', value_name = "T,T,..")]
+    pub tolerances: Option<Vec<f64>>,
+    /// Fewer points for a fast pass (CI): one tolerance, Draco -qp 8,10,12,14 at -cl 10,
+    /// one timing run.
+    #[arg(long)]
+    pub quick: bool,
+    /// Models measured in parallel.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub jobs: usize,
+    /// Directory holding draco_encoder and draco_decoder (default: search PATH).
+    #[arg(long, value_name = "DIR")]
+    pub draco_dir: Option<PathBuf>,
+    /// Timing repeats per step; the median is reported (default 3, 1 with --quick).
+    #[arg(long, value_name = "N")]
+    pub runs: Option<usize>,
+    /// Time limit of one encode (seconds); an overrun is an error row.
+    #[arg(long, default_value_t = 600, value_name = "SECS")]
+    pub timeout_secs: u64,
+    /// Time limit of all steps of one model (seconds); later steps become error rows.
+    #[arg(long, default_value_t = 1800, value_name = "SECS")]
+    pub model_timeout_secs: u64,
+}
+
+#[derive(Args, Debug)]
 pub struct SubdivideArgs {
     /// Control mesh (.obj with `l` sharp edges, .ply, .stl, .glb, .off) or a .scode file.
     pub input: PathBuf,
@@ -220,6 +274,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Subdivide(a) => commands::subdivide(&a),
         Command::Segment(a) => commands::segment(&a),
         Command::View(a) => view_command(&a),
+        Command::Report(a) => commands::report(&a),
+        Command::ReportStep { job } => commands::report_step(&job),
     }
 }
 

@@ -1,0 +1,94 @@
+//! Encode and decode times on two corpus models: the fitting encoder (tolerance 1e-3 of the
+//! diagonal, the default), raw mode at 10 bits, and decoding (bitstream only, and to the
+//! surface a viewer shows: subdivision to the file's default level plus limit projection).
+//! Subdivision alone is benchmarked in `benches/subdivide.rs`.
+//!
+//! Run: `cargo bench --bench codec` (SCODE_CORPUS overrides the corpus folder). The fitting
+//! encoder takes seconds per model, so its group uses criterion's minimum of 10 samples.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use scode::codec::{self, Content, EncodeOptions, Limits};
+use scode::pipeline::{
+    decode_surface, encode_fitted, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
+};
+
+fn corpus_dir() -> Option<PathBuf> {
+    if let Ok(p) = std::env::var("SCODE_CORPUS") {
+        return Some(PathBuf::from(p));
+    }
+    let local = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus");
+    if local.is_dir() {
+        return Some(local);
+    }
+    let abs = PathBuf::from("/work/shared/corpus");
+    abs.is_dir().then_some(abs)
+}
+
+/// Two small-to-medium CAD tessellations with sidecars: a part with cones and planes and
+/// one with fillets (cylinders) and a sphere.
+const MODELS: [(&str, &str); 2] = [
+    ("four_cone_fine", "tess/four_cone_fine.obj"),
+    ("block_fillet3_coarse", "tess/block_fillet3_coarse.obj"),
+];
+
+fn bench_codec(c: &mut Criterion) {
+    let Some(corpus) = corpus_dir() else {
+        eprintln!("corpus not found; skipping the codec benchmarks");
+        return;
+    };
+    for (name, rel) in MODELS {
+        let path: &Path = &corpus.join(rel);
+        let Ok((mesh, _)) = scode::io::read_mesh(path) else {
+            eprintln!("cannot read {}; skipped", path.display());
+            continue;
+        };
+        let hints = sidecar_hints(path, &mesh)
+            .ok()
+            .flatten()
+            .map(|(_, h)| h)
+            .unwrap_or_default();
+        let nv = mesh.vertex_count() as u64;
+        let fitted_opts = ModelEncodeOptions::default();
+        let raw_opts = EncodeOptions {
+            quantization_bits: 10,
+            content: Content::RawMesh,
+            store_group_names: true,
+        };
+
+        let mut g = c.benchmark_group("encode");
+        g.throughput(Throughput::Elements(nv));
+        g.sample_size(10);
+        g.measurement_time(Duration::from_secs(20));
+        g.bench_function(BenchmarkId::new("fitted_1e-3", name), |b| {
+            b.iter(|| encode_fitted(&mesh, &hints, &fitted_opts).expect("fit"))
+        });
+        g.bench_function(BenchmarkId::new("raw_10bit", name), |b| {
+            b.iter(|| codec::encode(&mesh, &raw_opts).expect("encode"))
+        });
+        g.finish();
+
+        let (fitted, _) = encode_fitted(&mesh, &hints, &fitted_opts).expect("fit");
+        let raw = codec::encode(&mesh, &raw_opts).expect("encode");
+        let mut g = c.benchmark_group("decode");
+        g.throughput(Throughput::Elements(nv));
+        g.bench_function(BenchmarkId::new("raw_10bit", name), |b| {
+            b.iter(|| codec::decode(&raw, &Limits::default()).expect("decode"))
+        });
+        g.bench_function(BenchmarkId::new("fitted_bitstream", name), |b| {
+            b.iter(|| codec::decode(&fitted, &Limits::default()).expect("decode"))
+        });
+        g.bench_function(BenchmarkId::new("fitted_surface", name), |b| {
+            b.iter(|| {
+                decode_surface(&fitted, &Limits::default(), &SurfaceOptions::default())
+                    .expect("decode")
+            })
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench_codec);
+criterion_main!(benches);

@@ -1,0 +1,325 @@
+//! Rate-distortion plots (PNG and SVG) with plotters. Text is drawn with a bundled font
+//! (DejaVu Sans, ASCII subset, `assets/fonts/`) through plotters' `ab_glyph` backend, so
+//! PNGs have readable labels on machines without fontconfig or system fonts.
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::run::{ModelReport, Report};
+use super::steps::Setting;
+use crate::error::{Error, Result};
+
+const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans-ascii.ttf");
+const SIZE: (u32, u32) = (900, 600);
+
+/// One polyline and/or point set of a plot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Series {
+    /// Legend entry; `None` for series that repeat an entry already shown.
+    pub label: Option<String>,
+    pub color: (u8, u8, u8),
+    /// (x, y) in data units; non-positive values are dropped (log scales).
+    pub points: Vec<(f64, f64)>,
+    pub line: bool,
+}
+
+/// A log-log chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Chart {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub series: Vec<Series>,
+}
+
+const BLUE_: (u8, u8, u8) = (31, 100, 200);
+const GREEN_: (u8, u8, u8) = (30, 150, 60);
+const RED_: (u8, u8, u8) = (210, 40, 40);
+const ORANGE_: (u8, u8, u8) = (240, 150, 30);
+
+fn register_font() -> Result<()> {
+    static ONCE: Once = Once::new();
+    let mut ok = true;
+    ONCE.call_once(|| {
+        ok = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok();
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::Parameter("bundled plot font is invalid".into()))
+    }
+}
+
+fn positive(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    points
+        .iter()
+        .copied()
+        .filter(|&(x, y)| x > 0.0 && y > 0.0 && x.is_finite() && y.is_finite())
+        .collect()
+}
+
+/// Log range covering `values` with some margin (one decade around a single value).
+fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if !lo.is_finite() || !hi.is_finite() {
+        return (0.1, 10.0);
+    }
+    let pad = ((hi / lo).log10() * 0.08).max(0.15);
+    (lo / 10f64.powf(pad), hi * 10f64.powf(pad))
+}
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    chart: &Chart,
+) -> std::result::Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let all: Vec<(f64, f64)> = chart
+        .series
+        .iter()
+        .flat_map(|s| positive(&s.points))
+        .collect();
+    let (x0, x1) = log_range(all.iter().map(|p| p.0));
+    let (y0, y1) = log_range(all.iter().map(|p| p.1));
+    let mut c = ChartBuilder::on(&root)
+        .caption(&chart.title, ("sans-serif", 24))
+        .margin(16)
+        .x_label_area_size(55)
+        .y_label_area_size(80)
+        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        .map_err(err)?;
+    c.configure_mesh()
+        .x_desc(&chart.x_label)
+        .y_desc(&chart.y_label)
+        .x_labels(12)
+        .y_labels(12)
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .x_label_formatter(&|x| format!("{x:.0e}"))
+        .y_label_formatter(&|y| {
+            if *y >= 1e5 || *y < 0.1 {
+                format!("{y:.0e}")
+            } else {
+                format!("{y}")
+            }
+        })
+        .draw()
+        .map_err(err)?;
+    for s in &chart.series {
+        let pts = positive(&s.points);
+        let color = RGBColor(s.color.0, s.color.1, s.color.2);
+        if s.line && pts.len() > 1 {
+            c.draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(err)?;
+        }
+        let anno = c
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+            .map_err(err)?;
+        if let Some(label) = &s.label {
+            anno.label(label.as_str())
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+        }
+    }
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font(("sans-serif", 16))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// Draws `chart` to `<stem>.png` and `<stem>.svg`.
+pub fn render(chart: &Chart, stem: &Path) -> Result<()> {
+    register_font()?;
+    let (w, h) = SIZE;
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        draw(root, chart).map_err(|e| Error::Parameter(format!("cannot draw plot: {e}")))?;
+    }
+    let png_path = stem.with_extension("png");
+    let file = std::fs::File::create(&png_path).map_err(|e| Error::io(&png_path, e))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    let png_err = |e: png::EncodingError| Error::io(&png_path, std::io::Error::other(e));
+    let mut writer = enc.write_header().map_err(png_err)?;
+    writer.write_image_data(&rgb).map_err(png_err)?;
+    writer.finish().map_err(png_err)?;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
+        draw(root, chart).map_err(|e| Error::Parameter(format!("cannot draw plot: {e}")))?;
+    }
+    let svg_path = stem.with_extension("svg");
+    std::fs::write(&svg_path, svg).map_err(|e| Error::io(&svg_path, e))
+}
+
+/// (max error, y) of a model's measured points with settings matching `keep`, in setting
+/// order.
+fn points_of(
+    m: &ModelReport,
+    keep: impl Fn(&Setting) -> bool,
+    y: impl Fn(&super::run::Measured) -> f64,
+) -> Vec<(f64, f64)> {
+    let mut pts: Vec<(f64, f64)> = m
+        .points
+        .iter()
+        .filter(|p| keep(&p.setting))
+        .filter_map(|p| p.measured().map(|me| (me.rd.max_error, y(me))))
+        .collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts
+}
+
+/// Bytes against max error for one model: scode fitted, scode raw, Draco per `-cl`.
+pub fn model_chart(m: &ModelReport, draco_levels: &[u8]) -> Chart {
+    let bytes = |me: &super::run::Measured| me.rd.bytes as f64;
+    let mut series = vec![
+        Series {
+            label: Some("scode (fitted)".into()),
+            color: BLUE_,
+            points: points_of(m, |s| matches!(s, Setting::Fitted { .. }), bytes),
+            line: true,
+        },
+        Series {
+            label: Some("scode raw".into()),
+            color: GREEN_,
+            points: points_of(m, |s| matches!(s, Setting::Raw { .. }), bytes),
+            line: false,
+        },
+    ];
+    for (k, &cl) in draco_levels.iter().enumerate() {
+        series.push(Series {
+            label: Some(format!("Draco -cl {cl}")),
+            color: if k == 0 { RED_ } else { ORANGE_ },
+            points: points_of(
+                m,
+                |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
+                bytes,
+            ),
+            line: true,
+        });
+    }
+    series.retain(|s| !s.points.is_empty());
+    Chart {
+        title: format!("{}: bytes vs max error", m.name),
+        x_label: "max error (fraction of bbox diagonal)".into(),
+        y_label: "bytes".into(),
+        series,
+    }
+}
+
+/// Bits per input vertex against max error for every model (sizes differ by orders of
+/// magnitude between models; bits per vertex puts them on one scale): scode fitted, scode
+/// raw, Draco at the first `-cl`.
+pub fn corpus_chart(report: &Report) -> Chart {
+    let bpv = |me: &super::run::Measured| me.rd.bits_per_vertex;
+    let cl = report.options.draco_cl.first().copied();
+    let mut series = Vec::new();
+    let mut labelled = [false; 3];
+    for m in report.models.iter().filter(|m| m.error.is_none()) {
+        let mut push = |k: usize, label: String, color, points: Vec<(f64, f64)>, line| {
+            if points.is_empty() {
+                return;
+            }
+            let label = (!labelled[k]).then_some(label);
+            labelled[k] = true;
+            series.push(Series {
+                label,
+                color,
+                points,
+                line,
+            });
+        };
+        push(
+            0,
+            "scode (fitted)".into(),
+            BLUE_,
+            points_of(m, |s| matches!(s, Setting::Fitted { .. }), bpv),
+            true,
+        );
+        push(
+            1,
+            "scode raw".into(),
+            GREEN_,
+            points_of(m, |s| matches!(s, Setting::Raw { .. }), bpv),
+            false,
+        );
+        if let Some(cl) = cl {
+            push(
+                2,
+                format!("Draco -cl {cl}"),
+                RED_,
+                points_of(
+                    m,
+                    |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
+                    bpv,
+                ),
+                true,
+            );
+        }
+    }
+    Chart {
+        title: "All models: bits per vertex vs max error".into(),
+        x_label: "max error (fraction of bbox diagonal)".into(),
+        y_label: "bits per input vertex".into(),
+        series,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn renders_png_and_svg_with_text() {
+        let chart = Chart {
+            title: "test: bytes vs max error".into(),
+            x_label: "max error".into(),
+            y_label: "bytes".into(),
+            series: vec![
+                Series {
+                    label: Some("a".into()),
+                    color: BLUE_,
+                    points: vec![(1e-3, 500.0), (5e-4, 900.0), (0.0, 1.0)],
+                    line: true,
+                },
+                Series {
+                    label: None,
+                    color: RED_,
+                    points: vec![(2e-3, 300.0)],
+                    line: false,
+                },
+            ],
+        };
+        let dir = std::env::temp_dir().join(format!("scode-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let stem = dir.join("chart");
+        render(&chart, &stem).unwrap();
+        let png = std::fs::read(stem.with_extension("png")).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width, info.height), SIZE);
+        // Text was drawn: the title band above the plot holds dark pixels.
+        let dark = buf[..(40 * SIZE.0 * 3) as usize]
+            .chunks(3)
+            .filter(|p| p.iter().all(|&c| c < 100))
+            .count();
+        assert!(dark > 50, "no title text drawn ({dark} dark pixels)");
+        let svg = std::fs::read_to_string(stem.with_extension("svg")).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("max error"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,92 @@
+//! `scode report` end to end on two small corpus models, quick mode, without Draco (a
+//! `--draco-dir` that holds no Draco takes the "missing Draco" path, so the test does not
+//! depend on Draco being installed).
+
+mod common;
+
+use std::path::PathBuf;
+use std::process::Command;
+
+#[test]
+fn report_runs_without_draco_and_writes_tables_and_plots() {
+    let Some(corpus) = common::corpus_dir() else {
+        return;
+    };
+    let out = std::env::temp_dir().join(format!("scode-report-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let no_draco = out.join("no-draco-here");
+    std::fs::create_dir_all(&no_draco).unwrap();
+    let models: Vec<PathBuf> = ["tess/screw_coarse.obj", "tess/four_cone_coarse.obj"]
+        .iter()
+        .map(|m| corpus.join(m))
+        .collect();
+    let run = Command::new(env!("CARGO_BIN_EXE_scode"))
+        .arg("report")
+        .args(&models)
+        // A STEP file: listed as not supported, never a crash.
+        .arg(corpus.join("step/screw.step"))
+        .args(["--quick", "--jobs", "2", "--draco-dir"])
+        .arg(&no_draco)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text =
+        String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{text}");
+    assert!(text.contains("Draco not found"), "{text}");
+
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let first_table = md.lines().find(|l| l.starts_with('|')).unwrap();
+    assert!(first_table.contains("scode setting"), "{first_table}");
+    assert!(md.contains("Draco not found"), "{md}");
+    assert!(md.contains("STEP not supported yet"), "{md}");
+    assert!(
+        md.contains("![tess_screw_coarse_obj") || md.contains("plots/"),
+        "{md}"
+    );
+
+    // The CSV: one row per measured point, numbers parse, errors are sane fractions.
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header.join(","), scode::report::CSV_HEADER);
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let measured: Vec<&Vec<&str>> = rows
+        .iter()
+        .filter(|r| !r[col("bytes")].is_empty())
+        .collect();
+    // Two models x (raw 10 bit + one tolerance).
+    assert_eq!(measured.len(), 4, "{csv}");
+    for r in &measured {
+        let bytes: u64 = r[col("bytes")].parse().unwrap();
+        let bpv: f64 = r[col("bits_per_vertex")].parse().unwrap();
+        let ratio: f64 = r[col("ratio_to_raw")].parse().unwrap();
+        let max: f64 = r[col("max_error")].parse().unwrap();
+        let rms: f64 = r[col("rms_error")].parse().unwrap();
+        let enc: f64 = r[col("encode_ms")].parse().unwrap();
+        let dec: f64 = r[col("decode_ms")].parse().unwrap();
+        assert!(bytes > 0 && bpv > 0.0 && ratio > 1.0, "{r:?}");
+        assert!(max > 0.0 && max < 0.05 && rms > 0.0 && rms <= max, "{r:?}");
+        assert!(enc > 0.0 && dec > 0.0, "{r:?}");
+        // No Draco: no equal-error pairing.
+        assert_eq!(r[col("draco_over_scode")], "");
+    }
+    // Raw 10 bit: the quantisation error bound sqrt(3)/2 / 1023 of the largest extent.
+    for r in measured.iter().filter(|r| r[col("setting")] == "10 bit") {
+        let max: f64 = r[col("max_error")].parse().unwrap();
+        assert!(max < 1e-3, "{r:?}");
+    }
+    let step_row = rows.iter().find(|r| r[0] == "screw.step").unwrap();
+    assert!(step_row.last().unwrap().contains("STEP"), "{step_row:?}");
+
+    for plot in ["corpus", "screw_coarse_obj", "four_cone_coarse_obj"] {
+        for ext in ["png", "svg"] {
+            let p = out.join("plots").join(format!("{plot}.{ext}"));
+            let meta = std::fs::metadata(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            assert!(meta.len() > 1000, "{}", p.display());
+        }
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
