@@ -6,7 +6,7 @@
 //! Run: `cargo bench --bench codec` (SCODE_CORPUS overrides the corpus folder). The fitting
 //! encoder takes seconds per model, so its group uses criterion's minimum of 10 samples.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
@@ -15,17 +15,9 @@ use scode::pipeline::{
     decode_surface, encode_fitted, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
 };
 
-fn corpus_dir() -> Option<PathBuf> {
-    if let Ok(p) = std::env::var("SCODE_CORPUS") {
-        return Some(PathBuf::from(p));
-    }
-    let local = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus");
-    if local.is_dir() {
-        return Some(local);
-    }
-    let abs = PathBuf::from("/work/shared/corpus");
-    abs.is_dir().then_some(abs)
-}
+#[path = "../tests/common/mod.rs"]
+mod common;
+use common::corpus_dir;
 
 /// Two small-to-medium CAD tessellations with sidecars: a part with cones and planes and
 /// one with fillets (cylinders) and a sphere.

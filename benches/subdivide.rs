@@ -8,23 +8,13 @@
 //! measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
 //! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
 
-use std::path::PathBuf;
-
 use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use scode::subdiv::{Refinement, SubdivOptions};
 
-fn corpus_dir() -> Option<PathBuf> {
-    if let Ok(p) = std::env::var("SCODE_CORPUS") {
-        return Some(PathBuf::from(p));
-    }
-    let local = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus");
-    if local.is_dir() {
-        return Some(local);
-    }
-    let abs = PathBuf::from("/work/shared/corpus");
-    abs.is_dir().then_some(abs)
-}
+#[path = "../tests/common/mod.rs"]
+mod common;
+use common::corpus_dir;
 
 /// CPU time of the calling thread (the sequential build runs everything on it).
 #[cfg_attr(feature = "parallel", allow(dead_code))]

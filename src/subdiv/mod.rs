@@ -372,17 +372,7 @@ impl Refinement {
         normals: Option<&[DVec3]>,
         per_face_levels: &[u8],
     ) -> Result<AdaptiveMesh> {
-        if let Some(nn) = normals {
-            if nn.len() != finest.len() {
-                return Err(Error::Parameter(format!(
-                    "{} normals for {} positions",
-                    nn.len(),
-                    finest.len()
-                )));
-            }
-        }
-        lod::extract(
-            self,
+        self.extract_lod_with(
             finest,
             normals,
             per_face_levels,

@@ -123,7 +123,8 @@ async function main() {
       if (!(near.levels.mean > far.levels.mean)) fail(`${model.name}: zooming in did not raise the level`);
       if (errors.length) fail(`${model.name}: page errors: ${errors.join('; ')}`);
       if (model.name === 'fandisk' || (!bench && model === models[models.length - 1])) {
-        // Decode + refine to >= 1M triangles + WebGL arrays; first run cold, then best of 3.
+        // Decode + refine to about 1M triangles (the uniform level nearest it) + WebGL arrays;
+        // first run cold, then best of 3.
         // Wall time from the page, CPU time of the page's main thread from the DevTools
         // protocol (ThreadTime), which stays meaningful when other work loads the machine.
         const cdp = await page.context().newCDPSession(page);
