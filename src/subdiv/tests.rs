@@ -681,8 +681,10 @@ fn cylinder_and_cone_patches_stay_on_their_surfaces() {
     }
 }
 
-#[test]
-fn cone_patch_with_apex() {
+/// A cone patch made of an apex fan of 7 triangles (half-angle atan 0.6, tilted axis) under a
+/// planar cap polygon; `jitter` moves the rim points off even angular spacing. Returns the
+/// mesh, the cone and cap groups, the apex and the axis direction.
+fn cone_with_cap(jitter: f64) -> (ControlMesh, u32, u32, DVec3, DVec3) {
     let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.2, -0.4);
     let apex = v3(0.2, 0.1, -0.3);
     let axis = rot * DVec3::Z;
@@ -700,7 +702,7 @@ fn cone_patch_with_apex() {
     let n = 7;
     m.push_vertex(apex);
     for i in 0..n {
-        let th = std::f64::consts::TAU * (i as f64 + 0.2 * (i % 3) as f64) / n as f64;
+        let th = std::f64::consts::TAU * (i as f64 + jitter * (i % 3) as f64) / n as f64;
         let (s, c) = th.sin_cos();
         m.push_vertex(apex + axis * 2.0 + (rot * v3(c, s, 0.0)) * 1.2);
     }
@@ -712,6 +714,12 @@ fn cone_patch_with_apex() {
     let capv: Vec<u32> = (1..=n as u32).collect();
     m.push_face(&capv, cap);
     m.corners.insert(0);
+    (m, cone, cap, apex, axis)
+}
+
+#[test]
+fn cone_patch_with_apex() {
+    let (m, cone, _, apex, axis) = cone_with_cap(0.2);
     let r = Refinement::new(&m, 3).unwrap();
     let p = r.positions(&m.positions).unwrap();
     let l3 = r.level(3);
@@ -1544,35 +1552,8 @@ fn belt_lod_is_watertight() {
 /// output densely; its planar cap sparsely; together watertight.
 #[test]
 fn unpaired_cone_group_is_dense_and_watertight() {
-    let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.2, -0.4);
-    let apex = v3(0.2, 0.1, -0.3);
-    let axis = rot * DVec3::Z;
-    let mut m = ControlMesh::new();
-    let cone = m.push_group(
-        "cone",
-        PatchKind::Boundary(BoundarySurface::Cone {
-            axis: Axis {
-                origin: apex,
-                direction: axis,
-            },
-        }),
-    );
-    let cap = m.push_group("cap", PatchKind::Boundary(BoundarySurface::Plane));
     let n = 7;
-    m.push_vertex(apex);
-    for i in 0..n {
-        let th = std::f64::consts::TAU * i as f64 / n as f64;
-        let (s, c) = th.sin_cos();
-        m.push_vertex(apex + axis * 2.0 + (rot * v3(c, s, 0.0)) * 1.2);
-    }
-    for i in 0..n {
-        let (a, b) = (1 + i as u32, 1 + ((i + 1) % n) as u32);
-        m.push_face(&[0, b, a], cone);
-        m.set_sharp(a, b);
-    }
-    let capv: Vec<u32> = (1..=n as u32).collect();
-    m.push_face(&capv, cap);
-    m.corners.insert(0);
+    let (m, cone, cap, _, _) = cone_with_cap(0.0);
     for level in 1..=4u32 {
         let (out, _) = subdivide(&m, level, &SubdivOptions::default()).unwrap();
         check_closed_or_boundary(&out.face_vertices, |_, _| false);
