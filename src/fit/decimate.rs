@@ -585,6 +585,16 @@ mod tests {
         (p, t, g)
     }
 
+    /// A boundary patch on the z = 0 plane: every interior vertex should go.
+    fn plane_rule() -> GroupRule {
+        GroupRule {
+            remove_all_interior: true,
+            max_cost: 0.0,
+            surface: SurfaceRef::Plane { normal: DVec3::Z },
+            max_edge_angle: std::f64::consts::PI,
+        }
+    }
+
     fn euler(tris: &[[u32; 3]]) -> i64 {
         let mut e = std::collections::BTreeSet::new();
         let mut v = std::collections::BTreeSet::new();
@@ -615,12 +625,7 @@ mod tests {
                 }
             })
             .collect();
-        let rules = [GroupRule {
-            remove_all_interior: true,
-            max_cost: 0.0,
-            surface: SurfaceRef::Plane { normal: DVec3::Z },
-            max_edge_angle: std::f64::consts::PI,
-        }];
+        let rules = [plane_rule()];
         let out = decimate(&DecimateInput {
             positions: &p,
             triangles: &t,
@@ -703,12 +708,7 @@ mod tests {
                 }
             })
             .collect();
-        let rule = GroupRule {
-            remove_all_interior: true,
-            max_cost: 0.0,
-            surface: SurfaceRef::Plane { normal: DVec3::Z },
-            max_edge_angle: std::f64::consts::PI,
-        };
+        let rule = plane_rule();
         let out = decimate(&DecimateInput {
             positions: &p,
             triangles: &t,

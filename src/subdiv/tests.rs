@@ -681,6 +681,19 @@ fn cylinder_and_cone_patches_stay_on_their_surfaces() {
     }
 }
 
+/// Uniform subdivision with boundary patches output as the dense grid.
+fn subdivide_dense(m: &ControlMesh, level: u32) -> (ControlMesh, Option<Vec<DVec3>>) {
+    subdivide(
+        m,
+        level,
+        &SubdivOptions {
+            boundary_patches: BoundaryPatchOutput::Dense,
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
 /// A cone patch made of an apex fan of 7 triangles (half-angle atan 0.6, tilted axis) under a
 /// planar cap polygon; `jitter` moves the rim points off even angular spacing. Returns the
 /// mesh, the cone and cap groups, the apex and the axis direction.
@@ -1306,15 +1319,7 @@ fn plane_patch_has_no_interior_vertices() {
             assert!(on_border.iter().all(|&b| b), "n {n} level {level}");
             check_closed_or_boundary(&out.face_vertices, |a, b| edges[&(a.min(b), a.max(b))] == 1);
             // the border is the dense output's border, point for point
-            let (dense, _) = subdivide(
-                &m,
-                level,
-                &SubdivOptions {
-                    boundary_patches: BoundaryPatchOutput::Dense,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let (dense, _) = subdivide_dense(&m, level);
             assert_eq!(dense.face_count(), (n - 2) << (2 * level));
             let mut a: Vec<[i64; 3]> = out
                 .positions
@@ -1405,7 +1410,7 @@ fn belt_output_follows_rulings_and_stays_on_the_surface() {
             let belt_tris = out.face_groups.iter().filter(|&&g| g == 1).count();
             // each belt quad: a zipper of 2 * 2^level triangles
             assert_eq!(belt_tris, (2 * n) << level, "cone {cone} level {level}");
-            let (verts, edges) = group_vertices_and_border(&out, 1);
+            let (verts, _) = group_vertices_and_border(&out, 1);
             assert_eq!(verts.len(), (2 * n) << level);
             let h_of = |v: u32| (out.positions[v as usize] - origin).dot(axis);
             let h0 = h_of(0);
@@ -1439,17 +1444,8 @@ fn belt_output_follows_rulings_and_stays_on_the_surface() {
                 assert_eq!((ring, ruling), (1, 1), "cone {cone} level {level}: {t:?}");
             }
             assert_eq!(rulings.len(), n << level);
-            let _ = &edges;
             // sparse and dense output agree on the belt's border
-            let (dense, _) = subdivide(
-                &m,
-                level,
-                &SubdivOptions {
-                    boundary_patches: BoundaryPatchOutput::Dense,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let (dense, _) = subdivide_dense(&m, level);
             assert!(dense.face_count() > out.face_count());
             check_closed_or_boundary(&dense.face_vertices, |_, _| false);
         }
@@ -1485,15 +1481,7 @@ fn sparse_patches_with_closed_neighbours_are_watertight() {
         for level in 1..=4u32 {
             let (out, _) = subdivide(&m, level, &SubdivOptions::default()).unwrap();
             check_closed_or_boundary(&out.face_vertices, |_, _| false);
-            let (dense, _) = subdivide(
-                &m,
-                level,
-                &SubdivOptions {
-                    boundary_patches: BoundaryPatchOutput::Dense,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let (dense, _) = subdivide_dense(&m, level);
             // 4 plane triangles: the centre one is a 0-face (1 triangle), the corner ones
             // 2-faces (2^(m+1) - 1)
             let plane_tris = out.face_groups.iter().filter(|&&g| g == plane).count();
