@@ -6,6 +6,12 @@
 //! Run: `cargo bench --bench codec` (SCODE_CORPUS overrides the corpus folder). The fitting
 //! encoder takes seconds per model, so its group uses criterion's minimum of 10 samples.
 
+/// The `scode` binary's allocator (see the `mimalloc` feature); build the bench with
+/// `--no-default-features --features cli,parallel` to measure the system allocator.
+#[cfg(feature = "mimalloc")]
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use std::path::Path;
 use std::time::Duration;
 

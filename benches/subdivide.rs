@@ -8,6 +8,12 @@
 //! measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
 //! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
 
+/// The `scode` binary's allocator (see the `mimalloc` feature); build the bench with
+/// `--no-default-features --features cli,parallel` to measure the system allocator.
+#[cfg(feature = "mimalloc")]
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use scode::subdiv::{Refinement, SubdivOptions};
