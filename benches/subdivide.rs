@@ -4,8 +4,8 @@
 //! (c) a full decode (`subdivide`: topology, positions and the output mesh).
 //!
 //! Run: `cargo bench --bench subdivide` (wall time, rayon pools of 1 thread and of all
-//! threads) and `cargo bench --bench subdivide --no-default-features` (sequential build,
-//! measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
+//! threads) and `cargo bench --bench subdivide --no-default-features --features encoder,mimalloc`
+//! (sequential build, measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
 //! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
 
 /// The `scode` binary's allocator (see the `mimalloc` feature); build the bench with
