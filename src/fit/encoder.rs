@@ -1059,6 +1059,8 @@ pub fn fit_model(
     let mut best: Option<(FitError, ControlMesh, u8)> = None;
     let mut levels_tried = opts.default_level;
     let mut prev_worst: Option<f64> = None;
+    // (control vertices, worst excess, level) of the previous round.
+    let mut prev_round: Option<(usize, f64, u8)> = None;
     for round in 0..opts.max_rounds.max(1) {
         report.rounds = round + 1;
         t = Instant::now();
@@ -1134,6 +1136,24 @@ pub fn fit_model(
             worst_groups.len(),
             listed.join("; ")
         ));
+        // A round at the final level that neither lowered the error nor grew the control
+        // mesh: the refinement has nothing left to add where the error is, and later rounds
+        // repeat it at full measuring cost (trj4_fine: three identical level-5 rounds).
+        let n_control = built.control.vertex_count();
+        let final_level = opts.default_level.is_some() || level >= 5;
+        if let Some((prev_n, prev_w, prev_level)) = prev_round {
+            if final_level
+                && prev_level == level
+                && worst >= 0.99 * prev_w
+                && n_control as f64 <= 1.02 * prev_n as f64
+            {
+                report.notes.push(format!(
+                    "  no progress at level {level} (error and control mesh unchanged): stopping"
+                ));
+                break;
+            }
+        }
+        prev_round = Some((n_control, worst, level));
         // When adding control points stops paying, the rest may be the piecewise-linear
         // chord error of level 4: go to level 5 (4x the triangles) once.
         if opts.default_level.is_none()
