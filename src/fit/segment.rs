@@ -167,6 +167,15 @@ enum FaceState {
     Taken,
 }
 
+/// The growing edge of a region during flood fill: faces still to test, the region so far,
+/// and the faces that failed the test (each listed once).
+struct Front<'a> {
+    queue: &'a mut VecDeque<u32>,
+    region: &'a mut Vec<u32>,
+    rejected: &'a mut Vec<u32>,
+    rejected_mark: &'a mut BTreeMap<u32, ()>,
+}
+
 struct Region {
     faces: Vec<u32>,
     fit: Option<PrimitiveFit>,
@@ -324,6 +333,38 @@ impl<'a> Segmenter<'a> {
         n.dot(model.normal_at(centroid)).abs() >= self.cos_normal
     }
 
+    /// Takes faces from `front.queue` into the region while they fit `primitive`, queueing
+    /// their neighbours; faces that do not fit are collected once in `front.rejected`.
+    fn flood(
+        &mut self,
+        primitive: &Primitive,
+        state: &[FaceState],
+        in_region: u32,
+        front: &mut Front,
+    ) {
+        while let Some(f) = front.queue.pop_front() {
+            if self.face_stamp[f as usize] == in_region || state[f as usize] == FaceState::Taken {
+                continue;
+            }
+            if self.face_fits(primitive, f) {
+                self.face_stamp[f as usize] = in_region;
+                front.region.push(f);
+                if front.rejected_mark.remove(&f).is_some() {
+                    front.rejected.retain(|&x| x != f);
+                }
+                for &g in self.neighbours(f) {
+                    if self.face_stamp[g as usize] != in_region
+                        && state[g as usize] != FaceState::Taken
+                    {
+                        front.queue.push_back(g);
+                    }
+                }
+            } else if front.rejected_mark.insert(f, ()).is_none() {
+                front.rejected.push(f);
+            }
+        }
+    }
+
     /// Grows one primitive region from `seed` over faces not `Taken`. On failure returns
     /// the faces that were tried.
     fn grow(
@@ -379,28 +420,13 @@ impl<'a> Segmenter<'a> {
         let mut last_fit = patch.len();
         let mut refits = 0;
         for _round in 0..64 {
-            while let Some(f) = queue.pop_front() {
-                if self.face_stamp[f as usize] == in_region || state[f as usize] == FaceState::Taken
-                {
-                    continue;
-                }
-                if self.face_fits(&model.primitive, f) {
-                    self.face_stamp[f as usize] = in_region;
-                    region.push(f);
-                    if rejected_mark.remove(&f).is_some() {
-                        rejected.retain(|&x| x != f);
-                    }
-                    for &g in self.neighbours(f) {
-                        if self.face_stamp[g as usize] != in_region
-                            && state[g as usize] != FaceState::Taken
-                        {
-                            queue.push_back(g);
-                        }
-                    }
-                } else if rejected_mark.insert(f, ()).is_none() {
-                    rejected.push(f);
-                }
-            }
+            let mut front = Front {
+                queue: &mut queue,
+                region: &mut region,
+                rejected: &mut rejected,
+                rejected_mark: &mut rejected_mark,
+            };
+            self.flood(&model.primitive, state, in_region, &mut front);
             if rejected.is_empty() {
                 break;
             }
@@ -445,25 +471,13 @@ impl<'a> Segmenter<'a> {
             rejected_mark.clear();
             // Process the queue; if nothing new joins, stop.
             let before = region.len();
-            while let Some(f) = queue.pop_front() {
-                if self.face_stamp[f as usize] == in_region || state[f as usize] == FaceState::Taken
-                {
-                    continue;
-                }
-                if self.face_fits(&model.primitive, f) {
-                    self.face_stamp[f as usize] = in_region;
-                    region.push(f);
-                    for &g in self.neighbours(f) {
-                        if self.face_stamp[g as usize] != in_region
-                            && state[g as usize] != FaceState::Taken
-                        {
-                            queue.push_back(g);
-                        }
-                    }
-                } else if rejected_mark.insert(f, ()).is_none() {
-                    rejected.push(f);
-                }
-            }
+            let mut front = Front {
+                queue: &mut queue,
+                region: &mut region,
+                rejected: &mut rejected,
+                rejected_mark: &mut rejected_mark,
+            };
+            self.flood(&model.primitive, state, in_region, &mut front);
             if region.len() == before && region.len() == size_before {
                 break;
             }
