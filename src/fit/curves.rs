@@ -180,14 +180,8 @@ pub fn chain_fit_error(
 }
 
 fn point_segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
-    let ab = b - a;
-    let l2 = ab.length_squared();
-    let t = if l2 > 0.0 {
-        ((p - a).dot(ab) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p - (a + t * ab)).length()
+    let t = crate::metrics::segment_parameter(p, a, b);
+    (p - a.lerp(b, t)).length()
 }
 
 fn point_polyline_distance(p: DVec3, line: &[DVec3]) -> f64 {

@@ -18,7 +18,7 @@ pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
 pub use sampling::{sample_surface, SampleCount, SurfaceSample};
-pub use surface::{closest_point_on_triangle, ClosestPoint, TriangleSurface};
+pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
 
 #[cfg(test)]
 mod tests {

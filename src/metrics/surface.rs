@@ -268,14 +268,21 @@ pub fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVe
     (a + ab * v + ac * w, [1.0 - v - w, v, w])
 }
 
-fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3, idx: [usize; 2]) -> (DVec3, [f64; 3]) {
+/// Parameter `t` in [0, 1] of the point of segment `a b` closest to `p` (0 when the segment
+/// is a point).
+pub fn segment_parameter(p: DVec3, a: DVec3, b: DVec3) -> f64 {
     let ab = b - a;
     let l2 = ab.length_squared();
-    let t = if l2 > 0.0 {
+    if l2 > 0.0 {
         ((p - a).dot(ab) / l2).clamp(0.0, 1.0)
     } else {
         0.0
-    };
+    }
+}
+
+fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3, idx: [usize; 2]) -> (DVec3, [f64; 3]) {
+    let ab = b - a;
+    let t = segment_parameter(p, a, b);
     let mut bc = [0.0; 3];
     bc[idx[0]] += 1.0 - t;
     bc[idx[1]] += t;
