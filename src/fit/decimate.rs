@@ -328,6 +328,61 @@ impl<'a> State<'a> {
         (count, first)
     }
 
+    /// Whether collapsing `u` onto `v` turns face `f` (corners `t`, holding `u`, not `v`) of a
+    /// closed patch into an *ear along a chain*: a triangle whose corners are all on the
+    /// patch boundary and one of which, `w`, keeps this triangle as its only face in the
+    /// group while the boundary runs nearly straight through it (angle at `w` above 120
+    /// degrees, so `w` is no corner of the patch). Such a triangle has no interior control
+    /// point and its two boundary edges are one smooth crease: its subdivision surface sags
+    /// from the chain towards the opposite edge (trj6_fine: a cone strip whose side chain
+    /// vertex slid onto a corner fanned it to three consecutive vertices of the bottom chain,
+    /// 3x over the tolerance however many control points were added elsewhere).
+    fn leaves_ear(&self, u: u32, v: u32, t: [u32; 3], f: u32) -> bool {
+        let g = self.input.face_groups[f as usize];
+        let rule = &self.input.rules[g as usize];
+        if rule.remove_all_interior {
+            return false;
+        }
+        let new = t.map(|i| if i == u { v } else { i });
+        if new
+            .iter()
+            .any(|&w| self.input.roles[w as usize] == VertexRole::Interior)
+        {
+            return false;
+        }
+        // Faces of group g at `w` after the collapse (faces holding both u and v vanish;
+        // u's other faces move to v).
+        let faces_after = |w: u32| -> usize {
+            let here = |x: u32| {
+                self.vfaces[x as usize].iter().filter(move |&&h| {
+                    let th = self.tris[h as usize];
+                    self.input.face_groups[h as usize] == g && !(th.contains(&u) && th.contains(&v))
+                })
+            };
+            if w == v {
+                here(v).count()
+                    + here(u)
+                        .filter(|&&h| !self.tris[h as usize].contains(&v))
+                        .count()
+            } else {
+                here(w).count()
+            }
+        };
+        (0..3).any(|k| {
+            let w = new[k];
+            if faces_after(w) != 1 {
+                return false;
+            }
+            let pw = self.pos(w);
+            let (a, b) = (
+                self.pos(new[(k + 1) % 3]) - pw,
+                self.pos(new[(k + 2) % 3]) - pw,
+            );
+            let (la, lb) = (a.length(), b.length());
+            la > 0.0 && lb > 0.0 && a.dot(b) / (la * lb) < -0.5
+        })
+    }
+
     /// Cost class and cost of collapsing `u` onto `v`, or `None` when not allowed. `nu` are
     /// `u`'s neighbours (sorted); `scratch` is reused for `v`'s.
     fn evaluate(&self, u: u32, v: u32, nu: &[u32], scratch: &mut Vec<u32>) -> Option<(u8, f64)> {
@@ -377,6 +432,9 @@ impl<'a> State<'a> {
             let t = self.tris[f as usize];
             if t.contains(&v) {
                 continue;
+            }
+            if self.leaves_ear(u, v, t, f) {
+                return None;
             }
             let old = t.map(|i| self.pos(i));
             let new = t.map(|i| if i == u { pv } else { self.pos(i) });
@@ -737,5 +795,67 @@ mod tests {
             }
         }
         assert_eq!(euler(&out.triangles), 1);
+    }
+
+    #[test]
+    fn chain_vertex_does_not_slide_into_an_ear() {
+        // A closed-patch strip between a curved bottom chain (y <= 0) and a top chain (y = 1); the left
+        // side has one chain vertex S that may slide onto either corner. Sliding onto the
+        // nearer bottom corner would leave the triangle (C00, B1, B2): an ear along the
+        // bottom chain (B1 keeps it as its only face, the chain runs straight through B1).
+        let xy = |x: f64, y: f64| DVec3::new(x, y, 0.0);
+        let p = vec![
+            xy(0.0, 0.0),   // 0 C00
+            xy(1.0, -0.15), // 1 B1
+            xy(2.0, -0.2),  // 2 B2
+            xy(3.0, -0.15), // 3 B3
+            xy(4.0, 0.0),   // 4 C40
+            xy(0.0, 1.0),   // 5 C01
+            xy(1.0, 1.0),   // 6 T1
+            xy(2.0, 1.0),   // 7 T2
+            xy(3.0, 1.0),   // 8 T3
+            xy(4.0, 1.0),   // 9 C41
+            xy(0.0, 0.4),   // 10 S
+        ];
+        let t = vec![
+            [0, 1, 10],
+            [10, 1, 2],
+            [10, 2, 6],
+            [10, 6, 5],
+            [2, 7, 6],
+            [2, 3, 7],
+            [3, 8, 7],
+            [3, 4, 8],
+            [4, 9, 8],
+        ];
+        let g = vec![0; t.len()];
+        let mut roles = vec![VertexRole::Keep; p.len()];
+        roles[10] = VertexRole::ChainDrop;
+        let rules = [GroupRule {
+            remove_all_interior: false,
+            max_cost: f64::MAX,
+            surface: SurfaceRef::Free,
+            max_edge_angle: std::f64::consts::PI,
+        }];
+        let out = decimate(&DecimateInput {
+            positions: &p,
+            triangles: &t,
+            face_groups: &g,
+            roles: &roles,
+            rules: &rules,
+        });
+        assert!(!out.vertices.contains(&10), "S stays: {out:?}");
+        let mut ear = [0, 1, 2];
+        for t in &out.triangles {
+            for _ in 0..3 {
+                assert_ne!(*t, ear, "ear left along the bottom chain: {out:?}");
+                ear.rotate_left(1);
+            }
+        }
+        // S went to the top corner instead: C00 keeps a single 90-degree corner triangle.
+        assert!(out
+            .triangles
+            .iter()
+            .any(|t| t.contains(&0) && t.contains(&5)));
     }
 }
