@@ -799,10 +799,11 @@ mod tests {
 
     #[test]
     fn chain_vertex_does_not_slide_into_an_ear() {
-        // A closed-patch strip between a curved bottom chain (y <= 0) and a top chain (y = 1); the left
-        // side has one chain vertex S that may slide onto either corner. Sliding onto the
-        // nearer bottom corner would leave the triangle (C00, B1, B2): an ear along the
-        // bottom chain (B1 keeps it as its only face, the chain runs straight through B1).
+        // A closed-patch strip between a curved bottom chain (y <= 0) and a top chain
+        // (y = 1); the left side has one chain vertex S that may slide onto either corner.
+        // Sliding onto the nearer bottom corner would leave the triangle (C00, B1, B2): an
+        // ear along the bottom chain (B1 keeps it as its only face, the chain runs nearly
+        // straight through B1).
         let xy = |x: f64, y: f64| DVec3::new(x, y, 0.0);
         let p = vec![
             xy(0.0, 0.0),   // 0 C00
