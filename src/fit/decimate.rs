@@ -653,6 +653,23 @@ mod tests {
         }
     }
 
+    /// Decimates one test mesh.
+    fn run(
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        face_groups: &[u32],
+        roles: &[VertexRole],
+        rules: &[GroupRule],
+    ) -> Decimated {
+        decimate(&DecimateInput {
+            positions,
+            triangles,
+            face_groups,
+            roles,
+            rules,
+        })
+    }
+
     fn euler(tris: &[[u32; 3]]) -> i64 {
         let mut e = std::collections::BTreeSet::new();
         let mut v = std::collections::BTreeSet::new();
@@ -684,13 +701,7 @@ mod tests {
             })
             .collect();
         let rules = [plane_rule()];
-        let out = decimate(&DecimateInput {
-            positions: &p,
-            triangles: &t,
-            face_groups: &g,
-            roles: &roles,
-            rules: &rules,
-        });
+        let out = run(&p, &t, &g, &roles, &rules);
         assert_eq!(out.vertices.len(), 4, "{out:?}");
         assert_eq!(out.triangles.len(), 2);
         assert_eq!(euler(&out.triangles), 1);
@@ -726,13 +737,7 @@ mod tests {
                 surface: SurfaceRef::Free,
                 max_edge_angle: std::f64::consts::PI,
             }];
-            decimate(&DecimateInput {
-                positions: &p,
-                triangles: &t,
-                face_groups: &g,
-                roles: &roles,
-                rules: &rules,
-            })
+            run(&p, &t, &g, &roles, &rules)
         };
         let strict = run(0.0);
         assert_eq!(strict.vertices.len(), p.len());
@@ -767,13 +772,7 @@ mod tests {
             })
             .collect();
         let rule = plane_rule();
-        let out = decimate(&DecimateInput {
-            positions: &p,
-            triangles: &t,
-            face_groups: &g,
-            roles: &roles,
-            rules: &[rule, rule],
-        });
+        let out = run(&p, &t, &g, &roles, &[rule, rule]);
         // No seam vertex survives but its ends, and every surviving vertex is on the x = 0.5
         // line or on the border: groups never leak across the seam.
         for &v in &out.vertices {
@@ -838,13 +837,7 @@ mod tests {
             surface: SurfaceRef::Free,
             max_edge_angle: std::f64::consts::PI,
         }];
-        let out = decimate(&DecimateInput {
-            positions: &p,
-            triangles: &t,
-            face_groups: &g,
-            roles: &roles,
-            rules: &rules,
-        });
+        let out = run(&p, &t, &g, &roles, &rules);
         assert!(!out.vertices.contains(&10), "S stays: {out:?}");
         let mut ear = [0, 1, 2];
         for t in &out.triangles {

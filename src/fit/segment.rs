@@ -169,11 +169,11 @@ enum FaceState {
 
 /// The growing edge of a region during flood fill: faces still to test, the region so far,
 /// and the faces that failed the test (each listed once).
-struct Front<'a> {
-    queue: &'a mut VecDeque<u32>,
-    region: &'a mut Vec<u32>,
-    rejected: &'a mut Vec<u32>,
-    rejected_mark: &'a mut BTreeMap<u32, ()>,
+struct Front {
+    queue: VecDeque<u32>,
+    region: Vec<u32>,
+    rejected: Vec<u32>,
+    rejected_mark: BTreeMap<u32, ()>,
 }
 
 struct Region {
@@ -412,27 +412,30 @@ impl<'a> Segmenter<'a> {
         let upgrade_limit = (4 * patch.len()).max(64);
         // Membership stamps: region = gen_r, rejected = gen_x.
         let in_region = self.next_generation();
-        let mut region = vec![seed];
         self.face_stamp[seed as usize] = in_region;
-        let mut rejected: Vec<u32> = Vec::new();
-        let mut rejected_mark: BTreeMap<u32, ()> = BTreeMap::new();
-        let mut queue: VecDeque<u32> = self.neighbours(seed).iter().copied().collect();
+        let mut front = Front {
+            queue: self.neighbours(seed).iter().copied().collect(),
+            region: vec![seed],
+            rejected: Vec::new(),
+            rejected_mark: BTreeMap::new(),
+        };
         let mut last_fit = patch.len();
         let mut refits = 0;
-        for _round in 0..64 {
-            let mut front = Front {
-                queue: &mut queue,
-                region: &mut region,
-                rejected: &mut rejected,
-                rejected_mark: &mut rejected_mark,
-            };
+        // Each round floods the queue with the current model, then tries to absorb the
+        // faces it rejected with a refit and queues them again; it ends when the rejected
+        // ring is empty or a flood adds nothing.
+        for round in 0..=64 {
+            let before = front.region.len();
             self.flood(&model.primitive, state, in_region, &mut front);
-            if rejected.is_empty() {
+            if round > 0 && front.region.len() == before {
+                break;
+            }
+            if front.rejected.is_empty() || round == 64 {
                 break;
             }
             // Try to absorb the rejected ring with a refit (maybe of a more general kind
             // while the region is young).
-            let kinds: Vec<PrimitiveKind> = if region.len() <= upgrade_limit {
+            let kinds: Vec<PrimitiveKind> = if front.region.len() <= upgrade_limit {
                 split_kinds
                     .iter()
                     .copied()
@@ -441,9 +444,8 @@ impl<'a> Segmenter<'a> {
             } else {
                 Vec::new()
             };
-            let mut candidates = region.clone();
-            candidates.extend_from_slice(&rejected);
-            let size_before = region.len();
+            let mut candidates = front.region.clone();
+            candidates.extend_from_slice(&front.rejected);
             let absorbed = self
                 .refine_faces(&candidates, &model.primitive)
                 .or_else(|| self.fit_faces(&candidates, &kinds));
@@ -452,36 +454,25 @@ impl<'a> Segmenter<'a> {
                 // ring after ring is following a freeform surface.
                 refits += 1;
                 if refits > self.opts.max_refits {
-                    return Err(region);
+                    return Err(front.region);
                 }
                 model = m;
-            } else if region.len() * 2 > last_fit * 3 {
+            } else if front.region.len() * 2 > last_fit * 3 {
                 // Cannot absorb the ring: sharpen the model on the region alone once it
                 // has grown, then re-test the ring.
-                last_fit = region.len();
-                match self.refine_faces(&region.clone(), &model.primitive) {
+                last_fit = front.region.len();
+                match self.refine_faces(&front.region.clone(), &model.primitive) {
                     Some(m) => model = m,
                     None => break,
                 }
             } else {
                 break;
             }
-            queue.extend(rejected.iter().copied());
-            rejected.clear();
-            rejected_mark.clear();
-            // Process the queue; if nothing new joins, stop.
-            let before = region.len();
-            let mut front = Front {
-                queue: &mut queue,
-                region: &mut region,
-                rejected: &mut rejected,
-                rejected_mark: &mut rejected_mark,
-            };
-            self.flood(&model.primitive, state, in_region, &mut front);
-            if region.len() == before && region.len() == size_before {
-                break;
-            }
+            let ring = std::mem::take(&mut front.rejected);
+            front.queue.extend(ring);
+            front.rejected_mark.clear();
         }
+        let region = front.region;
         // Final residuals over the region.
         let (pts, _) = self.points_and_normals(&region);
         model.residuals = model.primitive.residuals(&pts);
