@@ -34,6 +34,7 @@
 //! COMPOSITE_CURVE, ...: those faces are skipped).
 
 mod brep;
+mod conform;
 mod tessellate;
 pub mod text;
 
@@ -62,6 +63,10 @@ pub struct StepOptions {
     /// Longest time converting one face from STEP to truck, and then tessellating it, may
     /// take; a face over it is skipped.
     pub face_timeout: Duration,
+    /// Longest time tessellating all faces may take (checked between faces, so the read
+    /// ends at most about three `face_timeout`s later); over it the read fails naming how
+    /// far it got. With `timeout` this bounds the whole read even when many faces hang.
+    pub total_timeout: Duration,
 }
 
 impl Default for StepOptions {
@@ -72,6 +77,7 @@ impl Default for StepOptions {
             to_millimetres: true,
             timeout: Duration::from_secs(60),
             face_timeout: Duration::from_secs(10),
+            total_timeout: Duration::from_secs(300),
         }
     }
 }
