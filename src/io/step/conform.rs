@@ -277,7 +277,8 @@ pub(super) fn conforming_tessellation(
     }
     // The inside test is even-odd, so loop orientation does not matter past this point
     // (some files' loops run clockwise in truck's parameters; the caller orients faces).
-    triangulate(surface, &closed, tol, out).map_err(|e| {
+    let pool_xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
+    triangulate(surface, &closed, &pool_xyz, tol, out).map_err(|e| {
         format!(
             "{e} ({} loops: {}; periods {:?})",
             loops.len(),
@@ -515,6 +516,7 @@ fn scaled_segment_distance2(c: [f64; 2], p: [f64; 2], q: [f64; 2], s: [f64; 2]) 
 fn triangulate(
     surface: &Surface,
     loops: &[Vec<UvPoint>],
+    pool_xyz: &BTreeMap<u32, DVec3>,
     tol: f64,
     mut out: ConformingMesh,
 ) -> Result<ConformingMesh, String> {
@@ -577,6 +579,7 @@ fn triangulate(
     if cdt.num_vertices() != vertex_of.iter().filter(|v| v.is_some()).count() {
         return Err("the CDT split a boundary segment".into());
     }
+    let constraints = cdt.num_constraints();
     // Interior grid points, away from the boundary so no constraint edge is split.
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
@@ -636,6 +639,95 @@ fn triangulate(
                 vertex_of.resize(idx + 1, None);
             }
             vertex_of[idx] = Some(FaceVertex::New(out.new_points.len() as u32 - 1));
+        }
+    }
+    // Refine: a triangle whose middle (or the middle of an inner side) is more than `tol`
+    // from the surface gets a point at its centroid, until every triangle is within
+    // tolerance (the grid alone is not enough next to the boundary and on poles).
+    let xyz = |v: FaceVertex, alias: &BTreeMap<u32, FaceVertex>, out: &ConformingMesh| {
+        match v {
+            FaceVertex::New(k) => match alias.get(&k) {
+                Some(FaceVertex::Pool(i)) => pool_xyz.get(i).copied(),
+                _ => out.new_points.get(k as usize).copied(),
+            },
+            FaceVertex::Pool(i) => pool_xyz.get(&i).copied(),
+        }
+    };
+    for _round in 0..24 {
+        let mut add: Vec<[f64; 2]> = Vec::new();
+        for face in cdt.inner_faces() {
+            let vs = face.vertices();
+            let uv: [[f64; 2]; 3] = std::array::from_fn(|k| {
+                let p = vs[k].position();
+                [p.x, p.y]
+            });
+            let c = [
+                (uv[0][0] + uv[1][0] + uv[2][0]) / 3.0,
+                (uv[0][1] + uv[1][1] + uv[2][1]) / 3.0,
+            ];
+            if !inside(loops, c) {
+                continue;
+            }
+            let mut corners = [DVec3::ZERO; 3];
+            for k in 0..3 {
+                let Some(Some(v)) = vertex_of.get(vs[k].fix().index()).copied() else {
+                    return Err("a triangle uses a point the CDT made up".into());
+                };
+                let Some(p) = xyz(v, &alias, &out) else {
+                    return Err("a boundary vertex has no position".into());
+                };
+                corners[k] = p;
+            }
+            let off = |w: [f64; 3]| {
+                let u = w[0] * uv[0][0] + w[1] * uv[1][0] + w[2] * uv[2][0];
+                let v = w[0] * uv[0][1] + w[1] * uv[1][1] + w[2] * uv[2][1];
+                let flat = w[0] * corners[0] + w[1] * corners[1] + w[2] * corners[2];
+                p3(surface.subs(u, v)).distance(flat)
+            };
+            let third = 1.0 / 3.0;
+            let mut bad = off([third, third, third]) > tol;
+            if !bad {
+                for (k, e) in face.adjacent_edges().iter().enumerate() {
+                    if e.is_constraint_edge() {
+                        continue;
+                    }
+                    // adjacent_edges()[k] runs from vertex k to vertex k + 1.
+                    let mut w = [0.0; 3];
+                    w[k] = 0.5;
+                    w[(k + 1) % 3] = 0.5;
+                    if off(w) > tol {
+                        bad = true;
+                        break;
+                    }
+                }
+            }
+            if bad {
+                add.push(c);
+            }
+        }
+        if add.is_empty() {
+            break;
+        }
+        if cdt.num_vertices() + add.len() > MAX_GRID_POINTS {
+            return Err("refining the face to the tolerance needs too many points".into());
+        }
+        for c in add {
+            let before = cdt.num_vertices();
+            let h = cdt
+                .insert(SPoint2::new(spade_round(c[0]), spade_round(c[1])))
+                .map_err(|e| format!("the CDT refused a refinement point: {e:?}"))?;
+            if cdt.num_vertices() == before {
+                continue;
+            }
+            out.new_points.push(p3(surface.subs(c[0], c[1])));
+            let idx = h.index();
+            if vertex_of.len() <= idx {
+                vertex_of.resize(idx + 1, None);
+            }
+            vertex_of[idx] = Some(FaceVertex::New(out.new_points.len() as u32 - 1));
+        }
+        if cdt.num_constraints() != constraints {
+            return Err("refinement split a boundary segment".into());
         }
     }
     let mut area_scale = (hi[0] - lo[0]) * (hi[1] - lo[1]);
