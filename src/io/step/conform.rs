@@ -701,8 +701,24 @@ fn triangulate(
                     }
                 }
             }
-            if bad {
-                add.push(c);
+            // Never a point on or next to the boundary: spade would split a boundary
+            // segment (sliver triangles along the boundary have centroids almost on it).
+            let longest = (0..3)
+                .map(|k| {
+                    let (p, q) = (uv[k], uv[(k + 1) % 3]);
+                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
+                })
+                .fold(0.0, f64::max);
+            let area2 = ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+                - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]))
+                .abs();
+            if bad && area2 > 1e-6 * longest * longest {
+                let near = segments.iter().any(|&(p, q)| {
+                    scaled_segment_distance2(c, p, q, [1.0, 1.0]) < (0.05 * longest).powi(2)
+                });
+                if !near {
+                    add.push(c);
+                }
             }
         }
         if add.is_empty() {
