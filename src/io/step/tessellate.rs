@@ -727,7 +727,10 @@ pub(super) fn patch_kind(f: &FaceSurface) -> PatchKind {
 /// polylines (`segments`, undirected): each boundary side is a polyline segment, every
 /// segment is used (twice for a seam), no side is used more than twice or twice in one
 /// direction.
-fn follows_edges(triangles: &[[conform::FaceVertex; 3]], segments: &BTreeSet<(u32, u32)>) -> bool {
+pub(super) fn follows_edges(
+    triangles: &[[conform::FaceVertex; 3]],
+    segments: &BTreeSet<(u32, u32)>,
+) -> bool {
     use conform::FaceVertex;
     let key = |a: FaceVertex, b: FaceVertex| if a <= b { (a, b) } else { (b, a) };
     let mut uses: BTreeMap<(FaceVertex, FaceVertex), u32> = BTreeMap::new();
@@ -754,9 +757,9 @@ fn follows_edges(triangles: &[[conform::FaceVertex; 3]], segments: &BTreeSet<(u3
             }
         }
     }
-    segments.iter().all(|&(a, b)| {
-        uses.contains_key(&key(FaceVertex::Pool(a), FaceVertex::Pool(b)))
-    })
+    segments
+        .iter()
+        .all(|&(a, b)| uses.contains_key(&key(FaceVertex::Pool(a), FaceVertex::Pool(b))))
 }
 
 /// Index of the candidate nearest to `p` within `tol`, with its distance. `candidates` is
