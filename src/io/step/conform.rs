@@ -263,14 +263,14 @@ pub(super) fn conforming_tessellation(
                 w(a).total_cmp(&w(b))
             })
             .unwrap_or(0);
-        for k in 0..2 {
-            let Some(period) = periods[k] else { continue };
+        for (k, period) in periods.iter().enumerate() {
+            let Some(period) = *period else { continue };
             let reference = centre(&closed[widest], k);
-            for i in 0..closed.len() {
-                let c = centre(&closed[i], k);
+            for lp in closed.iter_mut() {
+                let c = centre(lp, k);
                 let d = nearest_rep(c, reference, Some(period)) - c;
                 if d != 0.0 {
-                    for p in &mut closed[i] {
+                    for p in lp.iter_mut() {
                         p.uv[k] += d;
                     }
                 }
@@ -761,7 +761,7 @@ fn triangulate(
         }
     }
     let mut area_scale = (hi[0] - lo[0]) * (hi[1] - lo[1]);
-    if !(area_scale > 0.0) {
+    if area_scale.is_nan() || area_scale <= 0.0 {
         area_scale = 1.0;
     }
     for face in cdt.inner_faces() {

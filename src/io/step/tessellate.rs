@@ -390,13 +390,10 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                                 None
                             }
                         });
-                        if !joins(&chain, prev)
-                            && prev != Some(u32::MAX)
-                            && chain.last() == prev.as_ref()
-                        {
-                            chain.reverse();
-                            reversed_in_loop += 1;
-                        } else if prev == Some(u32::MAX) {
+                        let turned_first = prev == Some(u32::MAX);
+                        let turned_later =
+                            !turned_first && !joins(&chain, prev) && chain.last() == prev.as_ref();
+                        if turned_first || turned_later {
                             chain.reverse();
                             reversed_in_loop += 1;
                         }
