@@ -64,6 +64,42 @@ fn project(surface: &Surface, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 
         .map(|(u, v)| [u, v])
 }
 
+/// Nearest-point search started from an 8 x 8 grid over one period (or the surface's
+/// range) in each parameter; the best result with its distance.
+fn project_from_grid(
+    surface: &Surface,
+    p: DVec3,
+    periods: [Option<f64>; 2],
+) -> Option<([f64; 2], f64)> {
+    let (ur, vr) = surface.try_range_tuple();
+    let span = |period: Option<f64>, range: Option<(f64, f64)>| match (period, range) {
+        (Some(t), _) => Some((0.0, t)),
+        (None, Some((a, b))) if a.is_finite() && b.is_finite() => Some((a, b)),
+        _ => None,
+    };
+    let (u0, u1) = span(periods[0], ur)?;
+    let (v0, v1) = span(periods[1], vr)?;
+    let pt = Point3::new(p.x, p.y, p.z);
+    let mut best: Option<([f64; 2], f64)> = None;
+    for i in 0..8 {
+        for j in 0..8 {
+            let hint = (
+                u0 + (u1 - u0) * (f64::from(i) + 0.5) / 8.0,
+                v0 + (v1 - v0) * (f64::from(j) + 0.5) / 8.0,
+            );
+            let found =
+                SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, hint, 100);
+            if let Some((u, v)) = found {
+                let d = p3(surface.subs(u, v)).distance(p);
+                if best.is_none_or(|b| d < b.1) {
+                    best = Some(([u, v], d));
+                }
+            }
+        }
+    }
+    best
+}
+
 /// The representative of `x` (modulo `period`) nearest to `reference`.
 fn nearest_rep(x: f64, reference: f64, period: Option<f64>) -> f64 {
     match period {
@@ -101,7 +137,16 @@ pub(super) fn conforming_tessellation(
             let Some(mut uv) = project(surface, p, prev) else {
                 return Err("a boundary point could not be projected onto the surface".into());
             };
-            let off = p3(surface.subs(uv[0], uv[1])).distance(p);
+            let mut off = p3(surface.subs(uv[0], uv[1])).distance(p);
+            if off > 10.0 * tol {
+                // The search can stop in a local minimum (tori): restart it from a grid.
+                if let Some((best, d)) = project_from_grid(surface, p, periods) {
+                    if d < off {
+                        uv = best;
+                        off = d;
+                    }
+                }
+            }
             if off > 10.0 * tol {
                 return Err(format!(
                     "the surface (as truck converts it) passes {off:.3e} from the face's \
