@@ -964,7 +964,7 @@ impl ErrorMeter<'_> {
 /// Adds to a mesh error the CAD faces (groups) whose control faces break the control mesh's
 /// topology (a side used twice in one direction, or by more than two faces), so a failing
 /// fit names the B-rep faces to look at instead of only vertex numbers.
-fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
+pub(crate) fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
     let Error::Mesh(msg) = e else { return e };
     let mut uses: std::collections::BTreeMap<(u32, u32), Vec<(usize, bool)>> = Default::default();
     for f in 0..control.face_count() {
@@ -1275,8 +1275,11 @@ pub fn fit_model(
         let (mut lo, mut hi) = (0u8, opts.max_coarser_bits);
         while lo < hi {
             let coarser = (lo + hi).div_ceil(2);
-            let decoded = reconstruct(&control, level, coarser)?;
-            let m = meter.measure(&decoded, level)?;
+            let decoded = reconstruct(&control, level, coarser)
+                .map_err(|e| with_faces_involved(e, &control))?;
+            let m = meter
+                .measure(&decoded, level)
+                .map_err(|e| with_faces_involved(e, &decoded))?;
             if m.error.max_beyond_chord <= tol && m.error.max <= max_cap {
                 lo = coarser;
                 coarser_bits = coarser;
