@@ -1166,7 +1166,8 @@ pub fn fit_model(
         );
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
-        fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)?;
+        fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)
+            .map_err(|e| with_faces_involved(e, &built.control))?;
         let t_fit = t.elapsed().as_secs_f64();
         // 6. Error of the decoded surface.
         t = Instant::now();
