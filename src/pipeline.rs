@@ -164,7 +164,8 @@ pub fn encode_fitted(
     let bytes = codec::encode(
         &outcome.control,
         &encode_opts(outcome.default_level, outcome.coarser_bits),
-    )?;
+    )
+    .map_err(|e| crate::fit::encoder::with_faces_involved(e, &outcome.control))?;
     Ok((bytes, outcome.report))
 }
 

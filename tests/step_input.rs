@@ -127,13 +127,16 @@ fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
 #[test]
 fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
     let Some(corpus) = corpus_dir() else { return };
-    // Planes + cones; planes + cylinders; a solid with voids (inward shells). Files whose
-    // fit does not meet the tolerance yet (an encoder limit, also on their mesh twins) are
-    // in the ignored sweep instead.
+    // Planes + cones; planes + cylinders; a solid with voids (inward shells); a sphere
+    // corner between cylinder fillets (periodic faces cut along a seam, a pole); an
+    // 18-solid assembly of planes and cylinders. Files whose fit does not meet the
+    // tolerance yet (an encoder limit, also on their mesh twins) are in the ignored sweep.
     for file in [
         "four_cone.step",
         "bug3883_xr2-ct-214_plate.stp",
         "tr8_bv1_ec.stp",
+        "block_fillet3.step",
+        "trj2_as1-ec-214.stp",
     ] {
         check_encodes_within_tolerance(&corpus, file);
     }
@@ -185,6 +188,60 @@ fn model_carries_brep_knowledge() {
         assert!(model.mesh.corners.contains(&e.vertices[0]));
         assert!(model.mesh.corners.contains(e.vertices.last().unwrap()));
         assert_eq!(e.groups.len(), 2);
+    }
+}
+
+/// Our own face tessellation: every face of a model with spheres, cylinders and planes (a
+/// sphere corner blending three cylinder fillets) and of one with cones is tessellated on
+/// its edge polylines, so the welded model is closed with no face left out, each B-rep edge
+/// is one chain shared by its two faces, and the triangles stay within the chordal
+/// tolerance of the exact surfaces (measured against the corpus' fine tessellation, whose
+/// vertices lie on them).
+#[test]
+fn faces_are_tessellated_on_their_edges() {
+    let Some(corpus) = corpus_dir() else { return };
+    for (file, stem) in [
+        ("block_fillet3.step", "block_fillet3"),
+        ("four_cone.step", "four_cone"),
+    ] {
+        let model = read_step(&corpus.join("step").join(file), &StepOptions::default()).unwrap();
+        assert!(model.skipped.is_empty(), "{file}: {:?}", model.skipped);
+        assert!(
+            model
+                .notes
+                .iter()
+                .any(|n| n.contains("on their edge polylines; 0 by truck")),
+            "{file}: {:?}",
+            model.notes
+        );
+        assert!(is_closed(&model), "{file}: not closed");
+        // Each B-rep edge's chain: consecutive vertices are mesh edges of its faces only.
+        let mut sides: std::collections::BTreeMap<(u32, u32), Vec<u32>> = Default::default();
+        for (f, &g) in model.mesh.face_groups.iter().enumerate() {
+            let t = model.mesh.face(f);
+            for k in 0..t.len() {
+                sides
+                    .entry(scode::mesh::edge_key(t[k], t[(k + 1) % t.len()]))
+                    .or_default()
+                    .push(g);
+            }
+        }
+        for e in &model.edges {
+            for w in e.vertices.windows(2) {
+                let mut groups = sides[&scode::mesh::edge_key(w[0], w[1])].clone();
+                groups.sort_unstable();
+                groups.dedup();
+                assert_eq!(groups, e.groups, "{file}: edge #{}", e.step_id);
+            }
+        }
+        let (fine, _) = scode::io::read_mesh(&fine_tessellation(&corpus, stem).unwrap()).unwrap();
+        let c = compare(&model.mesh, &fine);
+        assert!(
+            c.max_vertices <= 3.0 * model.chordal_tolerance,
+            "{file}: fine tessellation is {:.3e} from ours (chordal tolerance {:.3e})",
+            c.max_vertices,
+            model.chordal_tolerance
+        );
     }
 }
 

@@ -229,6 +229,50 @@ fn classify_group(
     kind.unwrap_or(PatchKind::Closed)
 }
 
+/// The input's own cylinder or cone for a group (a STEP face's exact axis and apex), when
+/// the group's vertices lie on it within a quarter of the tolerance; `None` otherwise (and
+/// for planes, whose exact description adds nothing to the plane fitted to the vertices).
+/// Taking it instead of a fitted axis keeps a fit error out of the patch's shape.
+fn exact_surface_kind(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    group: u32,
+    tol: f64,
+) -> Option<PatchKind> {
+    let kind = mesh.groups.get(group as usize)?.patch;
+    let PatchKind::Boundary(surface) = kind else {
+        return None;
+    };
+    let (points, _) = group_points_normals(mesh, tris, group);
+    if points.len() < 3 {
+        return None;
+    }
+    let radial = |axis: &crate::mesh::Axis, p: DVec3| {
+        let d = p - axis.origin;
+        let h = d.dot(axis.direction);
+        (h, (d - h * axis.direction).length())
+    };
+    let fits = match surface {
+        BoundarySurface::Plane => false,
+        BoundarySurface::Cylinder { axis } => {
+            let r: Vec<f64> = points.iter().map(|&p| radial(&axis, p).1).collect();
+            let mean = r.iter().sum::<f64>() / r.len() as f64;
+            r.iter().all(|x| (x - mean).abs() <= 0.25 * tol)
+        }
+        BoundarySurface::Cone { axis } => {
+            let hr: Vec<(f64, f64)> = points.iter().map(|&p| radial(&axis, p)).collect();
+            let (num, den) = hr
+                .iter()
+                .fold((0.0, 0.0), |a, &(h, r)| (a.0 + r * h, a.1 + h * h));
+            let slope = if den > 0.0 { num / den } else { return None };
+            let scale = 1.0 / (1.0 + slope * slope).sqrt();
+            hr.iter()
+                .all(|&(h, r)| ((r - slope * h) * scale).abs() <= 0.25 * tol)
+        }
+    };
+    fits.then_some(kind)
+}
+
 /// The surface a group's collapses must keep facing: the analytic one for boundary patches
 /// (a plane's normal fitted to the group's vertices), none for closed patches.
 fn collapse_surface(
@@ -917,6 +961,52 @@ impl ErrorMeter<'_> {
     }
 }
 
+/// Adds to a mesh error the CAD faces (groups) whose control faces break the control mesh's
+/// topology (a side used twice in one direction, or by more than two faces), so a failing
+/// fit names the B-rep faces to look at instead of only vertex numbers.
+pub(crate) fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
+    let Error::Mesh(msg) = e else { return e };
+    let mut uses: std::collections::BTreeMap<(u32, u32), Vec<(usize, bool)>> = Default::default();
+    for f in 0..control.face_count() {
+        let face = control.face(f);
+        for k in 0..face.len() {
+            let (a, b) = (face[k], face[(k + 1) % face.len()]);
+            uses.entry(crate::mesh::edge_key(a, b))
+                .or_default()
+                .push((f, a < b));
+        }
+    }
+    let mut groups = std::collections::BTreeSet::new();
+    for faces in uses.values() {
+        let forward = faces.iter().filter(|u| u.1).count();
+        if faces.len() > 2 || forward > 1 || faces.len() - forward > 1 {
+            for &(f, _) in faces {
+                if let Some(&g) = control.face_groups.get(f) {
+                    groups.insert(g);
+                }
+            }
+        }
+    }
+    if groups.is_empty() {
+        return Error::Mesh(msg);
+    }
+    let names: Vec<String> = groups
+        .iter()
+        .take(8)
+        .map(|&g| {
+            control
+                .groups
+                .get(g as usize)
+                .map_or_else(|| format!("group {g}"), |gr| format!("'{}'", gr.name))
+        })
+        .collect();
+    Error::Mesh(format!(
+        "{msg} (CAD faces involved: {}{})",
+        names.join(", "),
+        if groups.len() > 8 { ", ..." } else { "" }
+    ))
+}
+
 /// Fits a control mesh to `input` (a triangle or polygon mesh; polygons are fan-split).
 /// `hints[g]` is what the input says group g's surface is (or `Unknown`). `reconstruct`
 /// must return the control mesh exactly as the decoder will see it (quantised `coarser`
@@ -981,7 +1071,8 @@ pub fn fit_model(
             let kind = if segmented {
                 mesh.groups[g as usize].patch
             } else {
-                classify_group(&mesh, &tris, g, hints[g as usize], tol)
+                exact_surface_kind(&mesh, &tris, g, tol)
+                    .unwrap_or_else(|| classify_group(&mesh, &tris, g, hints[g as usize], tol))
             };
             GroupPlan {
                 kind,
@@ -1075,13 +1166,17 @@ pub fn fit_model(
         );
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
-        fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)?;
+        fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)
+            .map_err(|e| with_faces_involved(e, &built.control))?;
         let t_fit = t.elapsed().as_secs_f64();
         // 6. Error of the decoded surface.
         t = Instant::now();
         let level = levels_tried.unwrap_or(4);
-        let decoded = reconstruct(&built.control, level, 0)?;
-        let measured = meter.measure(&decoded, level)?;
+        let decoded = reconstruct(&built.control, level, 0)
+            .map_err(|e| with_faces_involved(e, &built.control))?;
+        let measured = meter
+            .measure(&decoded, level)
+            .map_err(|e| with_faces_involved(e, &decoded))?;
         let err = measured.error;
         let worst = err.max_beyond_chord;
         report.timings.push(("topology", t_top));
@@ -1188,8 +1283,11 @@ pub fn fit_model(
         let (mut lo, mut hi) = (0u8, opts.max_coarser_bits);
         while lo < hi {
             let coarser = (lo + hi).div_ceil(2);
-            let decoded = reconstruct(&control, level, coarser)?;
-            let m = meter.measure(&decoded, level)?;
+            let decoded = reconstruct(&control, level, coarser)
+                .map_err(|e| with_faces_involved(e, &control))?;
+            let m = meter
+                .measure(&decoded, level)
+                .map_err(|e| with_faces_involved(e, &decoded))?;
             if m.error.max_beyond_chord <= tol && m.error.max <= max_cap {
                 lo = coarser;
                 coarser_bits = coarser;

@@ -18,11 +18,18 @@
 //!   id and the entity; the rest of the model is still read.
 //! * **Hangs and panics**: parsing runs in a watchdog thread ([`StepOptions::timeout`]), and
 //!   each face is tessellated in its own watchdog thread ([`StepOptions::face_timeout`]),
-//!   both under `catch_unwind`. A thread that does not finish cannot be stopped; it is
-//!   abandoned (it keeps a core busy until the process ends), which the result says.
-//! * **Welding**: every face is tessellated alone, with the same edge polylines as its
-//!   neighbours; its boundary vertices are snapped to those polyline points, which live
-//!   once in the shared pool, so neighbouring faces share their boundary vertices exactly.
+//!   both under `catch_unwind`; all faces together get [`StepOptions::total_timeout`], so a
+//!   read always ends. A thread that does not finish cannot be stopped; it is abandoned (it
+//!   keeps a core busy until the process ends), which the result says.
+//! * **Welding by construction**: each B-rep edge is polylined once (truck's curve
+//!   polylining, trimmed to the edge's vertices) into a shared vertex pool, where boundary
+//!   points at one position are one vertex. Each face is then triangulated by our own
+//!   conforming tessellator (`conform`: spade CDT in the surface's parameters with the
+//!   edge polylines as constraints, periodic faces cut along a seam whose copies share
+//!   vertices, refined to the chordal tolerance), so neighbouring faces use the same
+//!   vertices along their edge and the model is watertight. A face it cannot do falls back
+//!   to truck's tessellation snapped to the polylines; if that does not follow the face's
+//!   edges either, the face is skipped and named rather than cracking the model.
 //! * **Units**: truck ignores them; positions are converted to millimetres from the file's
 //!   LENGTH_UNIT (as Open CASCADE and gmsh do), see [`StepModel::millimetres_per_unit`].
 //!
@@ -34,6 +41,7 @@
 //! COMPOSITE_CURVE, ...: those faces are skipped).
 
 mod brep;
+mod conform;
 mod tessellate;
 pub mod text;
 
@@ -62,6 +70,10 @@ pub struct StepOptions {
     /// Longest time converting one face from STEP to truck, and then tessellating it, may
     /// take; a face over it is skipped.
     pub face_timeout: Duration,
+    /// Longest time tessellating all faces may take (checked between faces, so the read
+    /// ends at most about three `face_timeout`s later); over it the read fails naming how
+    /// far it got. With `timeout` this bounds the whole read even when many faces hang.
+    pub total_timeout: Duration,
 }
 
 impl Default for StepOptions {
@@ -72,6 +84,7 @@ impl Default for StepOptions {
             to_millimetres: true,
             timeout: Duration::from_secs(60),
             face_timeout: Duration::from_secs(10),
+            total_timeout: Duration::from_secs(300),
         }
     }
 }

@@ -6,17 +6,18 @@
 //! that uses an edge fixes its polyline in the pool and every later face snaps its boundary
 //! vertices to those pool points: shared boundaries are shared vertices.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 use glam::DVec3;
 use truck_meshalgo::prelude::{PolygonMesh, RobustMeshableShape};
-use truck_stepio::r#in::alias::{BoundedCurve, ParametricCurve, Point3, PolylineCurve};
+use truck_stepio::r#in::alias::{BoundedCurve, Curve3D, ParametricCurve, Point3, PolylineCurve};
 use truck_topology::compress::{
     CompressedEdge, CompressedEdgeIndex, CompressedFace, CompressedShell,
 };
 
 use super::brep::{Parsed, ParsedBody};
+use super::conform;
 use super::{
     run_with_timeout, Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions, Watched,
 };
@@ -123,16 +124,51 @@ fn single_face_shell(
     )
 }
 
-/// Pool of welded vertices with a lookup of edge polyline points for snapping.
+/// Pool of welded vertices. Boundary points (B-rep vertices and edge polyline points) are
+/// added with [`Pool::push_welded`], which returns an existing point of the same body within
+/// the weld distance: files that repeat a VERTEX_POINT at one position, or edges whose
+/// polylines touch, then share one vertex instead of two at the same place (which a face's
+/// triangulation could not tell apart).
 #[derive(Default)]
 struct Pool {
     positions: Vec<DVec3>,
+    /// (body, grid cell) -> boundary points in it; cell size = weld distance.
+    cells: BTreeMap<(usize, [i64; 3]), Vec<u32>>,
 }
 
 impl Pool {
     fn push(&mut self, p: DVec3) -> u32 {
         self.positions.push(p);
         (self.positions.len() - 1) as u32
+    }
+
+    fn cell(p: DVec3, size: f64) -> [i64; 3] {
+        let c = (p / size).floor();
+        [c.x as i64, c.y as i64, c.z as i64]
+    }
+
+    fn push_welded(&mut self, body: usize, p: DVec3, weld: f64) -> u32 {
+        let c = Self::cell(p, weld);
+        let mut best: Option<(u32, f64)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let key = (body, [c[0] + dx, c[1] + dy, c[2] + dz]);
+                    for &id in self.cells.get(&key).into_iter().flatten() {
+                        let d = self.positions[id as usize].distance(p);
+                        if d <= weld && best.is_none_or(|b| d < b.1) {
+                            best = Some((id, d));
+                        }
+                    }
+                }
+            }
+        }
+        if let Some((id, _)) = best {
+            return id;
+        }
+        let id = self.push(p);
+        self.cells.entry((body, c)).or_default().push(id);
+        id
     }
 }
 
@@ -168,13 +204,42 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     let mut unsnapped = 0usize;
     let mut overlapping = 0usize;
     let snap_tol = 0.05 * chord;
+    // Polyline points closer than this to the previous one are the same point.
+    let merge_tol = 1e-9 * diag.max(chord);
+    // Boundary points closer than this are one vertex (model coordinates, file units).
+    let weld_tol = 1e-3 * chord;
+    // Faces tessellated by `conform` (boundary = edge polylines by construction), and the
+    // faces that fell back to truck's tessellation with the reason.
+    let mut conforming = 0usize;
+    let mut reversed_in_loop = 0usize;
+    // Edges whose curve does not pass through their vertices; faces using them are skipped.
+    let mut bad_edges: BTreeSet<(usize, usize)> = BTreeSet::new();
+    let mut trimmed_edges = 0usize;
+    let mut fallback: Vec<String> = Vec::new();
     // Group names are stored in the file: the body prefix only when there are several.
     let single_body = parsed.bodies.len() == 1;
+    let started = std::time::Instant::now();
+    let total_faces: usize = parsed.bodies.iter().map(|b| b.faces.len()).sum();
+    let mut faces_done = 0usize;
     for (bi, body) in parsed.bodies.iter().enumerate() {
         let first_group = mesh.groups.len() as u32;
         let place = body.placement;
+        let unplace = place.inverse();
         for pf in &body.faces {
-            let (shell, edges_global, vertices_global) = single_face_shell(body, &pf.face);
+            if started.elapsed() > opts.total_timeout {
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "tessellating the faces did not finish within {:.0} s ({faces_done} of \
+                         {total_faces} faces done; next: face #{} of {}); giving up",
+                        opts.total_timeout.as_secs_f64(),
+                        pf.face_id,
+                        body.name
+                    ),
+                ));
+            }
+            faces_done += 1;
+            let (shell, edges_global, _) = single_face_shell(body, &pf.face);
             let face_name = format!("{} #{}", pf.info.entity, pf.info.surface_id);
             let skip = |reason: String| SkippedFace {
                 face_id: pf.face_id,
@@ -182,75 +247,282 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                 entity: face_name.clone(),
                 reason,
             };
-            let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
-                shell.robust_triangulation(chord)
-            });
-            let meshed: MeshedShell = match watched {
-                Watched::Done(m) => m,
-                Watched::Panicked(msg) => {
-                    skipped.push(skip(format!("the tessellator (truck) panicked: {msg}")));
-                    continue;
-                }
-                Watched::TimedOut => {
-                    skipped.push(skip(format!(
-                        "the tessellation did not finish within {:.0} s (abandoned)",
-                        opts.face_timeout.as_secs_f64()
-                    )));
-                    continue;
-                }
-            };
-            let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
-                skipped.push(skip(
-                    "the tessellator (truck) could not triangulate the face".into(),
-                ));
-                continue;
-            };
-            // Pool ids of this face's edge polylines (first use fixes them).
-            let mut candidates: Vec<(DVec3, u32)> = Vec::new();
-            for (local, &ge) in edges_global.iter().enumerate() {
-                let key = (bi, ge);
-                if let std::collections::btree_map::Entry::Vacant(slot) = edge_pool.entry(key) {
-                    let pts: &Vec<Point3> = &meshed.edges[local].curve;
-                    let (va, vb) = body.edges[ge].vertices;
-                    let mut ids = Vec::with_capacity(pts.len());
-                    for (k, p) in pts.iter().enumerate() {
-                        let id = if k == 0 || k + 1 == pts.len() {
-                            let v = if k == 0 { va } else { vb };
-                            *vertex_pool.entry((bi, v)).or_insert_with(|| {
-                                pool.push(place.transform_point3(dv(&body.vertices[v])))
-                            })
-                        } else {
-                            pool.push(place.transform_point3(dv(p)))
-                        };
-                        ids.push(id);
+            // a. Edge polylines (truck's polylining of the edge curve): the first face that
+            // uses an edge fixes its polyline in the pool; later faces reuse those points.
+            let need: Vec<(usize, Curve3D)> = edges_global
+                .iter()
+                .filter(|&&ge| !edge_pool.contains_key(&(bi, ge)))
+                .map(|&ge| (ge, body.edges[ge].curve.clone()))
+                .collect();
+            if !need.is_empty() {
+                let watched = run_with_timeout("scode-step-edges", opts.face_timeout, move || {
+                    need.into_iter()
+                        .map(|(ge, c)| {
+                            let range = c.range_tuple();
+                            (ge, PolylineCurve::from_curve(&c, range, chord).0)
+                        })
+                        .collect::<Vec<(usize, Vec<Point3>)>>()
+                });
+                let polylines = match watched {
+                    Watched::Done(p) => p,
+                    Watched::Panicked(msg) => {
+                        skipped.push(skip(format!(
+                            "polylining its edges (truck) panicked: {msg}"
+                        )));
+                        continue;
                     }
-                    slot.insert(ids);
-                }
-                for &id in &edge_pool[&key] {
-                    candidates.push((pool.positions[id as usize], id));
+                    Watched::TimedOut => {
+                        skipped.push(skip(format!(
+                            "polylining its edges did not finish within {:.0} s (abandoned)",
+                            opts.face_timeout.as_secs_f64()
+                        )));
+                        continue;
+                    }
+                };
+                for (ge, mut pts) in polylines {
+                    let (va, vb) = body.edges[ge].vertices;
+                    // The polyline runs from the edge's start vertex to its end; a curve
+                    // parametrised the other way is turned round.
+                    if let (Some(f), Some(l)) = (pts.first(), pts.last()) {
+                        let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
+                        let (f, l) = (dv(f), dv(l));
+                        if f.distance(b) + l.distance(a) < f.distance(a) + l.distance(b) {
+                            pts.reverse();
+                        }
+                    }
+                    // truck sometimes trims an edge's curve to the wrong range (the curve
+                    // runs past a vertex or stops short of it): keep the stretch between
+                    // the points nearest to the two vertices, and refuse an edge whose
+                    // curve misses a vertex.
+                    if va != vb && pts.len() > 2 {
+                        let nearest_to = |q: DVec3| {
+                            let mut best = (0usize, f64::INFINITY);
+                            for (i, p) in pts.iter().enumerate() {
+                                let d = dv(p).distance(q);
+                                if d < best.1 {
+                                    best = (i, d);
+                                }
+                            }
+                            best
+                        };
+                        let (ia, da) = nearest_to(dv(&body.vertices[va]));
+                        let (ib, db) = nearest_to(dv(&body.vertices[vb]));
+                        if da.max(db) > 10.0 * chord + 1e-6 * diag {
+                            bad_edges.insert((bi, ge));
+                        } else if (ia, ib) != (0, pts.len() - 1) {
+                            trimmed_edges += 1;
+                            pts = if ia <= ib {
+                                pts[ia..=ib].to_vec()
+                            } else {
+                                pts[ib..=ia].iter().rev().copied().collect()
+                            };
+                        }
+                    }
+                    let ends = [va, vb].map(|v| {
+                        *vertex_pool.entry((bi, v)).or_insert_with(|| {
+                            pool.push_welded(
+                                bi,
+                                place.transform_point3(dv(&body.vertices[v])),
+                                weld_tol,
+                            )
+                        })
+                    });
+                    let mut ids = vec![ends[0]];
+                    let mut last = dv(&body.vertices[va]);
+                    let end = dv(&body.vertices[vb]);
+                    let n = pts.len();
+                    for p in pts.iter().take(n.saturating_sub(1)).skip(1) {
+                        let p = dv(p);
+                        // Degenerate edges (a pole) and doubled points add no vertex.
+                        if p.distance(last) <= merge_tol || p.distance(end) <= merge_tol {
+                            continue;
+                        }
+                        ids.push(pool.push_welded(bi, place.transform_point3(p), weld_tol));
+                        last = p;
+                    }
+                    ids.push(ends[1]);
+                    ids.dedup();
+                    edge_pool.insert((bi, ge), ids);
                 }
             }
-            let _ = &vertices_global;
-            candidates.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.1.cmp(&b.1)));
-            candidates.dedup_by_key(|c| c.1);
-            // Map the face mesh's vertices: snap to edge points, else new pool vertices.
-            let positions = poly.positions();
-            let boundary = mesh_boundary_vertices(poly);
-            let mut map = Vec::with_capacity(positions.len());
-            for (i, p) in positions.iter().enumerate() {
-                let p = place.transform_point3(dv(p));
-                let hit = nearest(&candidates, p, snap_tol);
-                match hit {
-                    Some((id, d)) => {
-                        snap_max = snap_max.max(d);
-                        map.push(id);
-                    }
-                    None => {
-                        if boundary[i] {
-                            unsnapped += 1;
+            if let Some(&(_, ge)) = edges_global
+                .iter()
+                .map(|&ge| (bi, ge))
+                .collect::<Vec<_>>()
+                .iter()
+                .find(|k| bad_edges.contains(k))
+            {
+                skipped.push(SkippedFace {
+                    face_id: pf.face_id,
+                    body: body.name.clone(),
+                    entity: format!("EDGE_CURVE #{}", body.edge_ids[ge]),
+                    reason: "the edge's curve (as truck converts it) does not pass through \
+                             its vertices"
+                        .into(),
+                });
+                continue;
+            }
+            // b. The face's loops over pool vertices, in body coordinates.
+            let loops: Vec<Vec<(u32, DVec3)>> = pf
+                .face
+                .boundaries
+                .iter()
+                .map(|wire| {
+                    let mut ids: Vec<u32> = Vec::new();
+                    let n = wire.len();
+                    for (k, ei) in wire.iter().enumerate() {
+                        let mut chain = edge_pool[&(bi, ei.index)].clone();
+                        if !ei.orientation {
+                            chain.reverse();
                         }
-                        map.push(pool.push(p));
+                        // An edge whose orientation in the loop is wrong (it does not start
+                        // where the previous one ended, but ends there) is turned round.
+                        let joins = |c: &[u32], prev: Option<u32>| prev.is_none_or(|p| c[0] == p);
+                        let prev = ids.last().copied().or_else(|| {
+                            // The first edge: check it against the next one.
+                            let next = &edge_pool[&(bi, wire[(k + 1) % n].index)];
+                            let c = &chain;
+                            let last = *c.last().unwrap_or(&u32::MAX);
+                            let (n0, n1) = (next[0], *next.last().unwrap_or(&u32::MAX));
+                            if n > 1 && last != n0 && last != n1 && (c[0] == n0 || c[0] == n1) {
+                                Some(u32::MAX)
+                            } else {
+                                None
+                            }
+                        });
+                        let turned_first = prev == Some(u32::MAX);
+                        let turned_later =
+                            !turned_first && !joins(&chain, prev) && chain.last() == prev.as_ref();
+                        if turned_first || turned_later {
+                            chain.reverse();
+                            reversed_in_loop += 1;
+                        }
+                        // The joint point is the previous edge's end.
+                        if !ids.is_empty() {
+                            ids.pop();
+                        }
+                        ids.extend(chain);
                     }
+                    if ids.len() > 1 && ids.first() == ids.last() {
+                        ids.pop();
+                    }
+                    ids.dedup();
+                    while ids.len() > 1 && ids.first() == ids.last() {
+                        ids.pop();
+                    }
+                    ids.iter()
+                        .map(|&id| (id, unplace.transform_point3(pool.positions[id as usize])))
+                        .collect()
+                })
+                .collect();
+            let mut segments: BTreeSet<(u32, u32)> = BTreeSet::new();
+            for &ge in &edges_global {
+                for w in edge_pool[&(bi, ge)].windows(2).filter(|w| w[0] != w[1]) {
+                    segments.insert(crate::mesh::edge_key(w[0], w[1]));
+                }
+            }
+            // c. Our conforming tessellation; truck's own when it cannot be done.
+            let surface = pf.face.surface.clone();
+            let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
+                conform::conforming_tessellation(&surface, &loops, chord)
+            });
+            let mut face_tris: Vec<[u32; 3]> = Vec::new();
+            let why_not = match watched {
+                Watched::Done(Ok(cm)) => {
+                    if follows_edges(&cm.triangles, &segments) {
+                        let ids: Vec<u32> = cm
+                            .new_points
+                            .iter()
+                            .map(|&p| pool.push(place.transform_point3(p)))
+                            .collect();
+                        let id = |v: conform::FaceVertex| match v {
+                            conform::FaceVertex::Pool(i) => i,
+                            conform::FaceVertex::New(k) => ids[k as usize],
+                        };
+                        face_tris = cm.triangles.iter().map(|t| t.map(id)).collect();
+                        conforming += 1;
+                        None
+                    } else {
+                        Some("its triangles do not follow its edge polylines".to_string())
+                    }
+                }
+                Watched::Done(Err(msg)) => Some(msg),
+                Watched::Panicked(msg) => Some(format!("panicked: {msg}")),
+                Watched::TimedOut => Some(format!(
+                    "did not finish within {:.0} s",
+                    opts.face_timeout.as_secs_f64()
+                )),
+            };
+            if let Some(why) = why_not {
+                fallback.push(format!("face #{} ({face_name}): {why}", pf.face_id));
+                let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
+                    shell.robust_triangulation(chord)
+                });
+                let meshed: MeshedShell = match watched {
+                    Watched::Done(m) => m,
+                    Watched::Panicked(msg) => {
+                        skipped.push(skip(format!("the tessellator (truck) panicked: {msg}")));
+                        continue;
+                    }
+                    Watched::TimedOut => {
+                        skipped.push(skip(format!(
+                            "the tessellation did not finish within {:.0} s (abandoned)",
+                            opts.face_timeout.as_secs_f64()
+                        )));
+                        continue;
+                    }
+                };
+                let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
+                    skipped.push(skip(
+                        "the tessellator (truck) could not triangulate the face".into(),
+                    ));
+                    continue;
+                };
+                let mut candidates: Vec<(DVec3, u32)> = Vec::new();
+                for &ge in &edges_global {
+                    for &id in &edge_pool[&(bi, ge)] {
+                        candidates.push((pool.positions[id as usize], id));
+                    }
+                }
+                candidates.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.1.cmp(&b.1)));
+                candidates.dedup_by_key(|c| c.1);
+                // Map the face mesh's vertices: snap to edge points, else new pool vertices.
+                let positions = poly.positions();
+                let boundary = mesh_boundary_vertices(poly);
+                let mut map = Vec::with_capacity(positions.len());
+                for (i, p) in positions.iter().enumerate() {
+                    let p = place.transform_point3(dv(p));
+                    match nearest(&candidates, p, snap_tol) {
+                        Some((id, d)) => {
+                            snap_max = snap_max.max(d);
+                            map.push(id);
+                        }
+                        None => {
+                            if boundary[i] {
+                                unsnapped += 1;
+                            }
+                            map.push(pool.push(p));
+                        }
+                    }
+                }
+                face_tris = poly
+                    .faces()
+                    .triangle_iter()
+                    .map(|tri| [map[tri[0].pos], map[tri[1].pos], map[tri[2].pos]])
+                    .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+                    .collect();
+                // A face whose triangles leave its edges would crack or fold the welded
+                // model: leave it out (named) so the rest is a clean surface.
+                let as_pool: Vec<[conform::FaceVertex; 3]> = face_tris
+                    .iter()
+                    .map(|t| t.map(conform::FaceVertex::Pool))
+                    .collect();
+                if !follows_edges(&as_pool, &segments) {
+                    skipped.push(skip(format!(
+                        "neither our tessellation ({why}) nor truck's follows the face's \
+                         edges"
+                    )));
+                    continue;
                 }
             }
             let group = mesh.push_group(
@@ -267,8 +539,8 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             // and trimmed faces, or welding folded a sliver), is dropped and counted.
             let mut directed: std::collections::BTreeSet<(u32, u32)> = Default::default();
             let mut uses: BTreeMap<(u32, u32), u8> = BTreeMap::new();
-            for tri in poly.faces().triangle_iter() {
-                let mut t = [map[tri[0].pos], map[tri[1].pos], map[tri[2].pos]];
+            for &tri in &face_tris {
+                let mut t = tri;
                 if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
                     continue;
                 }
@@ -370,6 +642,23 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     for (group, face) in mesh.groups.iter_mut().zip(&faces_out) {
         group.patch = patch_kind(face);
     }
+    notes.push(format!(
+        "{conforming} faces tessellated on their edge polylines; {} by truck's tessellator",
+        fallback.len()
+    ));
+    if trimmed_edges > 0 {
+        notes.push(format!(
+            "{trimmed_edges} edge polylines trimmed to their vertices (truck's curve ran past them)"
+        ));
+    }
+    if reversed_in_loop > 0 {
+        notes.push(format!(
+            "{reversed_in_loop} edge uses turned round to chain their loops"
+        ));
+    }
+    for f in fallback.iter().take(20) {
+        notes.push(format!("truck tessellated {f}"));
+    }
     if overlapping > 0 {
         notes.push(format!(
             "dropped {overlapping} triangles that overlapped others of their face (folded \
@@ -429,6 +718,45 @@ pub(super) fn patch_kind(f: &FaceSurface) -> PatchKind {
         }),
         _ => PatchKind::Closed,
     }
+}
+
+/// Whether a face's triangles form an oriented surface whose boundary is exactly its edge
+/// polylines (`segments`, undirected): each boundary side is a polyline segment, every
+/// segment is used (twice for a seam), no side is used more than twice or twice in one
+/// direction.
+pub(super) fn follows_edges(
+    triangles: &[[conform::FaceVertex; 3]],
+    segments: &BTreeSet<(u32, u32)>,
+) -> bool {
+    use conform::FaceVertex;
+    let key = |a: FaceVertex, b: FaceVertex| if a <= b { (a, b) } else { (b, a) };
+    let mut uses: BTreeMap<(FaceVertex, FaceVertex), u32> = BTreeMap::new();
+    let mut directed: BTreeSet<(FaceVertex, FaceVertex)> = BTreeSet::new();
+    for t in triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if !directed.insert((a, b)) {
+                return false;
+            }
+            *uses.entry(key(a, b)).or_insert(0) += 1;
+        }
+    }
+    for (&(a, b), &n) in &uses {
+        if n > 2 {
+            return false;
+        }
+        if n == 1 {
+            let (FaceVertex::Pool(a), FaceVertex::Pool(b)) = (a, b) else {
+                return false;
+            };
+            if !segments.contains(&crate::mesh::edge_key(a, b)) {
+                return false;
+            }
+        }
+    }
+    segments
+        .iter()
+        .all(|&(a, b)| uses.contains_key(&key(FaceVertex::Pool(a), FaceVertex::Pool(b))))
 }
 
 /// Index of the candidate nearest to `p` within `tol`, with its distance. `candidates` is

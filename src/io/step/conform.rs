@@ -1,0 +1,977 @@
+//! Conforming tessellation of one trimmed face: the face's triangles use exactly the points
+//! of its edge polylines on its boundary, so neighbouring faces share their boundary
+//! vertices by construction instead of by snapping.
+//!
+//! truck's own face tessellation (`robust_triangulation`) re-derives the boundary in the
+//! surface's parameter plane and lets the constrained Delaunay triangulation drop or split
+//! boundary constraints; on trimmed and periodic faces (tori, cones, spheres) it leaves
+//! boundary vertices on no edge polyline, or tessellates the whole untrimmed surface, and the
+//! welded model is then not a clean 2-manifold. Here the boundary is ours: every polyline
+//! point is projected to (u, v) with truck's parameter search, periodic surfaces are cut
+//! along a seam whose two copies share their vertices, the loops are inserted as constraints
+//! of a spade CDT, interior points come from truck's `parameter_division` grid (kept away
+//! from the boundary so no constraint is split), and triangles are kept by an even-odd test
+//! against the loops. When any of this fails the caller falls back to truck's tessellation.
+
+use std::collections::BTreeMap;
+
+use glam::DVec3;
+use spade::{ConstrainedDelaunayTriangulation, Point2 as SPoint2, Triangulation};
+use truck_meshalgo::prelude::{
+    ParameterDivision2D, ParametricSurface, Point3, SearchNearestParameter, SearchParameter, D2,
+};
+use truck_stepio::r#in::alias::Surface;
+
+/// A vertex of a conforming face mesh: a point of the shared pool (an edge polyline point),
+/// or a point this face adds (interior grid points, points on a cut seam or at a pole).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(super) enum FaceVertex {
+    Pool(u32),
+    New(u32),
+}
+
+/// Triangles of one face over pool points and the face's own new points (body coordinates).
+#[derive(Clone, Debug, Default)]
+pub(super) struct ConformingMesh {
+    pub new_points: Vec<DVec3>,
+    /// Counter-clockwise in the surface's (u, v) plane, i.e. along the surface normal.
+    pub triangles: Vec<[FaceVertex; 3]>,
+}
+
+/// A boundary point in the parameter plane with the vertex it stands for. The same vertex
+/// may appear at several (u, v) (both sides of a seam, every point of a pole line).
+#[derive(Clone, Copy, Debug)]
+struct UvPoint {
+    uv: [f64; 2],
+    vertex: FaceVertex,
+}
+
+/// Most interior grid points accepted for one face (a runaway grid means a bad projection).
+const MAX_GRID_POINTS: usize = 400_000;
+
+fn p3(p: Point3) -> DVec3 {
+    DVec3::new(p.x, p.y, p.z)
+}
+
+/// Parameters of `p` on `surface`, near `hint` if given.
+fn project(surface: &Surface, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
+    let pt = Point3::new(p.x, p.y, p.z);
+    let h = hint.map(|h| (h[0], h[1]));
+    SearchParameter::<D2>::search_parameter(surface, pt, h, 100)
+        .or_else(|| SearchParameter::<D2>::search_parameter(surface, pt, None, 100))
+        .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, h, 100))
+        .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, None, 100))
+        .map(|(u, v)| [u, v])
+}
+
+/// Nearest-point search started from an 8 x 8 grid over one period (or the surface's
+/// range) in each parameter; the best result with its distance.
+fn project_from_grid(
+    surface: &Surface,
+    p: DVec3,
+    periods: [Option<f64>; 2],
+) -> Option<([f64; 2], f64)> {
+    let (ur, vr) = surface.try_range_tuple();
+    let span = |period: Option<f64>, range: Option<(f64, f64)>| match (period, range) {
+        (Some(t), _) => Some((0.0, t)),
+        (None, Some((a, b))) if a.is_finite() && b.is_finite() => Some((a, b)),
+        _ => None,
+    };
+    let (u0, u1) = span(periods[0], ur)?;
+    let (v0, v1) = span(periods[1], vr)?;
+    let pt = Point3::new(p.x, p.y, p.z);
+    let mut best: Option<([f64; 2], f64)> = None;
+    for i in 0..8 {
+        for j in 0..8 {
+            let hint = (
+                u0 + (u1 - u0) * (f64::from(i) + 0.5) / 8.0,
+                v0 + (v1 - v0) * (f64::from(j) + 0.5) / 8.0,
+            );
+            let found =
+                SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, hint, 100);
+            if let Some((u, v)) = found {
+                let d = p3(surface.subs(u, v)).distance(p);
+                if best.is_none_or(|b| d < b.1) {
+                    best = Some(([u, v], d));
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The representative of `x` (modulo `period`) nearest to `reference`.
+fn nearest_rep(x: f64, reference: f64, period: Option<f64>) -> f64 {
+    match period {
+        Some(p) if p > 0.0 => x + ((reference - x) / p).round() * p,
+        _ => x,
+    }
+}
+
+/// Tessellates the face of `surface` bounded by `loops` (each a cyclic list of pool vertices
+/// with their body-coordinate positions, in the face's wire order). `tol` is the chordal
+/// tolerance in body units. Errors say why the face cannot be done this way.
+pub(super) fn conforming_tessellation(
+    surface: &Surface,
+    loops: &[Vec<(u32, DVec3)>],
+    tol: f64,
+) -> Result<ConformingMesh, String> {
+    let periods = [surface.u_period(), surface.v_period()];
+    let ranges = {
+        let (u, v) = surface.try_range_tuple();
+        [u, v]
+    };
+    let mut out = ConformingMesh::default();
+    // 1. Project every loop, unwrapping periodic parameters along it.
+    let mut closed: Vec<Vec<UvPoint>> = Vec::new();
+    // Open loops (closed in 3D, not in (u, v)): the points with the first repeated at the
+    // end, shifted by the period; and the axis and sign of the shift.
+    let mut open: Vec<(Vec<UvPoint>, usize, f64)> = Vec::new();
+    for lp in loops {
+        if lp.len() < 2 {
+            return Err(format!("a boundary loop has {} points", lp.len()));
+        }
+        let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
+        let mut prev: Option<[f64; 2]> = None;
+        for &(id, p) in lp {
+            let Some(mut uv) = project(surface, p, prev) else {
+                return Err("a boundary point could not be projected onto the surface".into());
+            };
+            let mut off = p3(surface.subs(uv[0], uv[1])).distance(p);
+            if off > 10.0 * tol {
+                // The search can stop in a local minimum (tori): restart it from a grid.
+                if let Some((best, d)) = project_from_grid(surface, p, periods) {
+                    if d < off {
+                        uv = best;
+                        off = d;
+                    }
+                }
+            }
+            if off > 10.0 * tol {
+                return Err(format!(
+                    "the surface (as truck converts it) passes {off:.3e} from the face's \
+                     edges"
+                ));
+            }
+            if let Some(q) = prev {
+                for k in 0..2 {
+                    uv[k] = nearest_rep(uv[k], q[k], periods[k]);
+                }
+            }
+            prev = Some(uv);
+            pts.push(UvPoint {
+                uv,
+                vertex: FaceVertex::Pool(id),
+            });
+        }
+        let pts = split_singular(surface, pts);
+        let first = pts[0].uv;
+        let last = pts[pts.len() - 1].uv;
+        let mut shift = [0.0; 2];
+        for k in 0..2 {
+            shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
+        }
+        let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
+        match open_axes.as_slice() {
+            [] => closed.push(pts),
+            [k] => {
+                let mut pts = pts;
+                let mut end = pts[0];
+                end.uv[*k] += shift[*k];
+                pts.push(end);
+                open.push((pts, *k, shift[*k].signum()));
+            }
+            _ => return Err("a boundary loop wraps around both periods".into()),
+        }
+    }
+    // 2. Close open loops along a cut seam (two loops) or the domain's edge (one loop).
+    let grid_range = {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for p in closed
+            .iter()
+            .flatten()
+            .chain(open.iter().flat_map(|o| o.0.iter()))
+        {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p.uv[k]);
+                hi[k] = hi[k].max(p.uv[k]);
+            }
+        }
+        ((lo[0], hi[0]), (lo[1], hi[1]))
+    };
+    let division = checked_division(surface, grid_range, tol)?;
+    match open.len() {
+        0 => {}
+        2 => {
+            let (c1, k1, s1) = open.pop().unwrap_or_default();
+            let (c0, k0, s0) = open.pop().unwrap_or_default();
+            if k0 != k1 || s0 == s1 {
+                return Err("two open boundary loops that do not bound a band".into());
+            }
+            let (mut c0, mut c1) = if s0 > 0.0 { (c0, c1) } else { (c1, c0) };
+            let k = k0;
+            let period = periods[k].unwrap_or(0.0);
+            // Bring c1's start next to c0's end.
+            let target = c0[c0.len() - 1].uv[k];
+            let d = nearest_rep(c1[0].uv[k], target, Some(period)) - c1[0].uv[k];
+            for p in &mut c1 {
+                p.uv[k] += d;
+            }
+            let a = c0[c0.len() - 1].uv;
+            let b = c1[0].uv;
+            let seam = seam_points(surface, a, b, &division, &mut out);
+            let mut lp: Vec<UvPoint> = Vec::new();
+            lp.append(&mut c0);
+            lp.extend(seam.iter().copied());
+            lp.extend(c1.iter().copied());
+            // The other copy of the seam: reversed, one period back.
+            for p in seam.iter().rev() {
+                let mut q = *p;
+                q.uv[k] -= period;
+                lp.push(q);
+            }
+            closed.push(lp);
+        }
+        1 => {
+            let (mut c0, k, s) = open.pop().unwrap_or_default();
+            let other = 1 - k;
+            let Some((b0, b1)) = ranges[other] else {
+                return Err("an open boundary loop on a surface without a domain edge".into());
+            };
+            let period = periods[k].unwrap_or(0.0);
+            // Counter-clockwise: going +u the face lies towards +v, going +v towards -u.
+            let towards_max = (k == 0) == (s > 0.0);
+            let edge = if towards_max { b1 } else { b0 };
+            let start = c0[0].uv;
+            let end = c0[c0.len() - 1].uv;
+            let mut corner_end = end;
+            corner_end[other] = edge;
+            let mut corner_start = start;
+            corner_start[other] = edge;
+            // end -> corner_end (a seam), corner_end -> corner_start (the domain edge),
+            // corner_start -> start (the seam's other copy).
+            let seam = seam_points(surface, end, corner_end, &division, &mut out);
+            let (along, corner_vertex) = edge_points(
+                surface,
+                corner_end,
+                corner_start,
+                &division,
+                k,
+                tol,
+                &mut out,
+            );
+            let mut lp: Vec<UvPoint> = Vec::new();
+            lp.append(&mut c0);
+            lp.extend(seam.iter().copied());
+            lp.push(UvPoint {
+                uv: corner_end,
+                vertex: corner_vertex,
+            });
+            lp.extend(along.iter().copied());
+            lp.push(UvPoint {
+                uv: corner_start,
+                vertex: corner_vertex,
+            });
+            for p in seam.iter().rev() {
+                let mut q = *p;
+                q.uv[k] -= s * period;
+                lp.push(q);
+            }
+            closed.push(lp);
+        }
+        n => return Err(format!("{n} open boundary loops")),
+    }
+    // 3. Loops of a periodic surface must lie in one period: bring each to the first's.
+    if closed.len() > 1 {
+        let centre = |lp: &[UvPoint], k: usize| {
+            let (lo, hi) = lp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
+                (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
+            });
+            0.5 * (lo + hi)
+        };
+        // The widest loop is the reference (the outer loop on a periodic band).
+        let widest = (0..closed.len())
+            .max_by(|&a, &b| {
+                let w = |i: usize| {
+                    let l: &Vec<UvPoint> = &closed[i];
+                    (0..2)
+                        .map(|k| {
+                            let (lo, hi) =
+                                l.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
+                                    (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
+                                });
+                            hi - lo
+                        })
+                        .sum::<f64>()
+                };
+                w(a).total_cmp(&w(b))
+            })
+            .unwrap_or(0);
+        for (k, period) in periods.iter().enumerate() {
+            let Some(period) = *period else { continue };
+            let reference = centre(&closed[widest], k);
+            for lp in closed.iter_mut() {
+                let c = centre(lp, k);
+                let d = nearest_rep(c, reference, Some(period)) - c;
+                if d != 0.0 {
+                    for p in lp.iter_mut() {
+                        p.uv[k] += d;
+                    }
+                }
+            }
+        }
+    }
+    // The inside test is even-odd, so loop orientation does not matter past this point
+    // (some files' loops run clockwise in truck's parameters; the caller orients faces).
+    let pool_xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
+    triangulate(surface, &closed, &pool_xyz, tol, out).map_err(|e| {
+        format!(
+            "{e} ({} loops: {}; periods {:?})",
+            loops.len(),
+            describe(&closed),
+            periods
+        )
+    })
+}
+
+/// Replaces each boundary point at a singular point of the surface (a pole or apex, where
+/// one parameter does not move the point) by two copies that continue the neighbours'
+/// free parameter, as truck does, so the loop does not jump across the parameter plane.
+fn split_singular(surface: &Surface, pts: Vec<UvPoint>) -> Vec<UvPoint> {
+    let n = pts.len();
+    let singular: Vec<Option<usize>> = pts
+        .iter()
+        .map(|p| {
+            // Central differences in 3D (some inverted truck surfaces report derivatives
+            // that do not match their points).
+            let at = |du: f64, dv: f64| p3(surface.subs(p.uv[0] + du, p.uv[1] + dv));
+            let h = 1e-4;
+            let su = at(h, 0.0).distance(at(-h, 0.0));
+            let sv = at(0.0, h).distance(at(0.0, -h));
+            if su < 1e-9 * sv.max(1e-300) {
+                Some(0)
+            } else if sv < 1e-9 * su.max(1e-300) {
+                Some(1)
+            } else {
+                None
+            }
+        })
+        .collect();
+    if singular.iter().all(Option::is_none) {
+        return pts;
+    }
+    let mut out = Vec::with_capacity(n + 4);
+    for i in 0..n {
+        let Some(k) = singular[i] else {
+            out.push(pts[i]);
+            continue;
+        };
+        let prev = pts[(i + n - 1) % n].uv[k];
+        let next = pts[(i + 1) % n].uv[k];
+        let mut a = pts[i];
+        a.uv[k] = prev;
+        out.push(a);
+        if (next - prev).abs() > 1e-12 {
+            let mut b = pts[i];
+            b.uv[k] = next;
+            out.push(b);
+        }
+    }
+    out
+}
+
+/// truck's parameter grid over `range`, refusing runaway sizes.
+fn checked_division(
+    surface: &Surface,
+    range: ((f64, f64), (f64, f64)),
+    tol: f64,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let finite = [range.0 .0, range.0 .1, range.1 .0, range.1 .1]
+        .iter()
+        .all(|x| x.is_finite());
+    if !finite {
+        return Err("the boundary's parameter range is not finite".into());
+    }
+    let (u, v) = surface.parameter_division(range, tol);
+    if u.len().saturating_mul(v.len()) > MAX_GRID_POINTS {
+        return Err(format!(
+            "the parameter grid would have {} x {} points",
+            u.len(),
+            v.len()
+        ));
+    }
+    Ok((u, v))
+}
+
+/// Interior points of the seam segment `a -> b` in (u, v), one per grid line it crosses in
+/// its main direction (at least none), as new vertices.
+fn seam_points(
+    surface: &Surface,
+    a: [f64; 2],
+    b: [f64; 2],
+    division: &(Vec<f64>, Vec<f64>),
+    out: &mut ConformingMesh,
+) -> Vec<UvPoint> {
+    let n = segments_along(a, b, division);
+    (1..n)
+        .map(|i| {
+            let t = i as f64 / n as f64;
+            let uv = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+            out.new_points.push(p3(surface.subs(uv[0], uv[1])));
+            UvPoint {
+                uv,
+                vertex: FaceVertex::New(out.new_points.len() as u32 - 1),
+            }
+        })
+        .collect()
+}
+
+/// Interior points of the domain-edge segment `a -> b` (along axis `k`) and the vertex of
+/// its corners. A degenerate edge (a pole: every point at one position) is one vertex.
+fn edge_points(
+    surface: &Surface,
+    a: [f64; 2],
+    b: [f64; 2],
+    division: &(Vec<f64>, Vec<f64>),
+    k: usize,
+    tol: f64,
+    out: &mut ConformingMesh,
+) -> (Vec<UvPoint>, FaceVertex) {
+    let _ = k;
+    let n = segments_along(a, b, division).max(2);
+    let pts: Vec<[f64; 2]> = (0..=n)
+        .map(|i| {
+            let t = i as f64 / n as f64;
+            [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+        })
+        .collect();
+    let xyz: Vec<DVec3> = pts
+        .iter()
+        .map(|uv| p3(surface.subs(uv[0], uv[1])))
+        .collect();
+    let degenerate = xyz.iter().all(|p| p.distance(xyz[0]) <= 1e-3 * tol);
+    if degenerate {
+        out.new_points.push(xyz[0]);
+        let v = FaceVertex::New(out.new_points.len() as u32 - 1);
+        let along = pts[1..n]
+            .iter()
+            .map(|&uv| UvPoint { uv, vertex: v })
+            .collect();
+        return (along, v);
+    }
+    // A real edge of the domain (an open face boundary): its corners are the two copies of
+    // one seam end, so they share one vertex.
+    out.new_points.push(xyz[0]);
+    let corner = FaceVertex::New(out.new_points.len() as u32 - 1);
+    let along = (1..n)
+        .map(|i| {
+            out.new_points.push(xyz[i]);
+            UvPoint {
+                uv: pts[i],
+                vertex: FaceVertex::New(out.new_points.len() as u32 - 1),
+            }
+        })
+        .collect();
+    (along, corner)
+}
+
+/// Number of segments for a straight (u, v) segment: the grid lines it crosses, at least 1.
+fn segments_along(a: [f64; 2], b: [f64; 2], division: &(Vec<f64>, Vec<f64>)) -> usize {
+    let count = |d: &[f64], x: f64, y: f64| {
+        let (lo, hi) = (x.min(y), x.max(y));
+        d.iter().filter(|&&t| t > lo && t < hi).count()
+    };
+    let n = count(&division.0, a[0], b[0]).max(count(&division.1, a[1], b[1]));
+    (n + 1).min(4096)
+}
+
+/// spade refuses coordinates below its smallest allowed magnitude; those are zero.
+fn spade_round(x: f64) -> f64 {
+    if x.abs() < spade::MIN_ALLOWED_VALUE {
+        0.0
+    } else {
+        x
+    }
+}
+
+/// Short description of loops for messages: size, signed area and parameter box.
+fn describe(loops: &[Vec<UvPoint>]) -> String {
+    loops
+        .iter()
+        .map(|l| {
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for p in l {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(p.uv[k]);
+                    hi[k] = hi[k].max(p.uv[k]);
+                }
+            }
+            format!(
+                "[{} points, area {:.3e}, u {:.3}..{:.3}, v {:.3}..{:.3}]",
+                l.len(),
+                signed_area(l),
+                lo[0],
+                hi[0],
+                lo[1],
+                hi[1]
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn signed_area(lp: &[UvPoint]) -> f64 {
+    let n = lp.len();
+    (0..n)
+        .map(|i| {
+            let (p, q) = (lp[i].uv, lp[(i + 1) % n].uv);
+            p[0] * q[1] - q[0] * p[1]
+        })
+        .sum::<f64>()
+        * 0.5
+}
+
+/// Even-odd inside test against all loops.
+fn inside(loops: &[Vec<UvPoint>], c: [f64; 2]) -> bool {
+    let mut odd = false;
+    for lp in loops {
+        let n = lp.len();
+        for i in 0..n {
+            let (p, q) = (lp[i].uv, lp[(i + 1) % n].uv);
+            if (p[1] > c[1]) != (q[1] > c[1]) {
+                let x = p[0] + (c[1] - p[1]) / (q[1] - p[1]) * (q[0] - p[0]);
+                if x > c[0] {
+                    odd = !odd;
+                }
+            }
+        }
+    }
+    odd
+}
+
+/// Squared distance from `c` to segment `p q`, after scaling the axes by `s`.
+fn scaled_segment_distance2(c: [f64; 2], p: [f64; 2], q: [f64; 2], s: [f64; 2]) -> f64 {
+    let (cx, cy) = (c[0] * s[0], c[1] * s[1]);
+    let (px, py) = (p[0] * s[0], p[1] * s[1]);
+    let (qx, qy) = (q[0] * s[0], q[1] * s[1]);
+    let (dx, dy) = (qx - px, qy - py);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((cx - px) * dx + (cy - py) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (ex, ey) = (px + t * dx - cx, py + t * dy - cy);
+    ex * ex + ey * ey
+}
+
+fn triangulate(
+    surface: &Surface,
+    loops: &[Vec<UvPoint>],
+    pool_xyz: &BTreeMap<u32, DVec3>,
+    tol: f64,
+    mut out: ConformingMesh,
+) -> Result<ConformingMesh, String> {
+    let mut cdt: ConstrainedDelaunayTriangulation<SPoint2<f64>> =
+        ConstrainedDelaunayTriangulation::new();
+    // Vertex of each CDT vertex (by handle index).
+    let mut vertex_of: Vec<Option<FaceVertex>> = Vec::new();
+    // New vertices found to coincide with an edge point.
+    let mut alias: BTreeMap<u32, FaceVertex> = BTreeMap::new();
+    let mut handles_of_loops = Vec::with_capacity(loops.len());
+    for lp in loops {
+        let mut handles = Vec::with_capacity(lp.len());
+        for p in lp {
+            if !(p.uv[0].is_finite() && p.uv[1].is_finite()) {
+                return Err("a boundary point has no finite parameters".into());
+            }
+            let h = cdt
+                .insert(SPoint2::new(spade_round(p.uv[0]), spade_round(p.uv[1])))
+                .map_err(|e| format!("the CDT refused a boundary point: {e:?}"))?;
+            let i = h.index();
+            if vertex_of.len() <= i {
+                vertex_of.resize(i + 1, None);
+            }
+            let resolve = |v: FaceVertex, alias: &BTreeMap<u32, FaceVertex>| match v {
+                FaceVertex::New(k) => alias.get(&k).copied().unwrap_or(v),
+                _ => v,
+            };
+            match vertex_of[i].map(|v| (resolve(v, &alias), resolve(p.vertex, &alias))) {
+                // A point this face added (a pole or seam end) that is an edge point.
+                Some((FaceVertex::New(k), w @ FaceVertex::Pool(_)))
+                | Some((w @ FaceVertex::Pool(_), FaceVertex::New(k))) => {
+                    alias.insert(k, w);
+                    vertex_of[i] = Some(w);
+                }
+                Some((v, w)) if v != w => {
+                    return Err(format!(
+                        "two boundary vertices ({v:?}, {:?}) at one parameter point {:?}",
+                        p.vertex, p.uv
+                    ))
+                }
+                _ => vertex_of[i] = Some(p.vertex),
+            }
+            handles.push(h);
+        }
+        handles_of_loops.push(handles);
+    }
+    for handles in &handles_of_loops {
+        let n = handles.len();
+        for i in 0..n {
+            let (a, b) = (handles[i], handles[(i + 1) % n]);
+            if a == b || cdt.exists_constraint(a, b) {
+                continue; // an edge used twice by its loop (a slit)
+            }
+            if !cdt.can_add_constraint(a, b) {
+                return Err("the boundary loops cross in the parameter plane".into());
+            }
+            cdt.add_constraint(a, b);
+        }
+    }
+    if cdt.num_vertices() != vertex_of.iter().filter(|v| v.is_some()).count() {
+        return Err("the CDT split a boundary segment".into());
+    }
+    let constraints = cdt.num_constraints();
+    // Interior grid points, away from the boundary so no constraint edge is split.
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for p in loops.iter().flatten() {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p.uv[k]);
+            hi[k] = hi[k].max(p.uv[k]);
+        }
+    }
+    let (udiv, vdiv) = checked_division(surface, ((lo[0], hi[0]), (lo[1], hi[1])), tol)?;
+    let segments: Vec<([f64; 2], [f64; 2])> = loops
+        .iter()
+        .flat_map(|lp| (0..lp.len()).map(move |i| (lp[i].uv, lp[(i + 1) % lp.len()].uv)))
+        .collect();
+    let step = |d: &[f64], i: usize| {
+        let a = if i > 0 {
+            d[i] - d[i - 1]
+        } else {
+            f64::INFINITY
+        };
+        let b = if i + 1 < d.len() {
+            d[i + 1] - d[i]
+        } else {
+            f64::INFINITY
+        };
+        let s = a.min(b);
+        if s.is_finite() && s > 0.0 {
+            s
+        } else {
+            (d[d.len() - 1] - d[0]).abs().max(1e-300)
+        }
+    };
+    for (i, &u) in udiv.iter().enumerate() {
+        let su = step(&udiv, i);
+        for (j, &v) in vdiv.iter().enumerate() {
+            let c = [u, v];
+            if !inside(loops, c) {
+                continue;
+            }
+            let sv = step(&vdiv, j);
+            let s = [1.0 / su, 1.0 / sv];
+            let near = segments.iter().any(|&(p, q)| {
+                // Cheap reject before the exact distance.
+                let (ulo, uhi) = (p[0].min(q[0]) - 0.4 * su, p[0].max(q[0]) + 0.4 * su);
+                let (vlo, vhi) = (p[1].min(q[1]) - 0.4 * sv, p[1].max(q[1]) + 0.4 * sv);
+                u >= ulo
+                    && u <= uhi
+                    && v >= vlo
+                    && v <= vhi
+                    && scaled_segment_distance2(c, p, q, s) < 0.35 * 0.35
+            });
+            if near {
+                continue;
+            }
+            let before = cdt.num_vertices();
+            let h = cdt
+                .insert(SPoint2::new(spade_round(u), spade_round(v)))
+                .map_err(|e| format!("the CDT refused a grid point: {e:?}"))?;
+            if cdt.num_vertices() == before {
+                continue; // coincides with an existing point
+            }
+            out.new_points.push(p3(surface.subs(u, v)));
+            let idx = h.index();
+            if vertex_of.len() <= idx {
+                vertex_of.resize(idx + 1, None);
+            }
+            vertex_of[idx] = Some(FaceVertex::New(out.new_points.len() as u32 - 1));
+        }
+    }
+    // Refine: a triangle whose middle (or the middle of an inner side) is more than `tol`
+    // from the surface gets a point at its centroid, until every triangle is within
+    // tolerance (the grid alone is not enough next to the boundary and on poles).
+    let xyz = |v: FaceVertex, alias: &BTreeMap<u32, FaceVertex>, out: &ConformingMesh| match v {
+        FaceVertex::New(k) => match alias.get(&k) {
+            Some(FaceVertex::Pool(i)) => pool_xyz.get(i).copied(),
+            _ => out.new_points.get(k as usize).copied(),
+        },
+        FaceVertex::Pool(i) => pool_xyz.get(&i).copied(),
+    };
+    for _round in 0..24 {
+        let mut add: Vec<[f64; 2]> = Vec::new();
+        for face in cdt.inner_faces() {
+            let vs = face.vertices();
+            let uv: [[f64; 2]; 3] = std::array::from_fn(|k| {
+                let p = vs[k].position();
+                [p.x, p.y]
+            });
+            let c = [
+                (uv[0][0] + uv[1][0] + uv[2][0]) / 3.0,
+                (uv[0][1] + uv[1][1] + uv[2][1]) / 3.0,
+            ];
+            if !inside(loops, c) {
+                continue;
+            }
+            let mut corners = [DVec3::ZERO; 3];
+            for k in 0..3 {
+                let Some(Some(v)) = vertex_of.get(vs[k].fix().index()).copied() else {
+                    return Err("a triangle uses a point the CDT made up".into());
+                };
+                let Some(p) = xyz(v, &alias, &out) else {
+                    return Err("a boundary vertex has no position".into());
+                };
+                corners[k] = p;
+            }
+            let off = |w: [f64; 3]| {
+                let u = w[0] * uv[0][0] + w[1] * uv[1][0] + w[2] * uv[2][0];
+                let v = w[0] * uv[0][1] + w[1] * uv[1][1] + w[2] * uv[2][1];
+                let flat = w[0] * corners[0] + w[1] * corners[1] + w[2] * corners[2];
+                p3(surface.subs(u, v)).distance(flat)
+            };
+            let third = 1.0 / 3.0;
+            let mut bad = off([third, third, third]) > tol;
+            if !bad {
+                for (k, e) in face.adjacent_edges().iter().enumerate() {
+                    if e.is_constraint_edge() {
+                        continue;
+                    }
+                    // adjacent_edges()[k] runs from vertex k to vertex k + 1.
+                    let mut w = [0.0; 3];
+                    w[k] = 0.5;
+                    w[(k + 1) % 3] = 0.5;
+                    if off(w) > tol {
+                        bad = true;
+                        break;
+                    }
+                }
+            }
+            // Never a point on or next to the boundary: spade would split a boundary
+            // segment (sliver triangles along the boundary have centroids almost on it).
+            let longest = (0..3)
+                .map(|k| {
+                    let (p, q) = (uv[k], uv[(k + 1) % 3]);
+                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
+                })
+                .fold(0.0, f64::max);
+            let area2 = ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+                - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]))
+                .abs();
+            if bad && area2 > 1e-6 * longest * longest {
+                let near = segments.iter().any(|&(p, q)| {
+                    scaled_segment_distance2(c, p, q, [1.0, 1.0]) < (0.05 * longest).powi(2)
+                });
+                if !near {
+                    add.push(c);
+                }
+            }
+        }
+        if add.is_empty() {
+            break;
+        }
+        if cdt.num_vertices() + add.len() > MAX_GRID_POINTS {
+            return Err("refining the face to the tolerance needs too many points".into());
+        }
+        for c in add {
+            let before = cdt.num_vertices();
+            let h = cdt
+                .insert(SPoint2::new(spade_round(c[0]), spade_round(c[1])))
+                .map_err(|e| format!("the CDT refused a refinement point: {e:?}"))?;
+            if cdt.num_vertices() == before {
+                continue;
+            }
+            out.new_points.push(p3(surface.subs(c[0], c[1])));
+            let idx = h.index();
+            if vertex_of.len() <= idx {
+                vertex_of.resize(idx + 1, None);
+            }
+            vertex_of[idx] = Some(FaceVertex::New(out.new_points.len() as u32 - 1));
+        }
+        if cdt.num_constraints() != constraints {
+            return Err("refinement split a boundary segment".into());
+        }
+    }
+    let mut area_scale = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+    if area_scale.is_nan() || area_scale <= 0.0 {
+        area_scale = 1.0;
+    }
+    for face in cdt.inner_faces() {
+        let vs = face.vertices();
+        let uv: Vec<[f64; 2]> = vs
+            .iter()
+            .map(|v| {
+                let p = v.position();
+                [p.x, p.y]
+            })
+            .collect();
+        let area = 0.5
+            * ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+                - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]));
+        if area.abs() <= 1e-14 * area_scale {
+            continue;
+        }
+        let c = [
+            (uv[0][0] + uv[1][0] + uv[2][0]) / 3.0,
+            (uv[0][1] + uv[1][1] + uv[2][1]) / 3.0,
+        ];
+        if !inside(loops, c) {
+            continue;
+        }
+        let mut t = [FaceVertex::Pool(0); 3];
+        for k in 0..3 {
+            let Some(Some(v)) = vertex_of.get(vs[k].fix().index()).copied() else {
+                return Err("a triangle uses a point the CDT made up".into());
+            };
+            t[k] = match v {
+                FaceVertex::New(n) => alias.get(&n).copied().unwrap_or(v),
+                _ => v,
+            };
+        }
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            continue; // collapsed at a pole
+        }
+        if area < 0.0 {
+            t.swap(1, 2);
+        }
+        out.triangles.push(t);
+    }
+    if out.triangles.is_empty() {
+        return Err("no triangle inside the boundary".into());
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeSet;
+    use truck_stepio::r#in::alias::{ElementarySurface, Line, Plane, Processor, RevolutedCurve};
+    use truck_stepio::r#in::alias::{Point3 as P3, Vector3};
+
+    fn circle(n: u32, z: f64, first_id: u32, forward: bool) -> Vec<(u32, DVec3)> {
+        let mut pts: Vec<(u32, DVec3)> = (0..n)
+            .map(|i| {
+                let a = std::f64::consts::TAU * f64::from(i) / f64::from(n);
+                (first_id + i, DVec3::new(a.cos(), a.sin(), z))
+            })
+            .collect();
+        if !forward {
+            pts[1..].reverse();
+        }
+        pts
+    }
+
+    fn area(mesh: &ConformingMesh, xyz: &BTreeMap<u32, DVec3>) -> f64 {
+        let p = |v: FaceVertex| match v {
+            FaceVertex::Pool(i) => xyz[&i],
+            FaceVertex::New(k) => mesh.new_points[k as usize],
+        };
+        mesh.triangles
+            .iter()
+            .map(|t| 0.5 * (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])).length())
+            .sum()
+    }
+
+    fn segments(loops: &[Vec<(u32, DVec3)>]) -> BTreeSet<(u32, u32)> {
+        let mut s = BTreeSet::new();
+        for l in loops {
+            for k in 0..l.len() {
+                s.insert(crate::mesh::edge_key(l[k].0, l[(k + 1) % l.len()].0));
+            }
+        }
+        s
+    }
+
+    /// A square with a square hole: only boundary points and no interior grid point are
+    /// needed on a plane; the triangles cover exactly the square minus the hole.
+    #[test]
+    fn plane_with_hole_follows_its_loops() {
+        let plane = Surface::ElementarySurface(Box::new(ElementarySurface::Plane(Plane::new(
+            P3::new(0.0, 0.0, 0.0),
+            P3::new(1.0, 0.0, 0.0),
+            P3::new(0.0, 1.0, 0.0),
+        ))));
+        let sq = |ids: [u32; 4], lo: f64, hi: f64, ccw: bool| {
+            let mut c = vec![(lo, lo), (hi, lo), (hi, hi), (lo, hi)];
+            if !ccw {
+                c.reverse();
+            }
+            ids.iter()
+                .zip(c)
+                .map(|(&i, (x, y))| (i, DVec3::new(x, y, 0.0)))
+                .collect::<Vec<_>>()
+        };
+        let loops = vec![
+            sq([0, 1, 2, 3], 0.0, 4.0, true),
+            sq([4, 5, 6, 7], 1.0, 2.0, false),
+        ];
+        let mesh = conforming_tessellation(&plane, &loops, 1e-3).unwrap();
+        assert!(super::super::tessellate::follows_edges(
+            &mesh.triangles,
+            &segments(&loops)
+        ));
+        let xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
+        assert!((area(&mesh, &xyz) - 15.0).abs() < 1e-9);
+    }
+
+    /// A cylinder band bounded by two circles and no seam edge: the loops are open in the
+    /// periodic parameter, the band is cut along a seam whose two copies share vertices, so
+    /// the result is a closed band whose only boundary is the two circles, within the
+    /// chordal tolerance of the cylinder.
+    #[test]
+    fn cylinder_band_without_seam_edge_is_cut_and_closed() {
+        let line = Line(P3::new(1.0, 0.0, 0.0), P3::new(1.0, 0.0, 1.0));
+        let revolved =
+            RevolutedCurve::by_revolution(line, P3::new(0.0, 0.0, 0.0), Vector3::unit_z());
+        let cylinder = Surface::ElementarySurface(Box::new(ElementarySurface::CylindricalSurface(
+            Processor::new(revolved),
+        )));
+        let loops = vec![circle(32, 0.0, 0, true), circle(32, 1.0, 100, false)];
+        let tol = 2e-3;
+        let mesh = conforming_tessellation(&cylinder, &loops, tol).unwrap();
+        let mut uses: BTreeMap<(FaceVertex, FaceVertex), u32> = BTreeMap::new();
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        let open: Vec<_> = uses
+            .iter()
+            .filter(|(_, &n)| n != 2)
+            .map(|(k, n)| (*k, *n))
+            .collect();
+        assert!(
+            super::super::tessellate::follows_edges(&mesh.triangles, &segments(&loops)),
+            "{} triangles, {} new points; sides not used twice: {:?}",
+            mesh.triangles.len(),
+            mesh.new_points.len(),
+            &open[..open.len().min(80)]
+        );
+        for p in &mesh.new_points {
+            assert!((p.truncate().length() - 1.0).abs() < 1e-9, "{p}");
+        }
+        // Vertices on the cylinder, triangles within the tolerance: the area is the
+        // cylinder's up to the chordal error (it may exceed it slightly: Schwarz lantern).
+        let xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
+        let a = area(&mesh, &xyz);
+        assert!(
+            (a - std::f64::consts::TAU).abs() < 0.01 * std::f64::consts::TAU,
+            "{a}"
+        );
+    }
+}
