@@ -345,12 +345,9 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                     edge_pool.insert((bi, ge), ids);
                 }
             }
-            if let Some(&(_, ge)) = edges_global
+            if let Some(&ge) = edges_global
                 .iter()
-                .map(|&ge| (bi, ge))
-                .collect::<Vec<_>>()
-                .iter()
-                .find(|k| bad_edges.contains(k))
+                .find(|&&ge| bad_edges.contains(&(bi, ge)))
             {
                 skipped.push(SkippedFace {
                     face_id: pf.face_id,
