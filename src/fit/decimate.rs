@@ -176,7 +176,11 @@ impl Quadric {
     }
 }
 
-/// Heap entry: lower `(class, cost)` first, ties by vertex id.
+/// Heap entry: lower `(class, cost)` first, ties by vertex id. A vertex's entry first holds
+/// its cheapest collapse by [`State::cost`] alone, a lower bound of
+/// its real cost (a collapse [`State::allowed`] forbids costs infinity): popping lower bounds
+/// and re-queueing the real cost gives the same order as queueing real costs, for a fraction
+/// of the validity tests. The heap holds at most a few entries per vertex.
 #[derive(Clone, Copy, Debug)]
 struct Candidate {
     class: u8,
@@ -186,9 +190,21 @@ struct Candidate {
     stamp: u32,
 }
 
+impl Candidate {
+    /// Integer sort key: costs are non-negative, so their bit patterns order like the values.
+    fn key(&self) -> (u8, u64, u32, u32) {
+        let cost = if self.cost > 0.0 {
+            self.cost.to_bits()
+        } else {
+            0
+        };
+        (self.class, cost, self.u, self.v)
+    }
+}
+
 impl PartialEq for Candidate {
     fn eq(&self, o: &Self) -> bool {
-        self.cmp(o) == Ordering::Equal
+        self.key() == o.key()
     }
 }
 impl Eq for Candidate {}
@@ -200,9 +216,7 @@ impl PartialOrd for Candidate {
 impl Ord for Candidate {
     // Reversed so that BinaryHeap (a max-heap) pops the smallest.
     fn cmp(&self, o: &Self) -> Ordering {
-        (o.class, o.cost, o.u, o.v)
-            .partial_cmp(&(self.class, self.cost, self.u, self.v))
-            .unwrap_or_else(|| o.cost.total_cmp(&self.cost))
+        o.key().cmp(&self.key())
     }
 }
 
@@ -383,9 +397,11 @@ impl<'a> State<'a> {
         })
     }
 
-    /// Cost class and cost of collapsing `u` onto `v`, or `None` when not allowed. `nu` are
-    /// `u`'s neighbours (sorted); `scratch` is reused for `v`'s.
-    fn evaluate(&self, u: u32, v: u32, nu: &[u32], scratch: &mut Vec<u32>) -> Option<(u8, f64)> {
+    /// Cost class and cost of collapsing `u` onto `v` from what is cheap to know (roles,
+    /// the edge's faces, the quadrics), or `None` when that already forbids it. The costly
+    /// checks are in [`State::allowed`], done only when the candidate reaches the top of the
+    /// queue.
+    fn cost(&self, u: u32, v: u32) -> Option<(u8, f64)> {
         let role = self.input.roles[u as usize];
         let (edge_len, edge) = self.edge_faces(u, v);
         if edge_len == 0 || edge_len > 2 {
@@ -413,69 +429,18 @@ impl<'a> State<'a> {
                 }
             }
         };
-        // Link condition: the common neighbours of u and v are exactly the vertices
-        // opposite the edge.
-        self.neighbours_into(v, scratch);
-        let common = scratch
-            .iter()
-            .filter(|w| nu.binary_search(w).is_ok())
-            .count();
-        if common != edge_len {
-            return None;
-        }
         // A vertex on the open boundary must not be pulled onto an interior edge's end.
         if edge_len == 2 && self.open_boundary[u as usize] && self.open_boundary[v as usize] {
             return None;
         }
         let pv = self.pos(v);
-        for &f in &self.vfaces[u as usize] {
-            let t = self.tris[f as usize];
-            if t.contains(&v) {
-                continue;
-            }
-            if self.leaves_ear(u, v, t, f) {
-                return None;
-            }
-            let old = t.map(|i| self.pos(i));
-            let new = t.map(|i| if i == u { pv } else { self.pos(i) });
-            let n_old = tri_normal(old);
-            let n_new = tri_normal(new);
-            if n_new.length_squared() <= self.min_area2 {
-                return None;
-            }
-            let rule = &self.input.rules[self.input.face_groups[f as usize] as usize];
-            let centroid = (new[0] + new[1] + new[2]) / 3.0;
-            match rule.surface.normal_at(centroid) {
-                Some(s) => {
-                    let c_old = (old[0] + old[1] + old[2]) / 3.0;
-                    let s_old = rule.surface.normal_at(c_old).unwrap_or(s);
-                    let sign = n_old.dot(s_old).signum();
-                    if sign * n_new.normalize().dot(s) < 0.3 {
-                        return None;
-                    }
-                }
-                None => {
-                    if n_old.length_squared() > self.min_area2
-                        && n_new.normalize().dot(n_old.normalize()) < 0.5
-                    {
-                        return None;
-                    }
-                }
-            }
-            if let Some(axis) = rule.surface.axis() {
-                for &w in &t {
-                    if w != u && angle_about(&axis, pv, self.pos(w)) > rule.max_edge_angle {
-                        return None;
-                    }
-                }
-            }
-        }
         let cost = match class {
             2 => {
                 let mut q = self.quadric[u as usize];
                 q.add(&self.quadric[v as usize]);
                 let c = q.eval(pv);
                 let g = self.input.face_groups[self.vfaces[u as usize][0] as usize];
+                // Quadrics only grow, so a collapse over the threshold stays over it.
                 if c > self.input.rules[g as usize].max_cost {
                     return None;
                 }
@@ -488,25 +453,93 @@ impl<'a> State<'a> {
         Some((class, cost))
     }
 
-    fn best_candidate(&self, u: u32, scratch: &mut Scratch) -> Option<Candidate> {
+    /// Whether collapsing `u` onto `v` keeps the mesh manifold and well shaped: the link
+    /// condition, no flipped or degenerate triangles, framed edges within their angle, no
+    /// ear along a chain. `nu` are `u`'s neighbours (sorted); `scratch` is reused for `v`'s.
+    fn allowed(&self, u: u32, v: u32, nu: &[u32], scratch: &mut Vec<u32>) -> bool {
+        let (edge_len, _) = self.edge_faces(u, v);
+        // Link condition: the common neighbours of u and v are exactly the vertices
+        // opposite the edge.
+        self.neighbours_into(v, scratch);
+        let common = scratch
+            .iter()
+            .filter(|w| nu.binary_search(w).is_ok())
+            .count();
+        if common != edge_len {
+            return false;
+        }
+        let pv = self.pos(v);
+        for &f in &self.vfaces[u as usize] {
+            let t = self.tris[f as usize];
+            if t.contains(&v) {
+                continue;
+            }
+            if self.leaves_ear(u, v, t, f) {
+                return false;
+            }
+            let old = t.map(|i| self.pos(i));
+            let new = t.map(|i| if i == u { pv } else { self.pos(i) });
+            let n_old = tri_normal(old);
+            let n_new = tri_normal(new);
+            if n_new.length_squared() <= self.min_area2 {
+                return false;
+            }
+            let rule = &self.input.rules[self.input.face_groups[f as usize] as usize];
+            let centroid = (new[0] + new[1] + new[2]) / 3.0;
+            match rule.surface.normal_at(centroid) {
+                Some(s) => {
+                    let c_old = (old[0] + old[1] + old[2]) / 3.0;
+                    let s_old = rule.surface.normal_at(c_old).unwrap_or(s);
+                    let sign = n_old.dot(s_old).signum();
+                    if sign * n_new.normalize().dot(s) < 0.3 {
+                        return false;
+                    }
+                }
+                None => {
+                    if n_old.length_squared() > self.min_area2
+                        && n_new.normalize().dot(n_old.normalize()) < 0.5
+                    {
+                        return false;
+                    }
+                }
+            }
+            if let Some(axis) = rule.surface.axis() {
+                for &w in &t {
+                    if w != u && angle_about(&axis, pv, self.pos(w)) > rule.max_edge_angle {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// The cheapest collapse of `u` by [`State::cost`] alone, or, with
+    /// `check`, the cheapest one [`State::allowed`] also allows.
+    fn best_candidate(&self, u: u32, check: bool, scratch: &mut Scratch) -> Option<Candidate> {
         if self.removed[u as usize] || self.input.roles[u as usize] == VertexRole::Keep {
             return None;
         }
-        let mut best: Option<Candidate> = None;
         self.neighbours_into(u, &mut scratch.nu);
+        let mut best: Option<Candidate> = None;
         for &v in &scratch.nu {
-            if let Some((class, cost)) = self.evaluate(u, v, &scratch.nu, &mut scratch.nv) {
-                let c = Candidate {
-                    class,
-                    cost,
-                    u,
-                    v,
-                    stamp: self.stamp[u as usize],
-                };
-                if best.is_none_or(|b| c > b) {
-                    best = Some(c);
-                }
+            let Some((class, cost)) = self.cost(u, v) else {
+                continue;
+            };
+            let c = Candidate {
+                class,
+                cost,
+                u,
+                v,
+                stamp: self.stamp[u as usize],
+            };
+            if best.is_some_and(|b| c <= b) {
+                continue;
             }
+            if check && !self.allowed(u, v, &scratch.nu, &mut scratch.nv) {
+                continue;
+            }
+            best = Some(c);
         }
         best
     }
@@ -543,32 +576,39 @@ impl<'a> State<'a> {
 pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
     let mut st = State::new(input);
     let nv = input.positions.len();
+    // One entry per vertex: its cheapest collapse, validity tested only when it reaches the
+    // top (see `Candidate`).
     let mut heap = BinaryHeap::new();
     let mut scratch = Scratch::default();
     for u in 0..nv as u32 {
-        if let Some(c) = st.best_candidate(u, &mut scratch) {
-            heap.push(c);
-        }
+        heap.extend(st.best_candidate(u, false, &mut scratch));
     }
     while let Some(c) = heap.pop() {
         if st.removed[c.u as usize] || c.stamp != st.stamp[c.u as usize] {
             continue;
         }
-        // Re-validate: the neighbourhood may have changed since the entry was pushed.
-        st.neighbours_into(c.u, &mut scratch.nu);
-        match st.evaluate(c.u, c.v, &scratch.nu, &mut scratch.nv) {
-            Some((class, cost)) if class == c.class && cost <= c.cost * (1.0 + 1e-12) + 1e-300 => {}
-            _ => {
-                st.stamp[c.u as usize] += 1;
-                if let Some(n) = st.best_candidate(c.u, &mut scratch) {
-                    heap.push(n);
-                }
-                continue;
-            }
+        // Re-validate: the neighbourhood (and the survivor's quadric) may have changed since
+        // the entry was queued.
+        let cost_now = if st.removed[c.v as usize] {
+            None
+        } else {
+            st.cost(c.u, c.v)
+        };
+        let unchanged = cost_now.is_some_and(|(class, cost)| {
+            class == c.class && cost <= c.cost * (1.0 + 1e-12) + 1e-300
+        });
+        if !unchanged || {
+            st.neighbours_into(c.u, &mut scratch.nu);
+            !st.allowed(c.u, c.v, &scratch.nu, &mut scratch.nv)
+        } {
+            // Queue u's real best collapse (re-tested again when it reaches the top).
+            st.stamp[c.u as usize] += 1;
+            heap.extend(st.best_candidate(c.u, true, &mut scratch));
+            continue;
         }
         st.collapse(c.u, c.v);
         // The survivor's ring (which now includes u's old ring) and the survivor itself
-        // see new neighbourhoods: their best collapses and link conditions changed.
+        // see new neighbourhoods: their costs and link conditions changed.
         let mut ring = std::mem::take(&mut scratch.ring);
         st.neighbours_into(c.v, &mut ring);
         ring.push(c.v);
@@ -577,9 +617,7 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
                 continue;
             }
             st.stamp[w as usize] += 1;
-            if let Some(n) = st.best_candidate(w, &mut scratch) {
-                heap.push(n);
-            }
+            heap.extend(st.best_candidate(w, false, &mut scratch));
         }
         scratch.ring = ring;
     }

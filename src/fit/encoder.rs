@@ -37,7 +37,7 @@ use super::segment::{segment, SegmentOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, PatchKind};
 use crate::metrics::{
-    closest_points, point_distances, sample_surface, SampleCount, SurfaceSample, TriangleSurface,
+    closest_points_near, sample_surface, SampleCount, SurfaceSample, TriangleSurface,
 };
 use crate::subdiv::{subdivide, Refinement, SubdivOptions};
 
@@ -890,6 +890,7 @@ struct ErrorMeter<'a> {
     input_surface: &'a TriangleSurface,
     chord: &'a [f64],
     error_samples: usize,
+    tol: f64,
 }
 
 impl ErrorMeter<'_> {
@@ -900,13 +901,24 @@ impl ErrorMeter<'_> {
             u32::from(level),
             &SubdivOptions {
                 limit: true,
+                normals: false,
                 ..Default::default()
             },
         )?;
         let s_tris: Vec<[u32; 3]> = surface_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
-        let s_surface = TriangleSurface::new(surface_mesh.positions.clone(), s_tris.clone())?;
+        // Subdivision output lists the descendants of each face together: index runs of 8
+        // triangles instead of single triangles (bug33398 at level 4: the BVH build 1.4 s ->
+        // 0.1 s, queries no slower).
+        let s_surface =
+            TriangleSurface::with_blocks(surface_mesh.positions.clone(), s_tris.clone(), 8)?;
+        // Most points of a fit worth measuring are within a few tolerances of the other
+        // surface: search that far first (same answers, a fraction of the tree visited).
+        let radius = 2.0 * self.tol;
         let in_points: Vec<DVec3> = self.input_samples.iter().map(|s| s.point).collect();
-        let d_in = point_distances(&in_points, &s_surface);
+        let d_in: Vec<f64> = closest_points_near(&in_points, &s_surface, radius)
+            .iter()
+            .map(|h| h.distance)
+            .collect();
         let s_samples = sample_surface(
             &surface_mesh.positions,
             &s_tris,
@@ -915,7 +927,7 @@ impl ErrorMeter<'_> {
             0x5C0D_E000_0000_0002,
         );
         let out_points: Vec<DVec3> = s_samples.iter().map(|s| s.point).collect();
-        let out_hits = closest_points(&out_points, self.input_surface);
+        let out_hits = closest_points_near(&out_points, self.input_surface, radius);
         let stats = |d: &mut dyn Iterator<Item = f64>| -> (f64, f64, f64) {
             let (mut max, mut sq, mut sum, mut n) = (0.0f64, 0.0, 0.0, 0usize);
             for x in d {
@@ -1146,6 +1158,7 @@ pub fn fit_model(
         input_surface: &input_surface,
         chord: &chord,
         error_samples: opts.error_samples,
+        tol,
     };
     let mut best: Option<(FitError, ControlMesh, u8)> = None;
     let mut levels_tried = opts.default_level;

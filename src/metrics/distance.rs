@@ -97,16 +97,27 @@ const CHUNK: usize = 256;
 
 /// Closest points on `surface` to each of `points`, in the order of `points`.
 pub fn closest_points(points: &[DVec3], surface: &TriangleSurface) -> Vec<ClosestPoint> {
+    closest_points_near(points, surface, f64::MAX)
+}
+
+/// Closest points on `surface` to each of `points`, for points expected within `radius` of
+/// it: each query first searches only that far, or only as far as the previous point's hit
+/// if that is nearer (a small radius prunes almost the whole tree), and searches everywhere
+/// only when nothing is that near. Same answers as [`closest_points`].
+pub fn closest_points_near(
+    points: &[DVec3],
+    surface: &TriangleSurface,
+    radius: f64,
+) -> Vec<ClosestPoint> {
     let chunk_fn = |chunk: &[DVec3]| -> Vec<ClosestPoint> {
         let mut out = Vec::with_capacity(chunk.len());
         let mut prev: Option<DVec3> = None;
         for &p in chunk {
-            let hit = prev.and_then(|q| {
-                // |p - q| bounds the distance since q is on the surface; pad for rounding.
-                let bound = (p - q).length() * (1.0 + 1e-9) + 1e-300;
-                surface.closest_point_within(p, bound)
-            });
-            let hit = hit.unwrap_or_else(|| surface.closest_point(p));
+            // |p - q| bounds the distance since q is on the surface; pad for rounding.
+            let bound = prev.map_or(radius, |q| radius.min((p - q).length() * (1.0 + 1e-9)));
+            let hit = surface
+                .closest_point_within(p, bound.max(1e-300))
+                .unwrap_or_else(|| surface.closest_point(p));
             prev = Some(hit.point).filter(|q| q.is_finite());
             out.push(hit);
         }

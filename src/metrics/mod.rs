@@ -11,8 +11,8 @@ mod sampling;
 mod surface;
 
 pub use distance::{
-    closest_points, hausdorff, one_sided_distances, point_distances, DistanceOptions,
-    DistanceReport, OneSided,
+    closest_points, closest_points_near, hausdorff, one_sided_distances, point_distances,
+    DistanceOptions, DistanceReport, OneSided,
 };
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
@@ -98,9 +98,15 @@ mod tests {
 
     #[test]
     fn bvh_matches_brute_force() {
-        for seed in 0..4u64 {
+        // Per-triangle leaves, and runs of 5 and 16 triangles per leaf (random triangle
+        // order: the blocks' boxes overlap a lot, the answers must not change).
+        for (seed, block) in (0..4u64).flat_map(|s| [(s, 0), (s, 5), (s, 16)]) {
             let (pos, tris) = random_mesh(seed, 12);
-            let surf = TriangleSurface::new(pos.clone(), tris.clone()).unwrap();
+            let surf = if block == 0 {
+                TriangleSurface::new(pos.clone(), tris.clone()).unwrap()
+            } else {
+                TriangleSurface::with_blocks(pos.clone(), tris.clone(), block).unwrap()
+            };
             let mut rng = SplitMix64::new(100 + seed);
             for k in 0..2000 {
                 // Mix of near-surface and far points.
@@ -128,6 +134,10 @@ mod tests {
             let d = point_distances(&pts, &surf);
             for (p, d) in pts.iter().zip(d) {
                 assert!((d - brute(*p, &pos, &tris)).abs() <= 1e-9);
+            }
+            // A search radius smaller than many distances changes nothing either.
+            for hit in pts.iter().zip(closest_points_near(&pts, &surf, 0.05)) {
+                assert!((hit.1.distance - brute(*hit.0, &pos, &tris)).abs() <= 1e-9);
             }
         }
     }

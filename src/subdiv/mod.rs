@@ -63,6 +63,9 @@ pub const MAX_LEVEL: u32 = 12;
 pub struct SubdivOptions {
     /// Project the output vertices to the limit surface and return limit normals.
     pub limit: bool,
+    /// With `limit`: also compute the limit normals (default true; callers that only need
+    /// the surface, such as the encoder's error measurement, save their cost).
+    pub normals: bool,
     /// Refuse to produce more than this many triangles.
     pub max_faces: u64,
     /// Sparse (S-CODE, default) or dense output of boundary patches.
@@ -73,6 +76,7 @@ impl Default for SubdivOptions {
     fn default() -> Self {
         SubdivOptions {
             limit: false,
+            normals: true,
             max_faces: DEFAULT_MAX_FACES,
             boundary_patches: BoundaryPatchOutput::Sparse,
         }
@@ -671,8 +675,12 @@ pub fn subdivide(
         r.positions_into(&mesh.positions, level, &mut p, &mut scratch)?;
     }
     let (positions, normals) = if opts.limit {
-        let n = r.limit_normals(&p, level)?;
-        (r.limit_positions(&p, level)?, Some(n))
+        let n = if opts.normals {
+            Some(r.limit_normals(&p, level)?)
+        } else {
+            None
+        };
+        (r.limit_positions(&p, level)?, n)
     } else {
         (p, None)
     };
@@ -749,7 +757,12 @@ pub fn subdivide_adaptive(
     let levels = r.base_levels_from_control(per_control_face_levels)?;
     let p = r.positions(&mesh.positions)?;
     let (pos, normals) = if opts.limit {
-        (r.limit_positions(&p, max)?, Some(r.limit_normals(&p, max)?))
+        let n = if opts.normals {
+            Some(r.limit_normals(&p, max)?)
+        } else {
+            None
+        };
+        (r.limit_positions(&p, max)?, n)
     } else {
         (p, None)
     };
