@@ -36,15 +36,19 @@ pub struct TriangleSurface {
 enum Index {
     /// One BVH leaf per triangle (parry's `TriMesh`): any triangle order.
     Triangles(TriMesh),
-    /// One BVH leaf per run of `block` consecutive triangles. For meshes whose consecutive
-    /// triangles are neighbours, such as subdivision output (the descendants of a face are
-    /// consecutive), the tree has `block` times fewer leaves: much cheaper to build and
-    /// shallower to search, for a few more triangle tests per leaf.
+    /// One BVH leaf per run of up to `block` consecutive triangles. For meshes whose
+    /// consecutive triangles are neighbours, such as subdivision output (the descendants of
+    /// a face are consecutive), the tree has up to `block` times fewer leaves: much cheaper
+    /// to build and shallower to search, for a few more triangle tests per leaf. A run ends
+    /// early where its box would grow well beyond a typical triangle's (large triangles,
+    /// such as the sparse output of planes, stay alone: a large box in a leaf is tested by
+    /// every query near it).
     Blocks {
         positions: Vec<DVec3>,
         triangles: Vec<[u32; 3]>,
         bvh: Bvh,
-        block: usize,
+        /// Leaf k holds triangles `runs[k]..runs[k + 1]`.
+        runs: Vec<u32>,
     },
 }
 
@@ -74,20 +78,39 @@ impl TriangleSurface {
     ) -> Result<Self> {
         check_triangles(&positions, &triangles)?;
         let block = block.max(1);
-        let leaves: Vec<Aabb> = triangles
-            .chunks(block)
-            .map(|run| {
-                let mut lo = DVec3::splat(f64::INFINITY);
-                let mut hi = DVec3::splat(f64::NEG_INFINITY);
-                for t in run {
-                    for &v in t {
-                        lo = lo.min(positions[v as usize]);
-                        hi = hi.max(positions[v as usize]);
-                    }
-                }
-                Aabb::new(lo, hi)
+        let tri_box = |t: &[u32; 3]| {
+            let p = t.map(|v| positions[v as usize]);
+            (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
+        };
+        // Typical triangle size: the median box diagonal.
+        let mut sizes: Vec<f64> = triangles
+            .iter()
+            .map(|t| {
+                let (lo, hi) = tri_box(t);
+                (hi - lo).length()
             })
             .collect();
+        let mid = sizes.len() / 2;
+        let typical = *sizes.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let limit = 4.0 * typical;
+        let mut runs = vec![0u32];
+        let mut leaves = Vec::new();
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for (i, t) in triangles.iter().enumerate() {
+            let (tlo, thi) = tri_box(t);
+            let count = i - *runs.last().unwrap_or(&0) as usize;
+            let (mlo, mhi) = (lo.min(tlo), hi.max(thi));
+            if count > 0 && (count >= block || (mhi - mlo).length() > limit) {
+                leaves.push(Aabb::new(lo, hi));
+                runs.push(i as u32);
+                (lo, hi) = (tlo, thi);
+            } else {
+                (lo, hi) = (mlo, mhi);
+            }
+        }
+        leaves.push(Aabb::new(lo, hi));
+        runs.push(triangles.len() as u32);
         let bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &leaves);
         let n = triangles.len() as u32;
         Ok(TriangleSurface {
@@ -95,7 +118,7 @@ impl TriangleSurface {
                 positions,
                 triangles,
                 bvh,
-                block,
+                runs,
             },
             source_face: (0..n).collect(),
         })
@@ -156,8 +179,8 @@ impl TriangleSurface {
                 positions,
                 triangles,
                 bvh,
-                block,
-            } => return closest_in_blocks(positions, triangles, bvh, *block, p, max_dist),
+                runs,
+            } => return closest_in_blocks(positions, triangles, bvh, runs, p, max_dist),
         };
         let (proj, (tri, loc)) =
             trimesh.project_local_point_and_get_location_with_max_dist(p, false, max_dist)?;
@@ -245,7 +268,7 @@ fn closest_in_blocks(
     positions: &[DVec3],
     triangles: &[[u32; 3]],
     bvh: &Bvh,
-    block: usize,
+    runs: &[u32],
     p: DVec3,
     max_dist: f64,
 ) -> Option<ClosestPoint> {
@@ -255,10 +278,11 @@ fn closest_in_blocks(
     };
     // Leaf cost: squared distance, with the hit (its `distance` filled in at the end).
     let leaf = |leaf: u32, best: f64| -> Option<(f64, ClosestPoint)> {
-        let start = leaf as usize * block;
+        let (start, end) = (*runs.get(leaf as usize)?, *runs.get(leaf as usize + 1)?);
+        let start = start as usize;
         let mut found = None;
         let mut best = best;
-        let run = triangles.get(start..(start + block).min(triangles.len()))?;
+        let run = triangles.get(start..end as usize)?;
         for (k, t) in run.iter().enumerate() {
             let [a, b, c] = t.map(|v| positions[v as usize]);
             let (q, bc) = closest_point_on_triangle(p, a, b, c);
