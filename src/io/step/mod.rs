@@ -40,6 +40,7 @@
 //! (OFFSET_SURFACE, RECTANGULAR_TRIMMED_SURFACE, CURVE_BOUNDED_SURFACE, TRIMMED_CURVE,
 //! COMPOSITE_CURVE, ...: those faces are skipped).
 
+mod analytic;
 mod brep;
 mod conform;
 mod tessellate;
