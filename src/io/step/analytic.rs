@@ -28,14 +28,21 @@ use crate::mesh::Axis;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Kind {
     Plane,
-    Cylinder { radius: f64 },
+    Cylinder {
+        radius: f64,
+    },
     /// `tan_angle` is `tan(semi_angle)`, `cos_angle`/`sin_angle` those of the semi-angle.
     Cone {
         radius: f64,
         semi_angle: f64,
     },
-    Sphere { radius: f64 },
-    Torus { major: f64, minor: f64 },
+    Sphere {
+        radius: f64,
+    },
+    Torus {
+        major: f64,
+        minor: f64,
+    },
 }
 
 /// An elementary surface in its STEP placement. Kept as the frame plus the sizes (not as a
@@ -280,10 +287,7 @@ impl Analytic {
                 let r = (radius + v0 * t).abs().max((radius + v1 * t).abs());
                 (split(u0, u1, step(r)), vec![v0, v1])
             }
-            Kind::Sphere { radius } => (
-                split(u0, u1, step(radius)),
-                split(v0, v1, step(radius)),
-            ),
+            Kind::Sphere { radius } => (split(u0, u1, step(radius)), split(v0, v1, step(radius))),
             Kind::Torus { major, minor } => (
                 split(u0, u1, step(major + minor)),
                 split(v0, v1, step(minor)),
@@ -424,7 +428,9 @@ mod tests {
             major: 4.0,
             minor: 1.0,
         });
-        assert!(tor.point(0.0, 0.0).abs_diff_eq(tor.origin + 5.0 * tor.x, 1e-12));
+        assert!(tor
+            .point(0.0, 0.0)
+            .abs_diff_eq(tor.origin + 5.0 * tor.x, 1e-12));
         assert!(tor
             .point(PI, FRAC_PI_2)
             .abs_diff_eq(tor.origin - 4.0 * tor.x + tor.z, 1e-12));
@@ -464,7 +470,8 @@ mod tests {
                     #2=DIRECTION('',(0.,0.,1.));\n#3=DIRECTION('',(1.,0.,0.));\n\
                     #4=AXIS2_PLACEMENT_3D('',#1,#2,#3);\n#5=CONICAL_SURFACE('',#4,2.,45.);\n\
                     #6=TOROIDAL_SURFACE('',#4,8.25,54.87);\n#7=PLANE('',#4);\n\
-                    #8=CYLINDRICAL_SURFACE('',#4,-1.);\nENDSEC;\nEND-ISO-10303-21;\n";
+                    #8=CYLINDRICAL_SURFACE('',#4,-1.);\n#9=DIRECTION('',(1.,0.,0.));\n\
+                    #10=AXIS2_PLACEMENT_3D('',#1,#9,$);\n#11=PLANE('',#10);\nENDSEC;\nEND-ISO-10303-21;\n";
         let records = super::super::text::scan(text);
         let cone = Analytic::from_record(&records, 5, PI / 180.0)
             .unwrap()
@@ -486,11 +493,21 @@ mod tests {
             }
         );
         assert_eq!(
-            Analytic::from_record(&records, 7, 1.0).unwrap().unwrap().kind,
+            Analytic::from_record(&records, 7, 1.0)
+                .unwrap()
+                .unwrap()
+                .kind,
             Kind::Plane
         );
         let err = Analytic::from_record(&records, 8, 1.0).unwrap_err();
-        assert!(err.contains("CYLINDRICAL_SURFACE #8") && err.contains("radius"), "{err}");
+        assert!(
+            err.contains("CYLINDRICAL_SURFACE #8") && err.contains("radius"),
+            "{err}"
+        );
         assert_eq!(Analytic::from_record(&records, 1, 1.0), Ok(None));
+        // No ref_direction and the axis along x (bug27693's planes): a frame all the same.
+        let plane = Analytic::from_record(&records, 11, 1.0).unwrap().unwrap();
+        assert!(plane.z.abs_diff_eq(DVec3::X, 1e-12));
+        assert!(plane.x.dot(plane.z).abs() < 1e-12 && (plane.x.length() - 1.0).abs() < 1e-12);
     }
 }

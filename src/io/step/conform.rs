@@ -101,9 +101,7 @@ impl UvSurface for Surface {
         let found = SearchParameter::<D2>::search_parameter(self, pt, h, 100)
             .or_else(|| SearchParameter::<D2>::search_parameter(self, pt, None, 100))
             .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, h, 100))
-            .or_else(|| {
-                SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, None, 100)
-            })
+            .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, None, 100))
             .map(|(u, v)| [u, v]);
         found
     }
@@ -240,7 +238,7 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
                 vertex: FaceVertex::Pool(id),
             });
         }
-        let pts = split_singular(surface, pts);
+        let (mut pts, poles) = split_singular(surface, pts);
         let first = pts[0].uv;
         let last = pts[pts.len() - 1].uv;
         let mut shift = [0.0; 2];
@@ -248,6 +246,25 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
             shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
         }
         let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
+        // A loop that goes round the period and through a pole (a cap bounded by a circle
+        // and a seam edge up to the pole and back): it is closed in (u, v) along the pole
+        // line, so from the pole on its points lie one period back.
+        if let [k] = open_axes.as_slice() {
+            if let Some(&(i, _)) = poles.iter().find(|p| p.1 == *k) {
+                let pole = pts[i];
+                let second_copy = pts
+                    .get(i + 1)
+                    .is_some_and(|q| q.vertex == pole.vertex && q.uv[1 - k] == pole.uv[1 - k]);
+                if !second_copy {
+                    pts.insert(i + 1, pole);
+                }
+                for p in &mut pts[i + 1..] {
+                    p.uv[*k] -= shift[*k];
+                }
+                closed.push(pts);
+                continue;
+            }
+        }
         match open_axes.as_slice() {
             [] => closed.push(pts),
             [k] => {
@@ -414,7 +431,13 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
 /// Replaces each boundary point at a singular point of the surface (a pole or apex, where
 /// one parameter does not move the point) by two copies that continue the neighbours'
 /// free parameter, as truck does, so the loop does not jump across the parameter plane.
-fn split_singular<S: UvSurface>(surface: &S, pts: Vec<UvPoint>) -> Vec<UvPoint> {
+///
+/// Also returns, for each such point, the index of its first copy in the result and the
+/// free parameter (the one that does not move the point).
+fn split_singular<S: UvSurface>(
+    surface: &S,
+    pts: Vec<UvPoint>,
+) -> (Vec<UvPoint>, Vec<(usize, usize)>) {
     let n = pts.len();
     let singular: Vec<Option<usize>> = pts
         .iter()
@@ -435,9 +458,10 @@ fn split_singular<S: UvSurface>(surface: &S, pts: Vec<UvPoint>) -> Vec<UvPoint> 
         })
         .collect();
     if singular.iter().all(Option::is_none) {
-        return pts;
+        return (pts, Vec::new());
     }
     let mut out = Vec::with_capacity(n + 4);
+    let mut poles = Vec::new();
     for i in 0..n {
         let Some(k) = singular[i] else {
             out.push(pts[i]);
@@ -447,6 +471,7 @@ fn split_singular<S: UvSurface>(surface: &S, pts: Vec<UvPoint>) -> Vec<UvPoint> 
         let next = pts[(i + 1) % n].uv[k];
         let mut a = pts[i];
         a.uv[k] = prev;
+        poles.push((out.len(), k));
         out.push(a);
         if (next - prev).abs() > 1e-12 {
             let mut b = pts[i];
@@ -454,7 +479,7 @@ fn split_singular<S: UvSurface>(surface: &S, pts: Vec<UvPoint>) -> Vec<UvPoint> 
             out.push(b);
         }
     }
-    out
+    (out, poles)
 }
 
 /// truck's parameter grid over `range`, refusing runaway sizes.
@@ -522,10 +547,7 @@ fn edge_points<S: UvSurface>(
             [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
         })
         .collect();
-    let xyz: Vec<DVec3> = pts
-        .iter()
-        .map(|uv| surface.point(uv[0], uv[1]))
-        .collect();
+    let xyz: Vec<DVec3> = pts.iter().map(|uv| surface.point(uv[0], uv[1])).collect();
     let degenerate = xyz.iter().all(|p| p.distance(xyz[0]) <= 1e-3 * tol);
     if degenerate {
         out.new_points.push(xyz[0]);

@@ -424,8 +424,8 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             // surface was), else truck's.
             let surface = pf.face.surface.clone();
             let (exact, same_sense) = (pf.exact, pf.same_sense);
-            let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
-                match exact {
+            let watched =
+                run_with_timeout("scode-step-face", opts.face_timeout, move || match exact {
                     Some(a) => conform::conforming_tessellation(&a, &loops, chord).map(|mut cm| {
                         if !same_sense {
                             for t in &mut cm.triangles {
@@ -435,8 +435,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                         cm
                     }),
                     None => conform::conforming_tessellation(&surface, &loops, chord),
-                }
-            });
+                });
             let mut face_tris: Vec<[u32; 3]> = Vec::new();
             let why_not = match watched {
                 Watched::Done(Ok(cm)) => {

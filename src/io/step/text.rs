@@ -242,7 +242,12 @@ impl Records {
             .and_then(|x| self.reference(x))
             .and_then(|d| self.triple(d))
             .unwrap_or(DVec3::X);
-        let x = (x - x.dot(z) * z).normalize_or_zero();
+        let mut x = (x - x.dot(z) * z).normalize_or_zero();
+        if x == DVec3::ZERO {
+            // No ref_direction, or one along the axis: ISO 10303-42 `first_proj_axis`
+            // takes (1, 0, 0), or (0, 1, 0) when the axis is along x.
+            x = (DVec3::Y - DVec3::Y.dot(z) * z).normalize_or_zero();
+        }
         if z == DVec3::ZERO || x == DVec3::ZERO {
             return None;
         }
