@@ -31,7 +31,7 @@ pub(super) enum Kind {
     Cylinder {
         radius: f64,
     },
-    /// `tan_angle` is `tan(semi_angle)`, `cos_angle`/`sin_angle` those of the semi-angle.
+    /// `radius` at the placement (`v = 0`), `semi_angle` in radians, in `(0, pi/2)`.
     Cone {
         radius: f64,
         semi_angle: f64,

@@ -98,12 +98,11 @@ impl UvSurface for Surface {
     fn project(&self, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
         let pt = Point3::new(p.x, p.y, p.z);
         let h = hint.map(|h| (h[0], h[1]));
-        let found = SearchParameter::<D2>::search_parameter(self, pt, h, 100)
+        SearchParameter::<D2>::search_parameter(self, pt, h, 100)
             .or_else(|| SearchParameter::<D2>::search_parameter(self, pt, None, 100))
             .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, h, 100))
             .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, None, 100))
-            .map(|(u, v)| [u, v]);
-        found
+            .map(|(u, v)| [u, v])
     }
 
     fn project_globally(&self, p: DVec3) -> Option<([f64; 2], f64)> {
