@@ -18,6 +18,7 @@ use truck_stepio::r#in::{
 };
 use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace};
 
+use super::analytic::Analytic;
 use super::text::{self, Records};
 use super::{run_with_timeout, FaceSurface, SkippedFace, Watched};
 use crate::error::{Error, Result};
@@ -32,6 +33,12 @@ pub(super) struct ParsedFace {
     pub face: CompressedFace<Surface>,
     /// In file units.
     pub info: FaceSurface,
+    /// The exact surface from the STEP record (plane, cylinder, cone, sphere, torus), in
+    /// its own parametrisation and orientation (`same_sense` not applied); `None` for
+    /// other surfaces, which only truck's `face.surface` describes.
+    pub exact: Option<Analytic>,
+    /// The face's `same_sense`: whether its normal is the surface's.
+    pub same_sense: bool,
 }
 
 /// One body's converted faces, with the edges and vertices they use (indices local to the
@@ -186,7 +193,9 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
             solid_ids.len()
         ));
     }
+    let radians_per_angle_unit = records.radians_per_angle_unit();
     Ok(Loaded {
+        radians_per_angle_unit,
         table: Arc::new(table),
         records: Arc::new(records),
         body_shells,
@@ -210,6 +219,8 @@ pub(super) struct Loaded {
     skipped: Vec<SkippedFace>,
     notes: Vec<String>,
     millimetres_per_unit: Option<f64>,
+    /// Plane-angle unit of the file (cone semi-angles), radians per unit.
+    radians_per_angle_unit: f64,
 }
 
 /// Converts every face of every body, each in a watchdog thread (`face_timeout`): a face
@@ -221,9 +232,11 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
         body_shells,
         instances,
         mut skipped,
-        notes,
+        mut notes,
         millimetres_per_unit,
+        radians_per_angle_unit,
     } = loaded;
+    let mut exact_faces = 0usize;
     let mut bodies: Vec<ParsedBody> = Vec::new();
     for (id, entity, shells) in body_shells {
         let name = format!("body{}", bodies.len() + 1);
@@ -255,7 +268,7 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
                 let (nv, ne) = (body.vertices.len(), body.edges.len());
                 let watched =
                     run_with_timeout("scode-step-convert", opts.face_timeout, move || {
-                        convert_face(&t, &r, &f, &m, nv, ne)
+                        convert_face(&t, &r, &f, &m, nv, ne, radians_per_angle_unit)
                     });
                 let result = match watched {
                     Watched::Done(r) => r,
@@ -292,10 +305,13 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
                         }
                         let mut info = out.info;
                         info.body = bodies.len() as u32;
+                        exact_faces += usize::from(out.exact.is_some());
                         body.faces.push(ParsedFace {
                             face_id: out.real_id,
                             face: cface,
                             info,
+                            exact: out.exact,
+                            same_sense: out.same_sense,
                         });
                     }
                     Err((entity, reason)) => skipped.push(SkippedFace {
@@ -321,6 +337,12 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
             b.placement = m;
             bodies.push(b);
         }
+    }
+    if exact_faces > 0 {
+        notes.push(format!(
+            "{exact_faces} faces on planes, cylinders, cones, spheres or tori evaluated exactly \
+             from their STEP records"
+        ));
     }
     Parsed {
         bodies,
@@ -372,6 +394,7 @@ fn convert_face(
     maps: &IdMaps,
     n_vertices: usize,
     n_edges: usize,
+    radians_per_angle_unit: f64,
 ) -> std::result::Result<FaceOut, FaceError> {
     let face_id = entity_ref(face).unwrap_or(0);
     let here = |id: u64| format!("{} #{id}", records.name_of(id));
@@ -419,6 +442,18 @@ fn convert_face(
     })?;
     let mut info = surface_info(&surface, records.name_of(surface_id), real_id);
     info.surface_id = surface_id;
+    // The exact surface from the record; an unreadable record leaves truck's surface.
+    let exact = Analytic::from_record(records, surface_id, radians_per_angle_unit)
+        .ok()
+        .flatten();
+    if let Some(a) = &exact {
+        let (surface, axis, radius, minor_radius, half_angle) = a.describe();
+        info.surface = surface;
+        info.axis = Some(axis);
+        info.radius = radius;
+        info.minor_radius = minor_radius;
+        info.half_angle = half_angle;
+    }
     if !holder.same_sense {
         surface.invert();
     }
@@ -524,6 +559,8 @@ fn convert_face(
             orientation,
         },
         info,
+        exact,
+        same_sense: holder.same_sense,
         new_vertices,
         new_edges,
     })
@@ -534,6 +571,8 @@ struct FaceOut {
     real_id: u64,
     face: CompressedFace<Surface>,
     info: FaceSurface,
+    exact: Option<Analytic>,
+    same_sense: bool,
     new_vertices: Vec<(u64, Point3)>,
     new_edges: Vec<(u64, usize, usize, Curve3D)>,
 }

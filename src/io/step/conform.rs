@@ -22,6 +22,8 @@ use truck_meshalgo::prelude::{
 };
 use truck_stepio::r#in::alias::Surface;
 
+use super::analytic::Analytic;
+
 /// A vertex of a conforming face mesh: a point of the shared pool (an edge polyline point),
 /// or a point this face adds (interior grid points, points on a cut seam or at a pole).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -53,15 +55,89 @@ fn p3(p: Point3) -> DVec3 {
     DVec3::new(p.x, p.y, p.z)
 }
 
-/// Parameters of `p` on `surface`, near `hint` if given.
-fn project(surface: &Surface, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
-    let pt = Point3::new(p.x, p.y, p.z);
-    let h = hint.map(|h| (h[0], h[1]));
-    SearchParameter::<D2>::search_parameter(surface, pt, h, 100)
-        .or_else(|| SearchParameter::<D2>::search_parameter(surface, pt, None, 100))
-        .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, h, 100))
-        .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, None, 100))
-        .map(|(u, v)| [u, v])
+/// What the conforming tessellation needs of a surface: evaluation, inversion, periods,
+/// domain edges and a parameter grid fine enough for the chordal tolerance. Implemented by
+/// truck's converted surfaces (B-splines and the rest) and by our exact elementary surfaces
+/// ([`Analytic`]), which follow the STEP record where truck's conversion can be wrong.
+pub(super) trait UvSurface {
+    /// For messages: how this surface was made (`" (as truck converts it)"` or empty).
+    fn source(&self) -> &'static str;
+    fn point(&self, u: f64, v: f64) -> DVec3;
+    fn periods(&self) -> [Option<f64>; 2];
+    /// Parameter ranges (a single open loop is closed against one of its ends).
+    fn ranges(&self) -> [Option<(f64, f64)>; 2];
+    /// Parameters of `p` (the nearest point of the surface), near `hint` if given.
+    fn project(&self, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]>;
+    /// A slower search for when [`UvSurface::project`] stopped in a local minimum: the
+    /// parameters and the distance. `None` when there is nothing better to try.
+    fn project_globally(&self, _p: DVec3) -> Option<([f64; 2], f64)> {
+        None
+    }
+    /// Grid lines over `range` for the chordal tolerance `tol`.
+    fn division(&self, range: ((f64, f64), (f64, f64)), tol: f64) -> (Vec<f64>, Vec<f64>);
+}
+
+impl UvSurface for Surface {
+    fn source(&self) -> &'static str {
+        " (as truck converts it)"
+    }
+
+    fn point(&self, u: f64, v: f64) -> DVec3 {
+        p3(self.subs(u, v))
+    }
+
+    fn periods(&self) -> [Option<f64>; 2] {
+        [self.u_period(), self.v_period()]
+    }
+
+    fn ranges(&self) -> [Option<(f64, f64)>; 2] {
+        let (u, v) = self.try_range_tuple();
+        [u, v]
+    }
+
+    fn project(&self, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
+        let pt = Point3::new(p.x, p.y, p.z);
+        let h = hint.map(|h| (h[0], h[1]));
+        SearchParameter::<D2>::search_parameter(self, pt, h, 100)
+            .or_else(|| SearchParameter::<D2>::search_parameter(self, pt, None, 100))
+            .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, h, 100))
+            .or_else(|| SearchNearestParameter::<D2>::search_nearest_parameter(self, pt, None, 100))
+            .map(|(u, v)| [u, v])
+    }
+
+    fn project_globally(&self, p: DVec3) -> Option<([f64; 2], f64)> {
+        project_from_grid(self, p, self.periods())
+    }
+
+    fn division(&self, range: ((f64, f64), (f64, f64)), tol: f64) -> (Vec<f64>, Vec<f64>) {
+        self.parameter_division(range, tol)
+    }
+}
+
+impl UvSurface for Analytic {
+    fn source(&self) -> &'static str {
+        " (exact, from its STEP record)"
+    }
+
+    fn point(&self, u: f64, v: f64) -> DVec3 {
+        Analytic::point(self, u, v)
+    }
+
+    fn periods(&self) -> [Option<f64>; 2] {
+        Analytic::periods(self)
+    }
+
+    fn ranges(&self) -> [Option<(f64, f64)>; 2] {
+        Analytic::ranges(self)
+    }
+
+    fn project(&self, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
+        Some(Analytic::project(self, p, hint))
+    }
+
+    fn division(&self, range: ((f64, f64), (f64, f64)), tol: f64) -> (Vec<f64>, Vec<f64>) {
+        Analytic::division(self, range, tol)
+    }
 }
 
 /// Nearest-point search started from an 8 x 8 grid over one period (or the surface's
@@ -90,7 +166,7 @@ fn project_from_grid(
             let found =
                 SearchNearestParameter::<D2>::search_nearest_parameter(surface, pt, hint, 100);
             if let Some((u, v)) = found {
-                let d = p3(surface.subs(u, v)).distance(p);
+                let d = surface.point(u, v).distance(p);
                 if best.is_none_or(|b| d < b.1) {
                     best = Some(([u, v], d));
                 }
@@ -111,16 +187,13 @@ fn nearest_rep(x: f64, reference: f64, period: Option<f64>) -> f64 {
 /// Tessellates the face of `surface` bounded by `loops` (each a cyclic list of pool vertices
 /// with their body-coordinate positions, in the face's wire order). `tol` is the chordal
 /// tolerance in body units. Errors say why the face cannot be done this way.
-pub(super) fn conforming_tessellation(
-    surface: &Surface,
+pub(super) fn conforming_tessellation<S: UvSurface>(
+    surface: &S,
     loops: &[Vec<(u32, DVec3)>],
     tol: f64,
 ) -> Result<ConformingMesh, String> {
-    let periods = [surface.u_period(), surface.v_period()];
-    let ranges = {
-        let (u, v) = surface.try_range_tuple();
-        [u, v]
-    };
+    let periods = surface.periods();
+    let ranges = surface.ranges();
     let mut out = ConformingMesh::default();
     // 1. Project every loop, unwrapping periodic parameters along it.
     let mut closed: Vec<Vec<UvPoint>> = Vec::new();
@@ -134,13 +207,13 @@ pub(super) fn conforming_tessellation(
         let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
         let mut prev: Option<[f64; 2]> = None;
         for &(id, p) in lp {
-            let Some(mut uv) = project(surface, p, prev) else {
+            let Some(mut uv) = surface.project(p, prev) else {
                 return Err("a boundary point could not be projected onto the surface".into());
             };
-            let mut off = p3(surface.subs(uv[0], uv[1])).distance(p);
+            let mut off = surface.point(uv[0], uv[1]).distance(p);
             if off > 10.0 * tol {
                 // The search can stop in a local minimum (tori): restart it from a grid.
-                if let Some((best, d)) = project_from_grid(surface, p, periods) {
+                if let Some((best, d)) = surface.project_globally(p) {
                     if d < off {
                         uv = best;
                         off = d;
@@ -149,8 +222,8 @@ pub(super) fn conforming_tessellation(
             }
             if off > 10.0 * tol {
                 return Err(format!(
-                    "the surface (as truck converts it) passes {off:.3e} from the face's \
-                     edges"
+                    "the surface{} passes {off:.3e} from the face's edges",
+                    surface.source()
                 ));
             }
             if let Some(q) = prev {
@@ -164,7 +237,7 @@ pub(super) fn conforming_tessellation(
                 vertex: FaceVertex::Pool(id),
             });
         }
-        let pts = split_singular(surface, pts);
+        let (mut pts, poles) = split_singular(surface, pts);
         let first = pts[0].uv;
         let last = pts[pts.len() - 1].uv;
         let mut shift = [0.0; 2];
@@ -172,6 +245,25 @@ pub(super) fn conforming_tessellation(
             shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
         }
         let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
+        // A loop that goes round the period and through a pole (a cap bounded by a circle
+        // and a seam edge up to the pole and back): it is closed in (u, v) along the pole
+        // line, so from the pole on its points lie one period back.
+        if let [k] = open_axes.as_slice() {
+            if let Some(&(i, _)) = poles.iter().find(|p| p.1 == *k) {
+                let pole = pts[i];
+                let second_copy = pts
+                    .get(i + 1)
+                    .is_some_and(|q| q.vertex == pole.vertex && q.uv[1 - k] == pole.uv[1 - k]);
+                if !second_copy {
+                    pts.insert(i + 1, pole);
+                }
+                for p in &mut pts[i + 1..] {
+                    p.uv[*k] -= shift[*k];
+                }
+                closed.push(pts);
+                continue;
+            }
+        }
         match open_axes.as_slice() {
             [] => closed.push(pts),
             [k] => {
@@ -338,14 +430,20 @@ pub(super) fn conforming_tessellation(
 /// Replaces each boundary point at a singular point of the surface (a pole or apex, where
 /// one parameter does not move the point) by two copies that continue the neighbours'
 /// free parameter, as truck does, so the loop does not jump across the parameter plane.
-fn split_singular(surface: &Surface, pts: Vec<UvPoint>) -> Vec<UvPoint> {
+///
+/// Also returns, for each such point, the index of its first copy in the result and the
+/// free parameter (the one that does not move the point).
+fn split_singular<S: UvSurface>(
+    surface: &S,
+    pts: Vec<UvPoint>,
+) -> (Vec<UvPoint>, Vec<(usize, usize)>) {
     let n = pts.len();
     let singular: Vec<Option<usize>> = pts
         .iter()
         .map(|p| {
             // Central differences in 3D (some inverted truck surfaces report derivatives
             // that do not match their points).
-            let at = |du: f64, dv: f64| p3(surface.subs(p.uv[0] + du, p.uv[1] + dv));
+            let at = |du: f64, dv: f64| surface.point(p.uv[0] + du, p.uv[1] + dv);
             let h = 1e-4;
             let su = at(h, 0.0).distance(at(-h, 0.0));
             let sv = at(0.0, h).distance(at(0.0, -h));
@@ -359,9 +457,10 @@ fn split_singular(surface: &Surface, pts: Vec<UvPoint>) -> Vec<UvPoint> {
         })
         .collect();
     if singular.iter().all(Option::is_none) {
-        return pts;
+        return (pts, Vec::new());
     }
     let mut out = Vec::with_capacity(n + 4);
+    let mut poles = Vec::new();
     for i in 0..n {
         let Some(k) = singular[i] else {
             out.push(pts[i]);
@@ -371,6 +470,7 @@ fn split_singular(surface: &Surface, pts: Vec<UvPoint>) -> Vec<UvPoint> {
         let next = pts[(i + 1) % n].uv[k];
         let mut a = pts[i];
         a.uv[k] = prev;
+        poles.push((out.len(), k));
         out.push(a);
         if (next - prev).abs() > 1e-12 {
             let mut b = pts[i];
@@ -378,12 +478,12 @@ fn split_singular(surface: &Surface, pts: Vec<UvPoint>) -> Vec<UvPoint> {
             out.push(b);
         }
     }
-    out
+    (out, poles)
 }
 
 /// truck's parameter grid over `range`, refusing runaway sizes.
-fn checked_division(
-    surface: &Surface,
+fn checked_division<S: UvSurface>(
+    surface: &S,
     range: ((f64, f64), (f64, f64)),
     tol: f64,
 ) -> Result<(Vec<f64>, Vec<f64>), String> {
@@ -393,7 +493,7 @@ fn checked_division(
     if !finite {
         return Err("the boundary's parameter range is not finite".into());
     }
-    let (u, v) = surface.parameter_division(range, tol);
+    let (u, v) = surface.division(range, tol);
     if u.len().saturating_mul(v.len()) > MAX_GRID_POINTS {
         return Err(format!(
             "the parameter grid would have {} x {} points",
@@ -406,8 +506,8 @@ fn checked_division(
 
 /// Interior points of the seam segment `a -> b` in (u, v), one per grid line it crosses in
 /// its main direction (at least none), as new vertices.
-fn seam_points(
-    surface: &Surface,
+fn seam_points<S: UvSurface>(
+    surface: &S,
     a: [f64; 2],
     b: [f64; 2],
     division: &(Vec<f64>, Vec<f64>),
@@ -418,7 +518,7 @@ fn seam_points(
         .map(|i| {
             let t = i as f64 / n as f64;
             let uv = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
-            out.new_points.push(p3(surface.subs(uv[0], uv[1])));
+            out.new_points.push(surface.point(uv[0], uv[1]));
             UvPoint {
                 uv,
                 vertex: FaceVertex::New(out.new_points.len() as u32 - 1),
@@ -429,8 +529,8 @@ fn seam_points(
 
 /// Interior points of the domain-edge segment `a -> b` (along axis `k`) and the vertex of
 /// its corners. A degenerate edge (a pole: every point at one position) is one vertex.
-fn edge_points(
-    surface: &Surface,
+fn edge_points<S: UvSurface>(
+    surface: &S,
     a: [f64; 2],
     b: [f64; 2],
     division: &(Vec<f64>, Vec<f64>),
@@ -446,10 +546,7 @@ fn edge_points(
             [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
         })
         .collect();
-    let xyz: Vec<DVec3> = pts
-        .iter()
-        .map(|uv| p3(surface.subs(uv[0], uv[1])))
-        .collect();
+    let xyz: Vec<DVec3> = pts.iter().map(|uv| surface.point(uv[0], uv[1])).collect();
     let degenerate = xyz.iter().all(|p| p.distance(xyz[0]) <= 1e-3 * tol);
     if degenerate {
         out.new_points.push(xyz[0]);
@@ -566,8 +663,8 @@ fn scaled_segment_distance2(c: [f64; 2], p: [f64; 2], q: [f64; 2], s: [f64; 2]) 
     ex * ex + ey * ey
 }
 
-fn triangulate(
-    surface: &Surface,
+fn triangulate<S: UvSurface>(
+    surface: &S,
     loops: &[Vec<UvPoint>],
     pool_xyz: &BTreeMap<u32, DVec3>,
     tol: f64,
@@ -694,7 +791,7 @@ fn triangulate(
             if cdt.num_vertices() == before {
                 continue; // coincides with an existing point
             }
-            out.new_points.push(p3(surface.subs(u, v)));
+            out.new_points.push(surface.point(u, v));
             let idx = h.index();
             if vertex_of.len() <= idx {
                 vertex_of.resize(idx + 1, None);
@@ -741,7 +838,7 @@ fn triangulate(
                 let u = w[0] * uv[0][0] + w[1] * uv[1][0] + w[2] * uv[2][0];
                 let v = w[0] * uv[0][1] + w[1] * uv[1][1] + w[2] * uv[2][1];
                 let flat = w[0] * corners[0] + w[1] * corners[1] + w[2] * corners[2];
-                p3(surface.subs(u, v)).distance(flat)
+                surface.point(u, v).distance(flat)
             };
             let third = 1.0 / 3.0;
             let mut bad = off([third, third, third]) > tol;
@@ -794,7 +891,7 @@ fn triangulate(
             if cdt.num_vertices() == before {
                 continue;
             }
-            out.new_points.push(p3(surface.subs(c[0], c[1])));
+            out.new_points.push(surface.point(c[0], c[1]));
             let idx = h.index();
             if vertex_of.len() <= idx {
                 vertex_of.resize(idx + 1, None);

@@ -30,6 +30,12 @@
 //!   vertices along their edge and the model is watertight. A face it cannot do falls back
 //!   to truck's tessellation snapped to the polylines; if that does not follow the face's
 //!   edges either, the face is skipped and named rather than cracking the model.
+//! * **Exact elementary surfaces** (`analytic`): planes, cylinders, cones, spheres and tori
+//!   are evaluated and inverted in closed form from their STEP records (placement, radii,
+//!   semi-angle in the file's plane-angle unit), not through truck's conversion, which
+//!   misplaces some cones and spindle tori (minor radius larger than the major one); the
+//!   face's exact axis and radii come from the record too. B-splines and the other
+//!   surfaces use truck's surface (truck keeps the weights of rational B-splines).
 //! * **Units**: truck ignores them; positions are converted to millimetres from the file's
 //!   LENGTH_UNIT (as Open CASCADE and gmsh do), see [`StepModel::millimetres_per_unit`].
 //!
@@ -40,6 +46,7 @@
 //! (OFFSET_SURFACE, RECTANGULAR_TRIMMED_SURFACE, CURVE_BOUNDED_SURFACE, TRIMMED_CURVE,
 //! COMPOSITE_CURVE, ...: those faces are skipped).
 
+mod analytic;
 mod brep;
 mod conform;
 mod tessellate;

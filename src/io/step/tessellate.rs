@@ -419,10 +419,23 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                 }
             }
             // c. Our conforming tessellation; truck's own when it cannot be done.
+            // The exact surface where the STEP record gives one (its normal is the
+            // record's: turned round when the face's `same_sense` is false, as truck's
+            // surface was), else truck's.
             let surface = pf.face.surface.clone();
-            let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
-                conform::conforming_tessellation(&surface, &loops, chord)
-            });
+            let (exact, same_sense) = (pf.exact, pf.same_sense);
+            let watched =
+                run_with_timeout("scode-step-face", opts.face_timeout, move || match exact {
+                    Some(a) => conform::conforming_tessellation(&a, &loops, chord).map(|mut cm| {
+                        if !same_sense {
+                            for t in &mut cm.triangles {
+                                t.swap(1, 2);
+                            }
+                        }
+                        cm
+                    }),
+                    None => conform::conforming_tessellation(&surface, &loops, chord),
+                });
             let mut face_tris: Vec<[u32; 3]> = Vec::new();
             let why_not = match watched {
                 Watched::Done(Ok(cm)) => {

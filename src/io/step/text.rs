@@ -104,6 +104,33 @@ impl Records {
         None
     }
 
+    /// Radians per plane-angle unit of the file (the PLANE_ANGLE_UNIT of the first
+    /// GLOBAL_UNIT_ASSIGNED_CONTEXT): 1 for radians or when the file does not say, the
+    /// conversion factor of a CONVERSION_BASED_UNIT (degrees: pi / 180).
+    pub fn radians_per_angle_unit(&self) -> f64 {
+        for id in self.ids_named("GLOBAL_UNIT_ASSIGNED_CONTEXT") {
+            for &u in &self.by_id[&id].refs {
+                let Some(unit) = self.get(u) else { continue };
+                if !unit.is("PLANE_ANGLE_UNIT") || !unit.is("CONVERSION_BASED_UNIT") {
+                    continue;
+                }
+                for &r in &unit.refs {
+                    if let Some(m) = self.get(r) {
+                        if m.is("PLANE_ANGLE_MEASURE_WITH_UNIT") {
+                            if let Some(v) = parse_measure(&m.params).filter(|v| *v > 0.0) {
+                                return v;
+                            }
+                        }
+                    }
+                }
+                if unit.params.to_ascii_uppercase().contains("DEGREE") {
+                    return std::f64::consts::PI / 180.0;
+                }
+            }
+        }
+        1.0
+    }
+
     fn unit_factor(&self, unit: &Record, depth: u32) -> Option<f64> {
         if depth > 4 {
             return None;
@@ -150,7 +177,7 @@ impl Records {
 
 impl Records {
     /// Top-level arguments of a short simple record (`NAME(a,b,(c,d))` -> `a`, `b`, `(c,d)`).
-    fn args(&self, id: u64) -> Option<Vec<String>> {
+    pub(super) fn args(&self, id: u64) -> Option<Vec<String>> {
         let p = &self.get(id)?.params;
         let open = p.find('(')?;
         let close = p.rfind(')')?;
@@ -215,7 +242,12 @@ impl Records {
             .and_then(|x| self.reference(x))
             .and_then(|d| self.triple(d))
             .unwrap_or(DVec3::X);
-        let x = (x - x.dot(z) * z).normalize_or_zero();
+        let mut x = (x - x.dot(z) * z).normalize_or_zero();
+        if x == DVec3::ZERO {
+            // No ref_direction, or one along the axis: ISO 10303-42 `first_proj_axis`
+            // takes (1, 0, 0), or (0, 1, 0) when the axis is along x.
+            x = (DVec3::Y - DVec3::Y.dot(z) * z).normalize_or_zero();
+        }
         if z == DVec3::ZERO || x == DVec3::ZERO {
             return None;
         }
