@@ -906,9 +906,9 @@ impl ErrorMeter<'_> {
             },
         )?;
         let s_tris: Vec<[u32; 3]> = surface_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
-        // Subdivision output lists the descendants of each face together: index runs of 8
-        // triangles instead of single triangles (bug33398 at level 4: the BVH build 1.4 s ->
-        // 0.1 s, queries no slower).
+        // Subdivision output lists the descendants of each face together: index runs of up
+        // to 8 triangles instead of single triangles (bug33398 at level 4: the BVH build
+        // 1.4 s -> 0.1 s).
         let s_surface =
             TriangleSurface::with_blocks(surface_mesh.positions.clone(), s_tris.clone(), 8)?;
         // Most points of a fit worth measuring are within a few tolerances of the other

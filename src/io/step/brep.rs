@@ -20,7 +20,7 @@ use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFa
 
 use super::analytic::Analytic;
 use super::text::{self, Records};
-use super::{run_with_timeout, FaceSurface, SkippedFace, Watched};
+use super::{run_with_timeout, FaceSurface, SkippedFace};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
 use crate::mesh::Axis;
@@ -270,20 +270,10 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
                     run_with_timeout("scode-step-convert", opts.face_timeout, move || {
                         convert_face(&t, &r, &f, &m, nv, ne, radians_per_angle_unit)
                     });
-                let result = match watched {
-                    Watched::Done(r) => r,
-                    Watched::Panicked(msg) => Err((
-                        face_and_surface(&records, face_id),
-                        format!("the STEP reader (truck) panicked: {msg}"),
-                    )),
-                    Watched::TimedOut => Err((
-                        face_and_surface(&records, face_id),
-                        format!(
-                            "converting the face did not finish within {:.0} s (abandoned)",
-                            opts.face_timeout.as_secs_f64()
-                        ),
-                    )),
-                };
+                let result = watched
+                    .or_why("converting the face (truck)", opts.face_timeout)
+                    .map_err(|why| (face_and_surface(&records, face_id), why))
+                    .and_then(|r| r);
                 match result {
                     Ok(out) => {
                         for (vid, p) in out.new_vertices {

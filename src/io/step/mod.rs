@@ -286,6 +286,21 @@ pub(crate) enum Watched<T> {
     TimedOut,
 }
 
+impl<T> Watched<T> {
+    /// The result, or why there is none: "`what` panicked: ..." or "`what` did not finish
+    /// within N s (abandoned)", for the message naming a skipped face.
+    pub(crate) fn or_why(self, what: &str, timeout: Duration) -> std::result::Result<T, String> {
+        match self {
+            Watched::Done(v) => Ok(v),
+            Watched::Panicked(msg) => Err(format!("{what} panicked: {msg}")),
+            Watched::TimedOut => Err(format!(
+                "{what} did not finish within {:.0} s (abandoned)",
+                timeout.as_secs_f64()
+            )),
+        }
+    }
+}
+
 /// Runs `f` in a new thread and waits at most `timeout`. A thread that does not finish is
 /// abandoned: Rust cannot stop it, so it runs on until it ends or the process exits.
 pub(crate) fn run_with_timeout<T: Send + 'static>(

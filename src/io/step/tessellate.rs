@@ -263,22 +263,14 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                         })
                         .collect::<Vec<(usize, Vec<Point3>)>>()
                 });
-                let polylines = match watched {
-                    Watched::Done(p) => p,
-                    Watched::Panicked(msg) => {
-                        skipped.push(skip(format!(
-                            "polylining its edges (truck) panicked: {msg}"
-                        )));
-                        continue;
-                    }
-                    Watched::TimedOut => {
-                        skipped.push(skip(format!(
-                            "polylining its edges did not finish within {:.0} s (abandoned)",
-                            opts.face_timeout.as_secs_f64()
-                        )));
-                        continue;
-                    }
-                };
+                let polylines =
+                    match watched.or_why("polylining its edges (truck)", opts.face_timeout) {
+                        Ok(p) => p,
+                        Err(why) => {
+                            skipped.push(skip(why));
+                            continue;
+                        }
+                    };
                 for (ge, mut pts) in polylines {
                     let (va, vb) = body.edges[ge].vertices;
                     // The polyline runs from the edge's start vertex to its end; a curve
@@ -468,20 +460,14 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                 let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
                     shell.robust_triangulation(chord)
                 });
-                let meshed: MeshedShell = match watched {
-                    Watched::Done(m) => m,
-                    Watched::Panicked(msg) => {
-                        skipped.push(skip(format!("the tessellator (truck) panicked: {msg}")));
-                        continue;
-                    }
-                    Watched::TimedOut => {
-                        skipped.push(skip(format!(
-                            "the tessellation did not finish within {:.0} s (abandoned)",
-                            opts.face_timeout.as_secs_f64()
-                        )));
-                        continue;
-                    }
-                };
+                let meshed: MeshedShell =
+                    match watched.or_why("the tessellator (truck)", opts.face_timeout) {
+                        Ok(m) => m,
+                        Err(why) => {
+                            skipped.push(skip(why));
+                            continue;
+                        }
+                    };
                 let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
                     skipped.push(skip(
                         "the tessellator (truck) could not triangulate the face".into(),
