@@ -7,14 +7,22 @@ use std::path::Path;
 use scode::codec::samples::canonical_hash;
 use scode::codec::{decode, Limits};
 
+/// The current version's vectors and the frozen version-1 ones, which must still decode.
 fn vectors() -> Vec<(String, Vec<u8>, u64, usize, usize)> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors");
+    let mut all = vectors_in(&root);
+    all.extend(vectors_in(&root.join("v1")));
+    all
+}
+
+fn vectors_in(dir: &Path) -> Vec<(String, Vec<u8>, u64, usize, usize)> {
     let text = std::fs::read_to_string(dir.join("EXPECTED.txt")).expect("EXPECTED.txt");
     text.lines()
         .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
         .map(|l| {
             let f: Vec<&str> = l.split_whitespace().collect();
             let bytes = std::fs::read(dir.join(f[0])).expect("vector file");
+            let name = format!("{}/{}", dir.display(), f[0]);
             assert_eq!(
                 bytes.len(),
                 f[4].parse::<usize>().unwrap(),
@@ -22,7 +30,7 @@ fn vectors() -> Vec<(String, Vec<u8>, u64, usize, usize)> {
                 f[0]
             );
             (
-                f[0].to_string(),
+                name,
                 bytes,
                 u64::from_str_radix(f[1], 16).unwrap(),
                 f[2].parse().unwrap(),
@@ -35,7 +43,7 @@ fn vectors() -> Vec<(String, Vec<u8>, u64, usize, usize)> {
 #[test]
 fn vectors_decode_to_expected_meshes() {
     let v = vectors();
-    assert!(v.len() >= 6);
+    assert!(v.len() >= 12);
     for (name, bytes, hash, nv, nf) in v {
         let d = decode(&bytes, &Limits::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(d.mesh.vertex_count(), nv, "{name}");

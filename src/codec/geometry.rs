@@ -130,14 +130,18 @@ fn f32_step(f: f32, up: bool) -> f32 {
 }
 
 /// Prediction classes (first part of the residual context): how many parallelogram-type
-/// predictions were averaged (1, 2, 3+), or a fallback (average of decoded neighbours, or no
-/// decoded neighbour at all).
+/// predictions were offered (1, 2, 3+), or a fallback (average of decoded neighbours, or no
+/// decoded neighbour at all); from version 2 also predictions along a crease (one, or two and
+/// more). Residuals of each class have their own spread, hence their own models.
 const KIND_NEIGHBOURS: usize = 0;
 const KIND_START: usize = 4;
-const KINDS: usize = 5;
+/// Plane-predicted coordinates (§8.3) take the context block after the version-1 kinds, so the
+/// version-1 context numbering is unchanged.
+const PLANE_CTX: usize = 5;
+const KIND_CREASE_ONE: usize = 6;
+const KIND_CREASE_MORE: usize = 7;
 /// Context count: (kind or plane) x magnitude bucket.
-const CONTEXTS: usize = (KINDS + 1) * 3;
-const PLANE_CTX: usize = KINDS;
+const CONTEXTS: usize = (KIND_CREASE_MORE + 1) * 3;
 /// Vertices are visited by the number of decoded neighbours, capped at this.
 const MAX_LEVEL: usize = 6;
 
@@ -324,16 +328,95 @@ fn div_round(num: i128, den: i128) -> i128 {
     sign * ((2 * num.abs() + den.abs()) / (2 * den.abs()))
 }
 
+/// Outgoing half-edges of `v` in rotation order (`next = twin(prev(h))`), into `out`.
+fn rotation(rb: &Rebuilt, v: u32, out: &mut Vec<u32>) {
+    out.clear();
+    let start = rb.vertex_out[v as usize];
+    let mut h = start;
+    loop {
+        out.push(h);
+        h = rb.twin[rb.prev[h as usize] as usize];
+        if h == start || out.len() > rb.next.len() {
+            break;
+        }
+    }
+}
+
+/// Version-2 predictions along creases (spec §8.2): a vertex on a crease chain (sharp or
+/// mesh-boundary edges) is predicted from the chain, not from parallelograms across faces of
+/// two different CAD faces. For `v` with crease neighbours `C` (rotation order): if `|C| = 2`
+/// and both are decoded, their midpoint; then for every decoded `w` in `C` whose own crease
+/// neighbours other than `v` are exactly one decoded `u`, the extrapolation `2w - u`. Pushed
+/// as twice their value, at most `MAX_CANDIDATES` in all.
+#[allow(clippy::too_many_arguments)]
+fn crease_candidates(
+    rb: &Rebuilt,
+    crease: &[bool],
+    v: u32,
+    out_edges: &[u32],
+    known: &[bool],
+    q: &[[i32; 3]],
+    scratch: &mut Vec<u32>,
+    cands: &mut Vec<[i64; 3]>,
+) {
+    let head = |h: u32| rb.vertex[rb.next[h as usize] as usize];
+    let p = |w: u32| q[w as usize].map(i64::from);
+    let mut nbs = [0u32; 2];
+    let mut n_nbs = 0usize;
+    let mut known_nbs = [0u32; MAX_CANDIDATES];
+    let mut n_known = 0usize;
+    for &h in out_edges {
+        if crease[h as usize] {
+            let w = head(h);
+            if n_nbs < 2 {
+                nbs[n_nbs] = w;
+            }
+            n_nbs += 1;
+            if known[w as usize] && n_known < MAX_CANDIDATES {
+                known_nbs[n_known] = w;
+                n_known += 1;
+            }
+        }
+    }
+    if n_nbs == 2 && known[nbs[0] as usize] && known[nbs[1] as usize] {
+        let (a, b) = (p(nbs[0]), p(nbs[1]));
+        cands.push([0, 1, 2].map(|c| a[c] + b[c]));
+    }
+    for &w in &known_nbs[..n_known] {
+        if cands.len() >= MAX_CANDIDATES {
+            break;
+        }
+        rotation(rb, w, scratch);
+        let mut other = None;
+        let mut n_other = 0usize;
+        for &h in scratch.iter() {
+            if crease[h as usize] && head(h) != v {
+                other = Some(head(h));
+                n_other += 1;
+            }
+        }
+        if let (1, Some(u)) = (n_other, other) {
+            if known[u as usize] {
+                let (pw, pu) = (p(w), p(u));
+                cands.push([0, 1, 2].map(|c| 4 * pw[c] - 2 * pu[c]));
+            }
+        }
+    }
+}
+
 /// Visits every vertex (spec §8.2: highest number of decoded neighbours first, then the
 /// isolated vertices), predicts it and lets `coder` code the residuals.
 ///
 /// `q` has one entry per coded vertex; `face_plane_group[f]` is the group id of face `f` when
-/// that group is a plane patch, else `NONE`.
+/// that group is a plane patch, else `NONE`. `crease[h]` (version 2 on; `None` for version-1
+/// files) says whether half-edge `h` lies on a sharp or mesh-boundary edge.
+#[allow(clippy::too_many_arguments)]
 pub fn walk(
     rb: &Rebuilt,
     face_plane_group: &[u32],
     plane_groups: usize,
     bits: u8,
+    crease: Option<&[bool]>,
     q: &mut [[i32; 3]],
     coder: &mut impl ResidualCoder,
 ) -> Result<()> {
@@ -348,6 +431,7 @@ pub fn walk(
     let mut incident: Vec<u32> = Vec::new();
     let mut out_edges: Vec<u32> = Vec::new();
     let mut cands: Vec<[i64; 3]> = Vec::new();
+    let mut scratch: Vec<u32> = Vec::new();
     let mut next_seed = 0usize;
     loop {
         // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
@@ -373,28 +457,22 @@ pub fn walk(
                 next_seed as u32
             }
         };
-        // Outgoing half-edges of v in rotation order.
-        out_edges.clear();
-        let start = rb.vertex_out[v as usize];
-        let mut h = start;
-        loop {
-            out_edges.push(h);
-            h = rb.twin[rb.prev[h as usize] as usize];
-            if h == start || out_edges.len() > rb.next.len() {
-                break;
-            }
-        }
+        rotation(rb, v, &mut out_edges);
         let kn = |w: u32| known[w as usize];
         let p = |w: u32| q[w as usize].map(i64::from);
-        // Parallelogram-type predictions, accumulated as twice their value.
-        // Parallelogram-type predictions, each as twice its value, in rotation order.
+        // Predictions along a crease (version 2), else parallelogram-type predictions in
+        // rotation order; each as twice its value.
         cands.clear();
+        if let Some(cr) = crease {
+            crease_candidates(rb, cr, v, &out_edges, &known, q, &mut scratch, &mut cands);
+        }
+        let n_crease = cands.len();
         let mut add2 = |pr2: [i64; 3]| {
             if cands.len() < MAX_CANDIDATES {
                 cands.push(pr2);
             }
         };
-        for &h in &out_edges {
+        for &h in out_edges.iter().filter(|_| n_crease == 0) {
             let f = rb.face[h as usize] as usize;
             let rf = rb.faces[f];
             if rf.hole {
@@ -442,7 +520,12 @@ pub fn walk(
         }
         let count = cands.len();
         let (pred, kind) = if count > 0 {
-            (Vec::new(), count.min(3))
+            let kind = match n_crease {
+                0 => count.min(3),
+                1 => KIND_CREASE_ONE,
+                _ => KIND_CREASE_MORE,
+            };
+            (Vec::new(), kind)
         } else {
             let mut sum = [0i64; 3];
             let mut n = 0i64;

@@ -16,6 +16,7 @@
 pub mod bytes;
 pub mod facefixer;
 pub mod geometry;
+mod names;
 pub mod rangecoder;
 pub mod samples;
 
@@ -31,7 +32,7 @@ use crate::error::{Error, Result};
 use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
 use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, Group, PatchKind};
 
-pub const FORMAT_VERSION_MAJOR: u8 = 1;
+pub const FORMAT_VERSION_MAJOR: u8 = 2;
 pub const FORMAT_VERSION_MINOR: u8 = 0;
 /// First four bytes of every `.scode` file.
 pub const MAGIC: [u8; 4] = *b"SCOD";
@@ -206,25 +207,38 @@ const FLAG_PATCHES: u64 = 16;
 const FLAG_NAMES: u64 = 32;
 const KNOWN_FLAGS: u64 = 63;
 
-/// What a file's version allows. All version gating lives here.
+/// What a file's version allows. All version gating lives here: the encoder writes the
+/// current version, the decoder reads every version listed here.
 struct Features {
     /// Known header flag bits.
     known_flags: u64,
+    /// Geometry: vertices on creases are predicted along them (§8.2, version 2).
+    crease_prediction: bool,
+    /// Names: stored in input group order with the coded->input group order, stem + number
+    /// coded (§9.2, version 2); version 1 stores plain names in coded order.
+    names_in_input_order: bool,
 }
 
 fn features_for(major: u8, _minor: u8) -> Result<Features> {
-    if major != FORMAT_VERSION_MAJOR {
-        return Err(Error::format(
+    // Minor versions may only add skippable sections; every decoder of a major version reads
+    // the flags it knows and rejects the others.
+    match major {
+        1 => Ok(Features {
+            known_flags: KNOWN_FLAGS,
+            crease_prediction: false,
+            names_in_input_order: false,
+        }),
+        2 => Ok(Features {
+            known_flags: KNOWN_FLAGS,
+            crease_prediction: true,
+            names_in_input_order: true,
+        }),
+        _ => Err(Error::format(
             "header",
             "version",
-            format!("unsupported major version {major} (this decoder reads version {FORMAT_VERSION_MAJOR}.x)"),
-        ));
+            format!("unsupported major version {major} (this decoder reads versions 1.x and {FORMAT_VERSION_MAJOR}.x)"),
+        )),
     }
-    // Minor versions of major 1 may only add skippable sections; every v1 decoder reads the
-    // flags it knows and rejects the others.
-    Ok(Features {
-        known_flags: KNOWN_FLAGS,
-    })
 }
 
 // ------------------------------------------------------------------------------------------
@@ -528,6 +542,20 @@ fn code_creases(
     Ok(())
 }
 
+/// Per half-edge: the edge is sharp or on the mesh boundary (a crease for the geometry
+/// predictions).
+fn crease_half_edges(rb: &Rebuilt, edges: &[u32], sharp: &[bool]) -> Vec<bool> {
+    let mut out = vec![false; rb.next.len()];
+    for (j, &h) in edges.iter().enumerate() {
+        let t = rb.twin[h as usize];
+        if sharp[j] || rb.is_hole(h) || rb.is_hole(t) {
+            out[h as usize] = true;
+            out[t as usize] = true;
+        }
+    }
+    out
+}
+
 fn zigzag64(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64
 }
@@ -742,11 +770,14 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let mut geom_enc = RangeEncoder::new();
     {
         let mut ge = GeomEncoder::new(&mut geom_enc);
+        // The encoder writes the current version, which predicts along creases.
+        let crease_he = crease_half_edges(&rb, &edges, &sharp);
         geometry::walk(
             &rb,
             &face_plane_group,
             groups_new_order.len(),
             bits,
+            Some(&crease_he),
             &mut q,
             &mut ge,
         )?;
@@ -820,12 +851,13 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         put_section(&mut out, SEC_FIXUPS, &fx, true, false);
     }
     if store_names {
-        let mut names = Vec::new();
-        for g in &groups_new_order {
-            put_varint(&mut names, g.name.len() as u64);
-            names.extend_from_slice(g.name.as_bytes());
+        let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
+        let mut input_of_coded = vec![0u32; group_new.len()];
+        for (og, &ng) in group_new.iter().enumerate() {
+            input_of_coded[ng as usize] = og as u32;
         }
-        put_section(&mut out, SEC_NAMES, &names, true, false);
+        let payload = names::write(&input_names, &input_of_coded);
+        put_section(&mut out, SEC_NAMES, &payload, true, false);
     }
 
     let vertex: Vec<u32> = (0..mesh.vertex_count())
@@ -839,12 +871,18 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             next_face += 1;
         }
     }
+    // With names stored, the decoder restores the input's group order.
+    let group = if store_names {
+        (0..mesh.groups.len() as u32).collect()
+    } else {
+        group_new
+    };
     Ok((
         out,
         EncodeMap {
             vertex,
             face,
-            group: group_new,
+            group,
         },
     ))
 }
@@ -1107,7 +1145,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
     let major = r.u8("version_major")?;
     let minor = r.u8("version_minor")?;
-    features_for(major, minor)?;
+    let features = features_for(major, minor)?;
     let max_raw = limits.max_input_bytes;
     let verify = limits.verify_checksums;
 
@@ -1331,11 +1369,15 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
         let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
         let mut gd = GeomDecoder::new(&mut d, quant.max_q());
+        let crease_he = features
+            .crease_prediction
+            .then(|| crease_half_edges(&rb, &edges, &sharp));
         geometry::walk(
             &rb,
             &face_plane_group,
             group_count,
             quant.bits,
+            crease_he.as_deref(),
             &mut q,
             &mut gd,
         )?;
@@ -1384,16 +1426,31 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
     let final_of_coded = final_numbering(coded_count, &merges);
 
-    // Names.
+    // Names, and (version 2) the input's group order: coded group `c` becomes group
+    // `input_of_coded[c]`.
     let mut names = vec![String::new(); group_count];
+    let mut input_of_coded: Option<Vec<u32>> = None;
     if let Some(p) = &payloads[SEC_NAMES as usize] {
-        let mut nr = Reader::new(p, "names");
-        for n in names.iter_mut() {
-            let len = nr.varint_max("name_length", nr.remaining() as u64)?;
-            let b = nr.bytes(len as usize, "name")?;
-            *n = String::from_utf8(b.to_vec()).map_err(|_| nr.err("name", "not UTF-8"))?;
+        if features.names_in_input_order {
+            let (n, order) = names::read(p, group_count)?;
+            names = n;
+            input_of_coded = Some(order);
+        } else {
+            names = names::read_v1(p, group_count)?;
         }
-        nr.expect_end()?;
+    }
+    let mut patch_kinds = patch_kinds;
+    if let Some(order) = &input_of_coded {
+        for g in face_group.iter_mut() {
+            if let Some(&o) = order.get(*g as usize) {
+                *g = o;
+            }
+        }
+        let mut kinds = vec![PatchKind::Closed; group_count];
+        for (c, &o) in order.iter().enumerate() {
+            kinds[o as usize] = patch_kinds[c];
+        }
+        patch_kinds = kinds;
     }
 
     // Assemble.

@@ -235,10 +235,10 @@ fn encoder_rejects_bad_input() {
 #[test]
 fn decoder_rejects_versions_trailing_bytes_and_limits() {
     let b = encode(&cube(), &opts()).unwrap();
-    let mut v2 = b.clone();
-    v2[4] = 2;
-    let e = decode(&v2, &Limits::default()).unwrap_err().to_string();
-    assert!(e.contains("major version 2"), "{e}");
+    let mut v3 = b.clone();
+    v3[4] = 3;
+    let e = decode(&v3, &Limits::default()).unwrap_err().to_string();
+    assert!(e.contains("major version 3"), "{e}");
     let mut trailing = b.clone();
     trailing.push(0);
     assert!(decode(&trailing, &Limits::default()).is_err());
