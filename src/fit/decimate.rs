@@ -226,6 +226,9 @@ struct Scratch {
     nu: Vec<u32>,
     nv: Vec<u32>,
     ring: Vec<u32>,
+    /// (neighbour, face holding both) pairs of one vertex, sorted: its neighbours and every
+    /// edge's faces from one pass over its faces.
+    pairs: Vec<(u32, u32)>,
 }
 
 struct State<'a> {
@@ -402,8 +405,13 @@ impl<'a> State<'a> {
     /// checks are in [`State::allowed`], done only when the candidate reaches the top of the
     /// queue.
     fn cost(&self, u: u32, v: u32) -> Option<(u8, f64)> {
-        let role = self.input.roles[u as usize];
         let (edge_len, edge) = self.edge_faces(u, v);
+        self.cost_on_edge(u, v, edge_len, edge)
+    }
+
+    /// [`State::cost`] with the edge's face count and first two faces already known.
+    fn cost_on_edge(&self, u: u32, v: u32, edge_len: usize, edge: [u32; 2]) -> Option<(u8, f64)> {
+        let role = self.input.roles[u as usize];
         if edge_len == 0 || edge_len > 2 {
             return None;
         }
@@ -520,10 +528,43 @@ impl<'a> State<'a> {
         if self.removed[u as usize] || self.input.roles[u as usize] == VertexRole::Keep {
             return None;
         }
-        self.neighbours_into(u, &mut scratch.nu);
+        let Scratch { nu, nv, pairs, .. } = scratch;
+        // One pass over u's faces gives its neighbours (as `neighbours_into`) and each
+        // edge's faces (as `edge_faces`: faces ascending, since `vfaces` lists stay sorted).
+        // One pair per face occurrence and distinct other corner, exactly what
+        // `edge_faces` counts.
+        pairs.clear();
+        for &f in &self.vfaces[u as usize] {
+            let t = self.tris[f as usize];
+            for (k, &w) in t.iter().enumerate() {
+                if w != u && !t[..k].contains(&w) {
+                    pairs.push((w, f));
+                }
+            }
+        }
+        pairs.sort_unstable();
+        nu.clear();
+        nu.extend(pairs.iter().map(|p| p.0));
+        nu.dedup();
         let mut best: Option<Candidate> = None;
-        for &v in &scratch.nu {
-            let Some((class, cost)) = self.cost(u, v) else {
+        let mut i = 0;
+        while i < pairs.len() {
+            let v = pairs[i].0;
+            let mut j = i + 1;
+            while j < pairs.len() && pairs[j].0 == v {
+                j += 1;
+            }
+            let edge_len = j - i;
+            let edge = [
+                pairs[i].1,
+                if edge_len > 1 {
+                    pairs[i + 1].1
+                } else {
+                    u32::MAX
+                },
+            ];
+            i = j;
+            let Some((class, cost)) = self.cost_on_edge(u, v, edge_len, edge) else {
                 continue;
             };
             let c = Candidate {
@@ -536,7 +577,7 @@ impl<'a> State<'a> {
             if best.is_some_and(|b| c <= b) {
                 continue;
             }
-            if check && !self.allowed(u, v, &scratch.nu, &mut scratch.nv) {
+            if check && !self.allowed(u, v, nu, nv) {
                 continue;
             }
             best = Some(c);
@@ -580,13 +621,20 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
     // top (see `Candidate`).
     let mut heap = BinaryHeap::new();
     let mut scratch = Scratch::default();
+    // Key of each vertex's live entry (the one whose stamp is current), if any: a ring
+    // vertex whose recomputed best is that same entry keeps it instead of queueing a copy
+    // (same pops in the same order, a smaller heap).
+    let mut queued: Vec<Option<(u8, u64, u32, u32)>> = vec![None; nv];
     for u in 0..nv as u32 {
-        heap.extend(st.best_candidate(u, false, &mut scratch));
+        let c = st.best_candidate(u, false, &mut scratch);
+        queued[u as usize] = c.map(|c| c.key());
+        heap.extend(c);
     }
     while let Some(c) = heap.pop() {
         if st.removed[c.u as usize] || c.stamp != st.stamp[c.u as usize] {
             continue;
         }
+        queued[c.u as usize] = None;
         // Re-validate: the neighbourhood (and the survivor's quadric) may have changed since
         // the entry was queued.
         let cost_now = if st.removed[c.v as usize] {
@@ -603,7 +651,9 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
         } {
             // Queue u's real best collapse (re-tested again when it reaches the top).
             st.stamp[c.u as usize] += 1;
-            heap.extend(st.best_candidate(c.u, true, &mut scratch));
+            let next = st.best_candidate(c.u, true, &mut scratch);
+            queued[c.u as usize] = next.map(|c| c.key());
+            heap.extend(next);
             continue;
         }
         st.collapse(c.u, c.v);
@@ -616,8 +666,17 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
             if st.removed[w as usize] {
                 continue;
             }
+            let next = st.best_candidate(w, false, &mut scratch);
+            let key = next.map(|c| c.key());
+            if key.is_some() && key == queued[w as usize] {
+                continue;
+            }
             st.stamp[w as usize] += 1;
-            heap.extend(st.best_candidate(w, false, &mut scratch));
+            queued[w as usize] = key;
+            heap.extend(next.map(|c| Candidate {
+                stamp: st.stamp[w as usize],
+                ..c
+            }));
         }
         scratch.ring = ring;
     }
