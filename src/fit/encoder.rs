@@ -30,6 +30,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use super::allowance::{add_analytic_surface_allowance, OwnFaces};
 use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
 use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole};
 use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
@@ -889,6 +890,8 @@ struct ErrorMeter<'a> {
     input_samples: Vec<SurfaceSample>,
     input_surface: &'a TriangleSurface,
     chord: &'a [f64],
+    /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
+    own_faces: OwnFaces<'a>,
     error_samples: usize,
     tol: f64,
 }
@@ -954,9 +957,14 @@ impl ErrorMeter<'_> {
             }
         }
         for (s, h) in s_samples.iter().zip(&out_hits) {
-            let e = h.distance - self.chord[h.triangle as usize];
-            worst = worst.max(e);
             let g = surface_mesh.face_groups[s.triangle as usize] as usize;
+            let e = self.own_faces.excess(
+                s.point,
+                g,
+                h.distance - self.chord[h.triangle as usize],
+                self.chord,
+            );
+            worst = worst.max(e);
             if g < group_excess.len() && e > group_excess[g].0 {
                 group_excess[g] = (e, s.point, "decoded->input");
             }
@@ -1118,14 +1126,15 @@ pub fn fit_model(
             }
         }
     }
-    let group_surfaces: Vec<Option<TriangleSurface>> = (0..mesh.groups.len() as u32)
-        .map(|g| {
-            let t: Vec<[u32; 3]> = tris
-                .iter()
-                .zip(&mesh.face_groups)
-                .filter(|(_, &fg)| fg == g)
-                .map(|(t, _)| *t)
-                .collect();
+    // Input triangles of each group (global indices), for the per-face surfaces below.
+    let mut group_triangles: Vec<Vec<u32>> = vec![Vec::new(); mesh.groups.len()];
+    for (t, &g) in mesh.face_groups.iter().enumerate() {
+        group_triangles[g as usize].push(t as u32);
+    }
+    let group_surfaces: Vec<Option<TriangleSurface>> = group_triangles
+        .iter()
+        .map(|ids| {
+            let t: Vec<[u32; 3]> = ids.iter().map(|&t| tris[t as usize]).collect();
             if t.is_empty() {
                 None
             } else {
@@ -1136,6 +1145,14 @@ pub fn fit_model(
     let input_surface = TriangleSurface::new(mesh.positions.clone(), tris.clone())?;
     let mut chord = chord_allowance(&mesh, &tris);
     add_curved_edge_allowance(&mesh, &tris, &net, &mut chord);
+    let kinds: Vec<PatchKind> = plans.iter().map(|p| p.kind).collect();
+    add_analytic_surface_allowance(
+        &mesh.positions,
+        &tris,
+        &mesh.face_groups,
+        &kinds,
+        &mut chord,
+    );
     report.timings.push(("curves", t.elapsed().as_secs_f64()));
     let mut chain_tol = vec![2.0 * tol; net.chains.len()];
     let mut chain_step = vec![60f64.to_radians(); net.chains.len()];
@@ -1157,6 +1174,10 @@ pub fn fit_model(
         ),
         input_surface: &input_surface,
         chord: &chord,
+        own_faces: OwnFaces {
+            surfaces: &group_surfaces,
+            triangles: &group_triangles,
+        },
         error_samples: opts.error_samples,
         tol,
     };
