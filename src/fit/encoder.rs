@@ -141,13 +141,23 @@ struct GroupPlan {
 
 /// The chain's frame: cylinder/cone axis of the lowest-index framed group next to it.
 fn chain_frame(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<Axis> {
-    chain_groups
-        .iter()
-        .find_map(|&g| match plans[g as usize].kind {
-            PatchKind::Boundary(BoundarySurface::Cylinder { axis })
-            | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
-            _ => None,
-        })
+    chain_frame_owner(chain_groups, plans).and_then(|g| match plans[g as usize].kind {
+        PatchKind::Boundary(BoundarySurface::Cylinder { axis })
+        | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
+        _ => None,
+    })
+}
+
+/// The group whose frame the decoder applies to the chain's crease (the lowest-index
+/// cylinder or cone boundary patch next to it), if any.
+fn chain_frame_owner(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<u32> {
+    chain_groups.iter().copied().find(|&g| {
+        matches!(
+            plans[g as usize].kind,
+            PatchKind::Boundary(BoundarySurface::Cylinder { .. })
+                | PatchKind::Boundary(BoundarySurface::Cone { .. })
+        )
+    })
 }
 
 fn kind_name(k: &PatchKind) -> &'static str {
@@ -1272,6 +1282,7 @@ pub fn fit_model(
             levels_tried = Some(5);
         }
         prev_worst = Some(worst);
+        let mut refitted_closed = Vec::new();
         for (g, bad) in bad_group.iter().enumerate() {
             if !bad {
                 continue;
@@ -1287,10 +1298,32 @@ pub fn fit_model(
                 ));
                 plan.kind = PatchKind::Closed;
                 plan.cost_factor = 2.0;
+                refitted_closed.push(g);
             }
             for &c in &group_chains[g] {
                 chain_tol[c] *= 0.5;
                 chain_step[c] = (chain_step[c] * 0.6).max(5f64.to_radians());
+            }
+        }
+        // A crease next to a cylinder or cone is interpolated in that patch's frame: on its
+        // surface, but between control points off any other surface it bounds (a slanted
+        // plane cuts a cone in a hyperbola, not in a curve affine in (theta, h, r)). A group
+        // that failed as a boundary patch may fail because of such creases, and making it
+        // closed does not change them: make the frame's owner closed too, so the crease
+        // becomes Cartesian and is fitted to its polyline (bug33398: the hexagon's sides
+        // next to its chamfer cones).
+        for g in refitted_closed {
+            for &c in &group_chains[g] {
+                let Some(h) = chain_frame_owner(&net.chains[c].groups, &plans) else {
+                    continue;
+                };
+                let plan = &mut plans[h as usize];
+                report.notes.push(format!(
+                    "group {h} ({}) refitted as a closed patch: its frame shapes a crease of group {g}",
+                    kind_name(&plan.kind)
+                ));
+                plan.kind = PatchKind::Closed;
+                plan.cost_factor = 2.0;
             }
         }
     }
