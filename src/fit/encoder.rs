@@ -600,6 +600,15 @@ fn add_curved_edge_allowance(
     }
 }
 
+/// A Cartesian chain whose tolerance has been halved down to this fraction of the
+/// tolerance (its groups failed about four times) and which already keeps every vertex
+/// cannot be refined any further: its interior control points become corners, so the
+/// decoded crease is the chain polyline itself. A smooth crease through few control points
+/// cannot follow a chain that turns by tens of degrees at a vertex (trj4: three-vertex
+/// chains between a blade and the hub, 49 degrees at the middle vertex); least squares then
+/// cuts the turn and the blade's patch sags behind its facets near that vertex.
+const STUCK_CHAIN_TOL: f64 = 0.125;
+
 /// Everything one build round produces.
 struct Built {
     control: ControlMesh,
@@ -622,6 +631,9 @@ fn build_topology(
 ) -> Built {
     let nv = mesh.vertex_count();
     let mut roles = vec![VertexRole::Interior; nv];
+    // Interior vertices of stuck Cartesian chains, made control corners below: a crease
+    // through corners only is the chain's polyline itself (see [`STUCK_CHAIN_TOL`]).
+    let mut pinned: Vec<u32> = Vec::new();
     for c in &net.corners {
         roles[c.vertex as usize] = VertexRole::Keep;
     }
@@ -634,6 +646,13 @@ fn build_topology(
         let frame = chain_frame(&chain.groups, plans);
         let min_interior = if chain_loop_len[ci] < 3 { 2 } else { 0 };
         let keep = chain_controls(&points, frame, chain_tol[ci], chain_step[ci], min_interior);
+        if frame.is_none()
+            && points.len() >= 3
+            && keep.len() == points.len()
+            && chain_tol[ci] <= STUCK_CHAIN_TOL * tol
+        {
+            pinned.extend_from_slice(&chain.vertices[1..points.len() - 1]);
+        }
         for (i, &v) in chain.vertices.iter().enumerate() {
             if roles[v as usize] == VertexRole::Keep {
                 continue;
@@ -700,8 +719,8 @@ fn build_topology(
             control.set_sharp(a, b);
         }
     }
-    for c in &net.corners {
-        let i = index[c.vertex as usize];
+    for v in net.corners.iter().map(|c| c.vertex).chain(pinned) {
+        let i = index[v as usize];
         if i != u32::MAX {
             control.corners.insert(i);
         }
