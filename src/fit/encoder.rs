@@ -30,6 +30,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
+use super::allowance::{add_analytic_surface_allowance, OwnFaces};
 use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
 use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole};
 use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
@@ -140,13 +141,23 @@ struct GroupPlan {
 
 /// The chain's frame: cylinder/cone axis of the lowest-index framed group next to it.
 fn chain_frame(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<Axis> {
-    chain_groups
-        .iter()
-        .find_map(|&g| match plans[g as usize].kind {
-            PatchKind::Boundary(BoundarySurface::Cylinder { axis })
-            | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
-            _ => None,
-        })
+    chain_frame_owner(chain_groups, plans).and_then(|g| match plans[g as usize].kind {
+        PatchKind::Boundary(BoundarySurface::Cylinder { axis })
+        | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
+        _ => None,
+    })
+}
+
+/// The group whose frame the decoder applies to the chain's crease (the lowest-index
+/// cylinder or cone boundary patch next to it), if any.
+fn chain_frame_owner(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<u32> {
+    chain_groups.iter().copied().find(|&g| {
+        matches!(
+            plans[g as usize].kind,
+            PatchKind::Boundary(BoundarySurface::Cylinder { .. })
+                | PatchKind::Boundary(BoundarySurface::Cone { .. })
+        )
+    })
 }
 
 fn kind_name(k: &PatchKind) -> &'static str {
@@ -589,6 +600,15 @@ fn add_curved_edge_allowance(
     }
 }
 
+/// A Cartesian chain whose tolerance has been halved down to this fraction of the
+/// tolerance (its groups failed about four times) and which already keeps every vertex
+/// cannot be refined any further: its interior control points become corners, so the
+/// decoded crease is the chain polyline itself. A smooth crease through few control points
+/// cannot follow a chain that turns by tens of degrees at a vertex (trj4: three-vertex
+/// chains between a blade and the hub, 49 degrees at the middle vertex); least squares then
+/// cuts the turn and the blade's patch sags behind its facets near that vertex.
+const STUCK_CHAIN_TOL: f64 = 0.125;
+
 /// Everything one build round produces.
 struct Built {
     control: ControlMesh,
@@ -611,6 +631,9 @@ fn build_topology(
 ) -> Built {
     let nv = mesh.vertex_count();
     let mut roles = vec![VertexRole::Interior; nv];
+    // Interior vertices of stuck Cartesian chains, made control corners below: a crease
+    // through corners only is the chain's polyline itself (see [`STUCK_CHAIN_TOL`]).
+    let mut pinned: Vec<u32> = Vec::new();
     for c in &net.corners {
         roles[c.vertex as usize] = VertexRole::Keep;
     }
@@ -623,6 +646,13 @@ fn build_topology(
         let frame = chain_frame(&chain.groups, plans);
         let min_interior = if chain_loop_len[ci] < 3 { 2 } else { 0 };
         let keep = chain_controls(&points, frame, chain_tol[ci], chain_step[ci], min_interior);
+        if frame.is_none()
+            && points.len() >= 3
+            && keep.len() == points.len()
+            && chain_tol[ci] <= STUCK_CHAIN_TOL * tol
+        {
+            pinned.extend_from_slice(&chain.vertices[1..points.len() - 1]);
+        }
         for (i, &v) in chain.vertices.iter().enumerate() {
             if roles[v as usize] == VertexRole::Keep {
                 continue;
@@ -689,8 +719,8 @@ fn build_topology(
             control.set_sharp(a, b);
         }
     }
-    for c in &net.corners {
-        let i = index[c.vertex as usize];
+    for v in net.corners.iter().map(|c| c.vertex).chain(pinned) {
+        let i = index[v as usize];
         if i != u32::MAX {
             control.corners.insert(i);
         }
@@ -1007,6 +1037,8 @@ struct ErrorMeter<'a> {
     input_samples: Vec<SurfaceSample>,
     input_surface: &'a TriangleSurface,
     chord: &'a [f64],
+    /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
+    own_faces: OwnFaces<'a>,
     error_samples: usize,
     tol: f64,
     cache: std::cell::RefCell<MeasureCache>,
@@ -1075,10 +1107,18 @@ impl ErrorMeter<'_> {
                 .collect();
             let pts: Vec<DVec3> = idx.iter().map(|&i| s_samples[i].point).collect();
             let hits = closest_points_near(&pts, self.input_surface, radius);
-            if hits
-                .iter()
-                .any(|h| fails(h.distance, self.chord[h.triangle as usize], max_cap))
-            {
+            // The same excess as the full measure below (own face included).
+            if idx.iter().zip(&hits).any(|(&i, h)| {
+                let s = &s_samples[i];
+                let g = surface_mesh.face_groups[s.triangle as usize] as usize;
+                let e = self.own_faces.excess(
+                    s.point,
+                    g,
+                    h.distance - self.chord[h.triangle as usize],
+                    self.chord,
+                );
+                e > self.tol || h.distance > max_cap
+            }) {
                 return Ok(None);
             }
         }
@@ -1215,10 +1255,12 @@ impl ErrorMeter<'_> {
         }
         let mut excess_out = Vec::with_capacity(n_out);
         for (s, h) in s_samples.iter().zip(&out_hits) {
-            let e = h.0 - self.chord[h.1 as usize];
+            let g = surface_mesh.face_groups[s.triangle as usize] as usize;
+            let e = self
+                .own_faces
+                .excess(s.point, g, h.0 - self.chord[h.1 as usize], self.chord);
             excess_out.push(e);
             worst = worst.max(e);
-            let g = surface_mesh.face_groups[s.triangle as usize] as usize;
             if g < group_excess.len() && e > group_excess[g].0 {
                 group_excess[g] = (e, s.point, "decoded->input");
             }
@@ -1392,17 +1434,19 @@ pub fn fit_model(
             }
         }
     }
+    // Input triangles of each group (global indices), for the per-face surfaces below.
+    let mut group_triangles: Vec<Vec<u32>> = vec![Vec::new(); mesh.groups.len()];
+    for (t, &g) in mesh.face_groups.iter().enumerate() {
+        group_triangles[g as usize].push(t as u32);
+    }
     // Each group's own vertices only (in first-use order): the same triangles in the same
     // order, so the same closest points, without a copy of every position per group
     // (bug33398: 422 groups x 53k vertices).
-    let mut group_tris: Vec<Vec<[u32; 3]>> = vec![Vec::new(); mesh.groups.len()];
-    for (t, &g) in tris.iter().zip(&mesh.face_groups) {
-        group_tris[g as usize].push(*t);
-    }
     let mut local = vec![u32::MAX; mesh.vertex_count()];
-    let group_surfaces: Vec<Option<TriangleSurface>> = group_tris
-        .into_iter()
-        .map(|t| {
+    let group_surfaces: Vec<Option<TriangleSurface>> = group_triangles
+        .iter()
+        .map(|ids| {
+            let t: Vec<[u32; 3]> = ids.iter().map(|&t| tris[t as usize]).collect();
             if t.is_empty() {
                 return None;
             }
@@ -1430,6 +1474,14 @@ pub fn fit_model(
     let input_surface = TriangleSurface::new(mesh.positions.clone(), tris.clone())?;
     let mut chord = chord_allowance(&mesh, &tris);
     add_curved_edge_allowance(&mesh, &tris, &net, &mut chord);
+    let kinds: Vec<PatchKind> = plans.iter().map(|p| p.kind).collect();
+    add_analytic_surface_allowance(
+        &mesh.positions,
+        &tris,
+        &mesh.face_groups,
+        &kinds,
+        &mut chord,
+    );
     report.timings.push(("curves", t.elapsed().as_secs_f64()));
     let mut chain_tol = vec![2.0 * tol; net.chains.len()];
     let mut chain_step = vec![60f64.to_radians(); net.chains.len()];
@@ -1451,6 +1503,10 @@ pub fn fit_model(
         ),
         input_surface: &input_surface,
         chord: &chord,
+        own_faces: OwnFaces {
+            surfaces: &group_surfaces,
+            triangles: &group_triangles,
+        },
         error_samples: opts.error_samples,
         tol,
         cache: Default::default(),
@@ -1546,6 +1602,7 @@ pub fn fit_model(
             levels_tried = Some(5);
         }
         prev_worst = Some(worst);
+        let mut refitted_closed = Vec::new();
         for (g, bad) in bad_group.iter().enumerate() {
             if !bad {
                 continue;
@@ -1561,10 +1618,32 @@ pub fn fit_model(
                 ));
                 plan.kind = PatchKind::Closed;
                 plan.cost_factor = 2.0;
+                refitted_closed.push(g);
             }
             for &c in &group_chains[g] {
                 chain_tol[c] *= 0.5;
                 chain_step[c] = (chain_step[c] * 0.6).max(5f64.to_radians());
+            }
+        }
+        // A crease next to a cylinder or cone is interpolated in that patch's frame: on its
+        // surface, but between control points off any other surface it bounds (a slanted
+        // plane cuts a cone in a hyperbola, not in a curve affine in (theta, h, r)). A group
+        // that failed as a boundary patch may fail because of such creases, and making it
+        // closed does not change them: make the frame's owner closed too, so the crease
+        // becomes Cartesian and is fitted to its polyline (bug33398: the hexagon's sides
+        // next to its chamfer cones).
+        for g in refitted_closed {
+            for &c in &group_chains[g] {
+                let Some(h) = chain_frame_owner(&net.chains[c].groups, &plans) else {
+                    continue;
+                };
+                let plan = &mut plans[h as usize];
+                report.notes.push(format!(
+                    "group {h} ({}) refitted as a closed patch: its frame shapes a crease of group {g}",
+                    kind_name(&plan.kind)
+                ));
+                plan.kind = PatchKind::Closed;
+                plan.cost_factor = 2.0;
             }
         }
     }

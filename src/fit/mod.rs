@@ -5,6 +5,7 @@
 //! the boundary curve network (corners + chains) shared by adjacent patches.
 
 mod adjacency;
+mod allowance;
 pub mod curves;
 pub mod decimate;
 pub mod encoder;
