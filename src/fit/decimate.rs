@@ -105,6 +105,10 @@ pub struct DecimateInput<'a> {
     pub face_groups: &'a [u32],
     pub roles: &'a [VertexRole],
     pub rules: &'a [GroupRule],
+    /// Per input vertex, a factor on its closed patch's `max_cost` (1 everywhere when
+    /// `None`): the encoder lowers it where the decoded surface was too far off, so a patch
+    /// gets control points where its error is instead of everywhere.
+    pub cost_scale: Option<&'a [f64]>,
 }
 
 /// The decimated mesh, still indexing the input's vertices.
@@ -243,6 +247,9 @@ struct State<'a> {
     /// this for surviving vertices, so it is computed once.
     open_boundary: Vec<bool>,
     min_area2: f64,
+    /// [`DecimateInput::cost_scale`], the survivor of a collapse taking the smaller of the
+    /// two (so a collapse over its limit stays over it).
+    cost_scale: Vec<f64>,
 }
 
 fn tri_normal(p: [DVec3; 3]) -> DVec3 {
@@ -313,6 +320,9 @@ impl<'a> State<'a> {
             open_boundary,
             // Doubled-area floor below which a triangle counts as degenerate.
             min_area2: (2.0 * mean_area * 1e-8).powi(2),
+            cost_scale: input
+                .cost_scale
+                .map_or_else(|| vec![1.0; nv], |s| s.to_vec()),
         }
     }
 
@@ -449,7 +459,8 @@ impl<'a> State<'a> {
                 let c = q.eval(pv);
                 let g = self.input.face_groups[self.vfaces[u as usize][0] as usize];
                 // Quadrics only grow, so a collapse over the threshold stays over it.
-                if c > self.input.rules[g as usize].max_cost {
+                let scale = self.cost_scale[u as usize].min(self.cost_scale[v as usize]);
+                if c > self.input.rules[g as usize].max_cost * scale {
                     return None;
                 }
                 c
@@ -608,6 +619,7 @@ impl<'a> State<'a> {
         self.vfaces[v as usize].sort_unstable();
         let qu = self.quadric[u as usize];
         self.quadric[v as usize].add(&qu);
+        self.cost_scale[v as usize] = self.cost_scale[v as usize].min(self.cost_scale[u as usize]);
         self.removed[u as usize] = true;
     }
 }
@@ -764,6 +776,7 @@ mod tests {
             face_groups,
             roles,
             rules,
+            cost_scale: None,
         })
     }
 
