@@ -391,8 +391,9 @@ fn step_info(args: &InfoArgs) -> Result<()> {
                 .map(|a| format!(" half-angle {:.3} deg", a.to_degrees()))
                 .unwrap_or_default();
             println!(
-                "  group {g} {}: {} triangles, {} ({}){axis}{radius}{angle} -> {}",
+                "  group {g} {} (face #{}): {} triangles, {} ({}){axis}{radius}{angle} -> {}",
                 model.mesh.groups[g].name,
+                f.face_id,
                 triangles[g],
                 step::surface_name(&f.surface),
                 f.entity,

@@ -181,8 +181,8 @@ impl std::fmt::Display for SkippedFace {
 /// What [`read_step`] read.
 #[derive(Clone, Debug, Default)]
 pub struct StepModel {
-    /// Triangles in one vertex pool, one group per face (`<id>`, the ADVANCED_FACE's
-    /// instance id, or `body<k>/<id>`
+    /// Triangles in one vertex pool, one group per face (`face_<k>` for the body's k-th face
+    /// in file order, or `body<b>/face_<k>`
     /// when the file has several bodies); group-boundary
     /// edges are sharp, B-rep vertices are corners; analytic faces (plane, cylinder, cone)
     /// already carry their exact [`crate::mesh::BoundarySurface`] as the group's patch kind.
