@@ -494,6 +494,8 @@ impl BitCoder for RangeDecoder<'_> {
 
 /// Codes the sharp flag of every edge (label order) and the corner flag of every coded
 /// vertex. `sharp[j]` is indexed by edge number (label order), `corner` by coded vertex.
+/// Returns per half-edge whether its edge is a crease (sharp or on the mesh boundary), which
+/// the corner contexts and the geometry predictions (§8.2) both use.
 fn code_creases(
     rb: &Rebuilt,
     edges: &[u32],
@@ -501,7 +503,7 @@ fn code_creases(
     sharp: &mut [bool],
     corner: &mut [bool],
     coder: &mut impl BitCoder,
-) -> Result<()> {
+) -> Result<Vec<bool>> {
     let mut sharp_models = [BitModel::default(); 13];
     let mut count = vec![0u8; corner.len()];
     for (j, &h) in edges.iter().enumerate() {
@@ -526,10 +528,13 @@ fn code_creases(
             count[b] = count[b].saturating_add(1);
         }
     }
+    let mut crease = vec![false; rb.next.len()];
     let mut crease_degree = vec![0u8; corner.len()];
     for (j, &h) in edges.iter().enumerate() {
         let t = rb.twin[h as usize];
         if sharp[j] || rb.is_hole(h) || rb.is_hole(t) {
+            crease[h as usize] = true;
+            crease[t as usize] = true;
             for v in [rb.vertex[h as usize], rb.vertex[t as usize]] {
                 crease_degree[v as usize] = crease_degree[v as usize].saturating_add(1);
             }
@@ -539,21 +544,7 @@ fn code_creases(
     for (v, c) in corner.iter_mut().enumerate() {
         coder.bit(&mut corner_models[crease_degree[v].min(3) as usize], c)?;
     }
-    Ok(())
-}
-
-/// Per half-edge: the edge is sharp or on the mesh boundary (a crease for the geometry
-/// predictions).
-fn crease_half_edges(rb: &Rebuilt, edges: &[u32], sharp: &[bool]) -> Vec<bool> {
-    let mut out = vec![false; rb.next.len()];
-    for (j, &h) in edges.iter().enumerate() {
-        let t = rb.twin[h as usize];
-        if sharp[j] || rb.is_hole(h) || rb.is_hole(t) {
-            out[h as usize] = true;
-            out[t as usize] = true;
-        }
-    }
-    out
+    Ok(crease)
 }
 
 fn zigzag64(v: i64) -> u64 {
@@ -751,7 +742,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         .map(|o| mesh.corners.contains(o))
         .collect();
     let mut creases_enc = RangeEncoder::new();
-    code_creases(
+    let crease_he = code_creases(
         &rb,
         &edges,
         &face_group_new,
@@ -771,7 +762,6 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     {
         let mut ge = GeomEncoder::new(&mut geom_enc);
         // The encoder writes the current version, which predicts along creases.
-        let crease_he = crease_half_edges(&rb, &edges, &sharp);
         geometry::walk(
             &rb,
             &face_plane_group,
@@ -1350,11 +1340,12 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let edges = label_edges(&rb.label_edge);
     let mut sharp = vec![false; edges.len()];
     let mut corner = vec![false; coded_count];
-    {
+    let crease_he = {
         let mut d = RangeDecoder::new(required(SEC_CREASES)?, "creases")?;
-        code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
+        let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
         d.finish()?;
-    }
+        crease
+    };
 
     // Geometry.
     let mut q = vec![[0i32; 3]; coded_count];
@@ -1369,15 +1360,12 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
         let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
         let mut gd = GeomDecoder::new(&mut d, quant.max_q());
-        let crease_he = features
-            .crease_prediction
-            .then(|| crease_half_edges(&rb, &edges, &sharp));
         geometry::walk(
             &rb,
             &face_plane_group,
             group_count,
             quant.bits,
-            crease_he.as_deref(),
+            features.crease_prediction.then_some(crease_he.as_slice()),
             &mut q,
             &mut gd,
         )?;

@@ -5,11 +5,11 @@
 //! gives groups back in the input's order, and stores the names in that order as *stem +
 //! number* against the previous name: CAD exporters name faces `face_1, face_2, ...` or
 //! `face_141, face_171, ...`, which then cost a byte a name before deflation instead of the
-//! whole string (the NIST export's 272 names: 678 -> a few dozen bytes plus the order).
+//! whole string (the NIST export's 272 names: 678 -> 330 bytes, most of them the order).
 
 use super::bytes::{put_varint, Reader};
 use super::rangecoder::{BitModel, RangeDecoder, RangeEncoder};
-use super::{decode_below, encode_below};
+use super::{decode_below, encode_below, unzigzag64, zigzag64};
 use crate::error::Result;
 
 /// Largest number a name may end in to be split as stem + number (18 decimal digits).
@@ -131,8 +131,9 @@ pub fn write(names: &[&str], original_of_coded: &[u32]) -> Vec<u8> {
         let (stem, number) = split(name);
         match number {
             Some(n) if stem == prev_stem => {
-                let delta = i128::from(n) - i128::from(prev_number) - 1;
-                put_varint(&mut out, 1 | (zigzag_i128(delta) << 1));
+                // Both numbers are at most MAX_NUMBER: the difference fits in 63 bits.
+                let delta = n as i64 - prev_number as i64 - 1;
+                put_varint(&mut out, 1 | (zigzag64(delta) << 1));
             }
             None if stem == prev_stem => put_varint(&mut out, 2),
             _ => {
@@ -147,12 +148,6 @@ pub fn write(names: &[&str], original_of_coded: &[u32]) -> Vec<u8> {
         }
     }
     out
-}
-
-fn zigzag_i128(v: i128) -> u64 {
-    // |delta| <= MAX_NUMBER + 1, far inside 63 bits.
-    let v = v as i64;
-    ((v << 1) ^ (v >> 63)) as u64
 }
 
 /// Reads a version-2 payload for `group_count` groups: the names in input order and, for
@@ -201,8 +196,7 @@ pub fn read(payload: &[u8], group_count: usize) -> Result<(Vec<String>, Vec<u32>
         } else if head == 2 {
             (prev_stem.clone(), None)
         } else if head & 3 == 0 {
-            let len = (head >> 2).min(u64::MAX >> 2);
-            let len = usize::try_from(len).unwrap_or(usize::MAX);
+            let len = usize::try_from(head >> 2).unwrap_or(usize::MAX);
             let b = r.bytes(len, "name_stem")?;
             let stem =
                 String::from_utf8(b.to_vec()).map_err(|_| r.err("name_stem", "not UTF-8"))?;
@@ -222,10 +216,6 @@ pub fn read(payload: &[u8], group_count: usize) -> Result<(Vec<String>, Vec<u32>
     }
     r.expect_end()?;
     Ok((names, original_of_coded))
-}
-
-fn unzigzag64(u: u64) -> i64 {
-    ((u >> 1) as i64) ^ -((u & 1) as i64)
 }
 
 /// Version-1 payload: per coded group `varint length` + UTF-8 bytes.
