@@ -1005,33 +1005,10 @@ struct Measurement {
     bad_points: Vec<Vec<DVec3>>,
 }
 
-/// A small, fast hasher for the exact-geometry keys of [`MeasureCache`] (bit patterns of
-/// coordinates; no adversarial input, so no need for SipHash's cost).
-#[derive(Clone, Copy, Default)]
-struct GeomHasher(u64);
-
-impl std::hash::Hasher for GeomHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for c in bytes.chunks(8) {
-            let mut w = [0u8; 8];
-            w[..c.len()].copy_from_slice(c);
-            self.write_u64(u64::from_le_bytes(w));
-        }
-    }
-    fn write_u64(&mut self, x: u64) {
-        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    fn finish(&self) -> u64 {
-        // Final avalanche (SplitMix64's), so bucket and control bits both depend on every
-        // input bit.
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-}
-
-type GeomBuild = std::hash::BuildHasherDefault<GeomHasher>;
+/// Hashing for the exact-geometry keys of [`MeasureCache`] (bit patterns of coordinates, no
+/// adversarial input): rustc-hash's Fx hasher instead of SipHash's cost. A hash only finds
+/// candidates; every hit is checked against the exact corners.
+type GeomBuild = rustc_hash::FxBuildHasher;
 
 fn point_key(p: DVec3) -> [u64; 3] {
     [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
@@ -1039,7 +1016,7 @@ fn point_key(p: DVec3) -> [u64; 3] {
 
 fn hash_words(words: &[u64]) -> u64 {
     use std::hash::Hasher;
-    let mut h = GeomHasher::default();
+    let mut h = rustc_hash::FxHasher::default();
     for &w in words {
         h.write_u64(w);
     }
