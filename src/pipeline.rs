@@ -154,7 +154,15 @@ pub fn encode_fitted(
             ));
             Ok((bytes, report))
         }
-        _ => Ok(first),
+        Ok(_) => Ok(first),
+        Err(e) => {
+            // The first fit stands; say why the second was not considered.
+            let (bytes, mut report) = first;
+            report.notes.push(format!(
+                "the fit with closed patches refined only where they failed did not finish: {e}"
+            ));
+            Ok((bytes, report))
+        }
     }
 }
 
