@@ -7,11 +7,13 @@ use std::path::Path;
 use scode::codec::samples::canonical_hash;
 use scode::codec::{decode, Limits};
 
-/// The current version's vectors and the frozen version-1 ones, which must still decode.
+/// The current version's vectors and the frozen version-1 and version-2 ones, which must
+/// still decode.
 fn vectors() -> Vec<(String, Vec<u8>, u64, usize, usize)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors");
     let mut all = vectors_in(&root);
     all.extend(vectors_in(&root.join("v1")));
+    all.extend(vectors_in(&root.join("v2")));
     all
 }
 
@@ -43,7 +45,7 @@ fn vectors_in(dir: &Path) -> Vec<(String, Vec<u8>, u64, usize, usize)> {
 #[test]
 fn vectors_decode_to_expected_meshes() {
     let v = vectors();
-    assert!(v.len() >= 12);
+    assert!(v.len() >= 19);
     for (name, bytes, hash, nv, nf) in v {
         let d = decode(&bytes, &Limits::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(d.mesh.vertex_count(), nv, "{name}");

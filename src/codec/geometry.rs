@@ -140,8 +140,11 @@ const KIND_START: usize = 4;
 const PLANE_CTX: usize = 5;
 const KIND_CREASE_ONE: usize = 6;
 const KIND_CREASE_MORE: usize = 7;
+/// Version 3: at least one of the crease predictions follows a circle around a cylinder or
+/// cone axis (§8.2, *arc candidates*).
+const KIND_ARC: usize = 8;
 /// Context count: (kind or plane) x magnitude bucket.
-const CONTEXTS: usize = (KIND_CREASE_MORE + 1) * 3;
+const CONTEXTS: usize = (KIND_ARC + 1) * 3;
 /// Vertices are visited by the number of decoded neighbours, capped at this.
 const MAX_LEVEL: usize = 6;
 
@@ -342,47 +345,183 @@ fn rotation(rb: &Rebuilt, v: u32, out: &mut Vec<u32>) {
     }
 }
 
+/// A cylinder or cone axis in grid units, as the decoder sees it (spec §8.2, *arc
+/// candidates*): the stored origin (integers, exact in f64) and the stored i16 direction
+/// divided by its length. Arc predictions are computed in binary64 with the operation order
+/// written out below (no fused multiply-add), so both sides get the same bits everywhere.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridAxis {
+    pub origin: [f64; 3],
+    pub dir: [f64; 3],
+}
+
+impl GridAxis {
+    pub fn new(origin: [i64; 3], dir: [i16; 3]) -> Self {
+        let d = dir.map(f64::from);
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        GridAxis {
+            origin: origin.map(|o| o as f64),
+            dir: d.map(|c| c / len),
+        }
+    }
+
+    /// Height along the axis and the radial vector of grid point `p`.
+    fn split(&self, p: [i32; 3]) -> (f64, [f64; 3]) {
+        let r0 = [0, 1, 2].map(|c| f64::from(p[c]) - self.origin[c]);
+        let h = fdot(r0, self.dir);
+        (h, [0, 1, 2].map(|c| r0[c] - h * self.dir[c]))
+    }
+
+    fn point(&self, h: f64, r: [f64; 3]) -> [f64; 3] {
+        [0, 1, 2].map(|c| self.origin[c] + h * self.dir[c] + r[c])
+    }
+}
+
+/// Per-face cylinder/cone axes for the arc candidates (version 3): `face_axis[f]` indexes
+/// `axes`, or is `NONE` for faces of other groups.
+#[derive(Clone, Copy)]
+pub struct ArcAxes<'a> {
+    pub face_axis: &'a [u32],
+    pub axes: &'a [GridAxis],
+}
+
+fn fdot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn fcross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// Two points lie on one circle around `axis` when their radii and heights differ by less
+/// than this (grid units).
+const ARC_SLACK: f64 = 2.0;
+
+/// Twice `p`, rounded, if it is a usable candidate.
+fn twice_rounded(p: [f64; 3]) -> Option<[i64; 3]> {
+    let t = p.map(|c| (2.0 * c).round());
+    t.iter()
+        .all(|c| c.is_finite() && c.abs() < 2f64.powi(40))
+        .then(|| t.map(|c| c as i64))
+}
+
+/// The point midway between `a` and `b` on their common circle around `axis`, if they share
+/// one (as twice its value).
+fn arc_midpoint(axis: &GridAxis, a: [i32; 3], b: [i32; 3]) -> Option<[i64; 3]> {
+    let ((ha, ra), (hb, rb)) = (axis.split(a), axis.split(b));
+    let (la, lb) = (fdot(ra, ra).sqrt(), fdot(rb, rb).sqrt());
+    if (la - lb).abs() >= ARC_SLACK || (ha - hb).abs() >= ARC_SLACK || la < 1.0 || lb < 1.0 {
+        return None;
+    }
+    let s = [0, 1, 2].map(|c| ra[c] + rb[c]);
+    let ls = fdot(s, s).sqrt();
+    if ls < 1.0 {
+        return None;
+    }
+    let k = (la + lb) * 0.5 / ls;
+    twice_rounded(axis.point((ha + hb) * 0.5, s.map(|c| c * k)))
+}
+
+/// The point after `u`, `w` on their common circle around `axis` (rotating `w` by the angle
+/// from `u` to `w`, height extrapolated), if they share one (as twice its value).
+fn arc_extrapolation(axis: &GridAxis, u: [i32; 3], w: [i32; 3]) -> Option<[i64; 3]> {
+    let ((hu, ru), (hw, rw)) = (axis.split(u), axis.split(w));
+    let lu = fdot(ru, ru).sqrt();
+    let lw0 = fdot(rw, rw).sqrt();
+    if (lu - lw0).abs() >= ARC_SLACK || (hu - hw).abs() >= ARC_SLACK || lu < 1.0 || lw0 < 1.0 {
+        return None;
+    }
+    let e1 = ru.map(|c| c / lu);
+    let e2 = fcross(axis.dir, e1);
+    let (x, y) = (fdot(rw, e1), fdot(rw, e2));
+    let lw = (x * x + y * y).sqrt();
+    if lw < 1.0 {
+        return None;
+    }
+    let (a, b) = ((x * x - y * y) / lw, (2.0 * x * y) / lw);
+    let r = [0, 1, 2].map(|c| e1[c] * a + e2[c] * b);
+    twice_rounded(axis.point(2.0 * hw - hu, r))
+}
+
+/// The axes of the faces on both sides of the given half-edges, each once, in that order.
+fn edge_axes(rb: &Rebuilt, arcs: &ArcAxes, hs: &[u32], out: &mut Vec<u32>) {
+    out.clear();
+    for &h in hs {
+        for e in [h, rb.twin[h as usize]] {
+            let f = rb.face[e as usize] as usize;
+            if rb.faces[f].hole {
+                continue;
+            }
+            let a = arcs.face_axis.get(f).copied().unwrap_or(NONE);
+            if a != NONE && !out.contains(&a) {
+                out.push(a);
+            }
+        }
+    }
+}
+
 /// Version-2 predictions along creases (spec §8.2): a vertex on a crease chain (sharp or
 /// mesh-boundary edges) is predicted from the chain, not from parallelograms across faces of
 /// two different CAD faces. For `v` with crease neighbours `C` (rotation order): if `|C| = 2`
 /// and both are decoded, their midpoint; then for every decoded `w` in `C` whose own crease
 /// neighbours other than `v` are exactly one decoded `u`, the extrapolation `2w - u`. Pushed
-/// as twice their value, at most `MAX_CANDIDATES` in all.
+/// as twice their value, at most `MAX_CANDIDATES` in all. Version 3 (`arcs`): where the two
+/// points a prediction is made from lie on one circle around the axis of a cylinder or cone
+/// face next to the chain, the point on that circle replaces the straight-line one. Returns
+/// whether any candidate is such an arc.
 #[allow(clippy::too_many_arguments)]
 fn crease_candidates(
     rb: &Rebuilt,
     crease: &[bool],
+    arcs: Option<&ArcAxes>,
     v: u32,
     out_edges: &[u32],
     known: &[bool],
     q: &[[i32; 3]],
     scratch: &mut Vec<u32>,
+    axes_near: &mut Vec<u32>,
     cands: &mut Vec<[i64; 3]>,
-) {
+) -> bool {
     let head = |h: u32| rb.vertex[rb.next[h as usize] as usize];
     let p = |w: u32| q[w as usize].map(i64::from);
     let mut nbs = [0u32; 2];
+    let mut nb_edges = [0u32; 2];
     let mut n_nbs = 0usize;
-    let mut known_nbs = [0u32; MAX_CANDIDATES];
+    let mut known_nbs = [(0u32, 0u32); MAX_CANDIDATES];
     let mut n_known = 0usize;
     for &h in out_edges {
         if crease[h as usize] {
             let w = head(h);
             if n_nbs < 2 {
                 nbs[n_nbs] = w;
+                nb_edges[n_nbs] = h;
             }
             n_nbs += 1;
             if known[w as usize] && n_known < MAX_CANDIDATES {
-                known_nbs[n_known] = w;
+                known_nbs[n_known] = (w, h);
                 n_known += 1;
             }
         }
     }
+    let mut any_arc = false;
     if n_nbs == 2 && known[nbs[0] as usize] && known[nbs[1] as usize] {
+        let (qa, qb) = (q[nbs[0] as usize], q[nbs[1] as usize]);
+        let mut arc = None;
+        if let Some(arcs) = arcs {
+            edge_axes(rb, arcs, &nb_edges, axes_near);
+            arc = axes_near
+                .iter()
+                .find_map(|&a| arc_midpoint(&arcs.axes[a as usize], qa, qb));
+        }
+        any_arc |= arc.is_some();
         let (a, b) = (p(nbs[0]), p(nbs[1]));
-        cands.push([0, 1, 2].map(|c| a[c] + b[c]));
+        cands.push(arc.unwrap_or([0, 1, 2].map(|c| a[c] + b[c])));
     }
-    for &w in &known_nbs[..n_known] {
+    for &(w, hvw) in &known_nbs[..n_known] {
         if cands.len() >= MAX_CANDIDATES {
             break;
         }
@@ -391,17 +530,26 @@ fn crease_candidates(
         let mut n_other = 0usize;
         for &h in scratch.iter() {
             if crease[h as usize] && head(h) != v {
-                other = Some(head(h));
+                other = Some((head(h), h));
                 n_other += 1;
             }
         }
-        if let (1, Some(u)) = (n_other, other) {
+        if let (1, Some((u, hwu))) = (n_other, other) {
             if known[u as usize] {
+                let mut arc = None;
+                if let Some(arcs) = arcs {
+                    edge_axes(rb, arcs, &[hvw, hwu], axes_near);
+                    arc = axes_near.iter().find_map(|&a| {
+                        arc_extrapolation(&arcs.axes[a as usize], q[u as usize], q[w as usize])
+                    });
+                }
+                any_arc |= arc.is_some();
                 let (pw, pu) = (p(w), p(u));
-                cands.push([0, 1, 2].map(|c| 4 * pw[c] - 2 * pu[c]));
+                cands.push(arc.unwrap_or([0, 1, 2].map(|c| 4 * pw[c] - 2 * pu[c])));
             }
         }
     }
+    any_arc
 }
 
 /// Visits every vertex (spec §8.2: highest number of decoded neighbours first, then the
@@ -409,7 +557,8 @@ fn crease_candidates(
 ///
 /// `q` has one entry per coded vertex; `face_plane_group[f]` is the group id of face `f` when
 /// that group is a plane patch, else `NONE`. `crease[h]` (version 2 on; `None` for version-1
-/// files) says whether half-edge `h` lies on a sharp or mesh-boundary edge.
+/// files) says whether half-edge `h` lies on a sharp or mesh-boundary edge; `arcs` (version 3
+/// on) gives the cylinder and cone axes for arc candidates.
 #[allow(clippy::too_many_arguments)]
 pub fn walk(
     rb: &Rebuilt,
@@ -417,6 +566,7 @@ pub fn walk(
     plane_groups: usize,
     bits: u8,
     crease: Option<&[bool]>,
+    arcs: Option<&ArcAxes>,
     q: &mut [[i32; 3]],
     coder: &mut impl ResidualCoder,
 ) -> Result<()> {
@@ -432,6 +582,7 @@ pub fn walk(
     let mut out_edges: Vec<u32> = Vec::new();
     let mut cands: Vec<[i64; 3]> = Vec::new();
     let mut scratch: Vec<u32> = Vec::new();
+    let mut axes_near: Vec<u32> = Vec::new();
     let mut next_seed = 0usize;
     loop {
         // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
@@ -463,8 +614,20 @@ pub fn walk(
         // Predictions along a crease (version 2), else parallelogram-type predictions in
         // rotation order; each as twice its value.
         cands.clear();
+        let mut arc = false;
         if let Some(cr) = crease {
-            crease_candidates(rb, cr, v, &out_edges, &known, q, &mut scratch, &mut cands);
+            arc = crease_candidates(
+                rb,
+                cr,
+                arcs,
+                v,
+                &out_edges,
+                &known,
+                q,
+                &mut scratch,
+                &mut axes_near,
+                &mut cands,
+            );
         }
         let n_crease = cands.len();
         let mut add2 = |pr2: [i64; 3]| {
@@ -522,6 +685,7 @@ pub fn walk(
         let (pred, kind) = if count > 0 {
             let kind = match n_crease {
                 0 => count.min(3),
+                _ if arc => KIND_ARC,
                 1 => KIND_CREASE_ONE,
                 _ => KIND_CREASE_MORE,
             };
@@ -565,7 +729,7 @@ pub fn walk(
                 incident.push(pg);
             }
         }
-        incident.sort_unstable();
+        // (No sort needed: ties on the area are broken by the group id.)
         let best = incident
             .iter()
             .filter(|&&g| planes[g as usize].n == 3)
@@ -747,6 +911,34 @@ mod tests {
                 assert!((r - p).abs().max_element() <= q.step() / 2.0 * (1.0 + 1e-9) + 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn arc_predictions_follow_the_circle() {
+        let z = GridAxis::new([0, 0, 0], [0, 0, 1000]);
+        // Quarter circle of radius 100: midpoint at 45 degrees (twice 70.71 -> 141).
+        assert_eq!(
+            arc_midpoint(&z, [100, 0, 7], [0, 100, 7]),
+            Some([141, 141, 14])
+        );
+        // Rotating on by the same angle, height extrapolated.
+        assert_eq!(
+            arc_extrapolation(&z, [100, 0, 5], [0, 100, 6]),
+            Some([-200, 0, 14])
+        );
+        // Off the circle (radii or heights differ by 2 or more): no arc.
+        assert_eq!(arc_midpoint(&z, [100, 0, 0], [0, 102, 0]), None);
+        assert_eq!(arc_extrapolation(&z, [100, 0, 0], [0, 100, 2]), None);
+        // On the axis: no direction to rotate.
+        assert_eq!(arc_midpoint(&z, [0, 0, 0], [0, 0, 1]), None);
+        // Opposite points: the chord midpoint is on the axis, no arc.
+        assert_eq!(arc_midpoint(&z, [100, 0, 0], [-100, 0, 0]), None);
+        // An axis off the origin, along x.
+        let x = GridAxis::new([0, 50, 50], [-7, 0, 0]);
+        assert_eq!(
+            arc_extrapolation(&x, [3, 60, 50], [3, 50, 60]),
+            Some([6, 80, 100])
+        );
     }
 
     #[test]

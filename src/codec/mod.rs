@@ -1,5 +1,5 @@
-//! The `.scode` v1 bitstream: encoder, decoder and inspector. The byte-exact definition is
-//! `spec/format.md`; this module follows it section by section.
+//! The `.scode` bitstream (writes version 3, reads 1 to 3): encoder, decoder and inspector.
+//! The byte-exact definition is `spec/format.md`; this module follows it section by section.
 //!
 //! Layout of a file: 4-byte magic `SCOD`, major and minor version bytes, then sections
 //! (`header`, `connectivity`, optional `patches`, `creases`, `geometry`, optional `fixups`,
@@ -7,7 +7,8 @@
 //!
 //! Connectivity is Face Fixer ([`facefixer`]) under an adaptive range coder ([`rangecoder`]);
 //! face groups ride along with the F labels; sharp edges and corner tags are context-coded in
-//! label / geometry order; positions are quantised to a cube and predicted ([`geometry`]).
+//! label / geometry order; positions are quantised to a cube and predicted ([`geometry`]);
+//! patch kinds and axes have their own module ([`patches`]), as do group names ([`names`]).
 //!
 //! Decoded meshes are renumbered: vertices in geometry order, faces in traversal order (each
 //! face's cycle may start at a different corner), groups by first appearance. [`encode_with_map`]
@@ -17,6 +18,7 @@ pub mod bytes;
 pub mod facefixer;
 pub mod geometry;
 mod names;
+mod patches;
 pub mod rangecoder;
 pub mod samples;
 
@@ -26,13 +28,13 @@ use glam::DVec3;
 
 use self::bytes::{put_section, put_varint, read_section, Reader};
 use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
-use self::geometry::{GeomDecoder, GeomEncoder, Quantizer};
+use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, Quantizer};
 use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
 use crate::error::{Error, Result};
 use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
-use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, Group, PatchKind};
+use crate::mesh::{edge_key, BoundarySurface, ControlMesh, Group, PatchKind};
 
-pub const FORMAT_VERSION_MAJOR: u8 = 2;
+pub const FORMAT_VERSION_MAJOR: u8 = 3;
 pub const FORMAT_VERSION_MINOR: u8 = 0;
 /// First four bytes of every `.scode` file.
 pub const MAGIC: [u8; 4] = *b"SCOD";
@@ -217,6 +219,12 @@ struct Features {
     /// Names: stored in input group order with the coded->input group order, stem + number
     /// coded (§9.2, version 2); version 1 stores plain names in coded order.
     names_in_input_order: bool,
+    /// Geometry: crease vertices next to cylinders and cones are predicted on circles round
+    /// the axis (§8.2, version 3).
+    arc_prediction: bool,
+    /// Patches: range-coded, directions by reference, cylinder origins with two coordinates
+    /// (§9 *Patches*, version 3); versions 1 and 2 store bytes.
+    coded_patches: bool,
 }
 
 fn features_for(major: u8, _minor: u8) -> Result<Features> {
@@ -227,16 +235,27 @@ fn features_for(major: u8, _minor: u8) -> Result<Features> {
             known_flags: KNOWN_FLAGS,
             crease_prediction: false,
             names_in_input_order: false,
+            arc_prediction: false,
+            coded_patches: false,
         }),
         2 => Ok(Features {
             known_flags: KNOWN_FLAGS,
             crease_prediction: true,
             names_in_input_order: true,
+            arc_prediction: false,
+            coded_patches: false,
+        }),
+        3 => Ok(Features {
+            known_flags: KNOWN_FLAGS,
+            crease_prediction: true,
+            names_in_input_order: true,
+            arc_prediction: true,
+            coded_patches: true,
         }),
         _ => Err(Error::format(
             "header",
             "version",
-            format!("unsupported major version {major} (this decoder reads versions 1.x and {FORMAT_VERSION_MAJOR}.x)"),
+            format!("unsupported major version {major} (this decoder reads versions 1.x to {FORMAT_VERSION_MAJOR}.x)"),
         )),
     }
 }
@@ -714,7 +733,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
 
     // Patches section.
     let quant = Quantizer::for_positions(&mesh.positions, bits);
-    let patches = encode_patches(&groups_new_order, &quant)?;
+    let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
 
     // Creases section.
     let edges = label_edges(&rb.label_edge);
@@ -758,16 +777,21 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         .map(|&w| quant.quantize(work.positions[w as usize]))
         .collect();
     let face_plane_group = plane_groups_of_faces(&face_group_new, &groups_new_order);
+    let (face_axis, axes) = patches::face_axes(&face_group_new, &group_axes);
     let mut geom_enc = RangeEncoder::new();
     {
         let mut ge = GeomEncoder::new(&mut geom_enc);
-        // The encoder writes the current version, which predicts along creases.
+        // The encoder writes the current version: predictions along creases, arcs round axes.
         geometry::walk(
             &rb,
             &face_plane_group,
             groups_new_order.len(),
             bits,
             Some(&crease_he),
+            Some(&ArcAxes {
+                face_axis: &face_axis,
+                axes: &axes,
+            }),
             &mut q,
             &mut ge,
         )?;
@@ -908,102 +932,6 @@ fn plane_groups_of_faces(face_group: &[u32], groups: &[Group]) -> Vec<u32> {
             _ => NONE,
         })
         .collect()
-}
-
-const PATCH_CLOSED: u8 = 0;
-const PATCH_PLANE: u8 = 1;
-const PATCH_CYLINDER: u8 = 2;
-const PATCH_CONE: u8 = 3;
-/// Axis directions are stored as three i16 components scaled by this.
-const DIRECTION_SCALE: f64 = 32767.0;
-
-fn encode_patches(groups: &[Group], quant: &Quantizer) -> Result<Option<Vec<u8>>> {
-    if groups.iter().all(|g| g.patch == PatchKind::Closed) {
-        return Ok(None);
-    }
-    let mut p = Vec::new();
-    for g in groups {
-        let (kind, axis) = match g.patch {
-            PatchKind::Closed => (PATCH_CLOSED, None),
-            PatchKind::Boundary(BoundarySurface::Plane) => (PATCH_PLANE, None),
-            PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => (PATCH_CYLINDER, Some(axis)),
-            PatchKind::Boundary(BoundarySurface::Cone { axis }) => (PATCH_CONE, Some(axis)),
-        };
-        p.push(kind);
-        if let Some(axis) = axis {
-            let step = quant.step();
-            for i in 0..3 {
-                let q = if step > 0.0 {
-                    ((axis.origin[i] - quant.min[i]) / step).round()
-                } else {
-                    0.0
-                };
-                if !q.is_finite() || q.abs() > 2f64.powi(52) {
-                    return Err(Error::Mesh(format!(
-                        "group `{}`: axis origin is too far from the mesh to quantise",
-                        g.name
-                    )));
-                }
-                put_varint(&mut p, zigzag64(q as i64));
-            }
-            let d = axis.direction;
-            let len = d.length();
-            if !len.is_finite() || len == 0.0 {
-                return Err(Error::Mesh(format!(
-                    "group `{}`: axis direction must be a finite non-zero vector",
-                    g.name
-                )));
-            }
-            for i in 0..3 {
-                let c = (d[i] / len * DIRECTION_SCALE).round() as i16;
-                p.extend_from_slice(&c.to_le_bytes());
-            }
-        }
-    }
-    Ok(Some(p))
-}
-
-fn decode_patches(payload: &[u8], group_count: usize, quant: &Quantizer) -> Result<Vec<PatchKind>> {
-    let mut r = Reader::new(payload, "patches");
-    let mut out = Vec::with_capacity(group_count.min(payload.len()));
-    for _ in 0..group_count {
-        let kind = r.u8("kind")?;
-        let patch = match kind {
-            PATCH_CLOSED => PatchKind::Closed,
-            PATCH_PLANE => PatchKind::Boundary(BoundarySurface::Plane),
-            PATCH_CYLINDER | PATCH_CONE => {
-                let mut origin = [0.0; 3];
-                for (i, o) in origin.iter_mut().enumerate() {
-                    let q = unzigzag64(r.varint("axis_origin")?);
-                    if q.unsigned_abs() > 1 << 52 {
-                        return Err(r.err("axis_origin", "out of range"));
-                    }
-                    *o = quant.min[i] + q as f64 * quant.step();
-                }
-                let mut d = [0.0; 3];
-                for c in &mut d {
-                    *c = f64::from(r.i16("axis_direction")?);
-                }
-                let d = DVec3::from(d);
-                if d == DVec3::ZERO {
-                    return Err(r.err("axis_direction", "zero direction"));
-                }
-                let axis = Axis {
-                    origin: DVec3::from(origin),
-                    direction: d.normalize(),
-                };
-                PatchKind::Boundary(if kind == PATCH_CYLINDER {
-                    BoundarySurface::Cylinder { axis }
-                } else {
-                    BoundarySurface::Cone { axis }
-                })
-            }
-            k => return Err(r.err("kind", format!("unknown patch kind {k}"))),
-        };
-        out.push(patch);
-    }
-    r.expect_end()?;
-    Ok(out)
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1331,9 +1259,13 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
 
     // Patches.
-    let patch_kinds = match &payloads[SEC_PATCHES as usize] {
-        Some(p) => decode_patches(p, group_count, &quant)?,
-        None => vec![PatchKind::Closed; group_count],
+    let (patch_kinds, grid_axes) = match &payloads[SEC_PATCHES as usize] {
+        Some(p) if features.coded_patches => patches::decode(p, group_count, &quant)?,
+        Some(p) => patches::decode_v1(p, group_count, &quant)?,
+        None => (
+            vec![PatchKind::Closed; group_count],
+            vec![None; group_count],
+        ),
     };
 
     // Creases.
@@ -1358,6 +1290,11 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             })
             .collect();
         let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
+        let (face_axis, axes) = patches::face_axes(&face_group, &grid_axes);
+        let arcs = ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
+        };
         let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
         let mut gd = GeomDecoder::new(&mut d, quant.max_q());
         geometry::walk(
@@ -1366,6 +1303,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             group_count,
             quant.bits,
             features.crease_prediction.then_some(crease_he.as_slice()),
+            features.arc_prediction.then_some(&arcs),
             &mut q,
             &mut gd,
         )?;

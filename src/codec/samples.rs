@@ -117,6 +117,52 @@ pub fn multi_group() -> ControlMesh {
     m
 }
 
+/// A turned part: a quad torus whose rings of faces (around the z axis) are groups with
+/// cylinder and cone patches on z (one coaxial pair, one reversed direction, one apex so far
+/// away that its coordinate needs the escape code), sharp edges between the rings. Exercises
+/// version 3's arc predictions and every branch of the coded patches section.
+pub fn turned_part() -> ControlMesh {
+    let (n, m_) = (12u32, 6u32);
+    let mut m = torus(n, m_);
+    m.groups.clear();
+    let axis = |z: f64, dz: f64| Axis {
+        origin: DVec3::new(0.0, 0.0, z),
+        direction: DVec3::new(0.0, 0.0, dz),
+    };
+    let kinds = [
+        PatchKind::Boundary(BoundarySurface::Cylinder {
+            axis: axis(0.0, 1.0),
+        }),
+        PatchKind::Boundary(BoundarySurface::Cylinder {
+            axis: axis(5.0, 2.0),
+        }),
+        PatchKind::Boundary(BoundarySurface::Cone {
+            axis: axis(3.0, 1.0),
+        }),
+        PatchKind::Boundary(BoundarySurface::Cylinder {
+            axis: axis(1.0, -1.0),
+        }),
+        PatchKind::Boundary(BoundarySurface::Cone {
+            axis: axis(1e7, -1.0),
+        }),
+        PatchKind::Closed,
+    ];
+    for (j, k) in kinds.into_iter().enumerate() {
+        m.push_group(format!("ring_{j}"), k);
+    }
+    for i in 0..n {
+        for j in 0..m_ {
+            m.face_groups[(i * m_ + j) as usize] = j;
+        }
+    }
+    for i in 0..n {
+        for j in 0..m_ {
+            m.set_sharp(i * m_ + j, ((i + 1) % n) * m_ + j);
+        }
+    }
+    m
+}
+
 /// A small CAD part: a box (one group per side) with a cylindrical boss on top, sharp
 /// edges on all group boundaries, corners at the box corners.
 pub fn cad_part() -> ControlMesh {

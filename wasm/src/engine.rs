@@ -54,6 +54,11 @@ struct LineEdge {
     faces: [u32; 2],
 }
 
+/// Key of a (vertex, group) pair in [`GroupNormals`]' side list.
+fn key(v: u32, g: u32) -> u64 {
+    (u64::from(v) << 32) | u64::from(g)
+}
+
 /// Unit normals at the finest level, one per (vertex, group) pair: each vertex has a primary
 /// group (that of its first face) stored densely; the few vertices on CAD-face boundaries have
 /// their other groups in a sorted side list. Area-weighted face normals of the finest
@@ -63,7 +68,9 @@ struct LineEdge {
 struct GroupNormals {
     primary_group: Vec<u32>,
     primary: Vec<Vec3>,
-    extra_keys: Vec<(u32, u32)>,
+    /// `(vertex << 32) | group`, sorted: one u64 sort instead of a tuple sort keeps the
+    /// module smaller.
+    extra_keys: Vec<u64>,
     extra: Vec<Vec3>,
 }
 
@@ -84,7 +91,7 @@ impl GroupNormals {
                 if *pg == NONE {
                     *pg = g;
                 } else if *pg != g {
-                    extra_keys.push((v, g));
+                    extra_keys.push(key(v, g));
                 }
             }
         }
@@ -103,7 +110,7 @@ impl GroupNormals {
             for &v in t {
                 if primary_group[v as usize] == g {
                     acc[v as usize] += n;
-                } else if let Ok(i) = extra_keys.binary_search(&(v, g)) {
+                } else if let Ok(i) = extra_keys.binary_search(&key(v, g)) {
                     acc_extra[i] += n;
                 }
             }
@@ -124,7 +131,7 @@ impl GroupNormals {
             extra: acc_extra
                 .into_iter()
                 .zip(&extra_keys)
-                .map(|(n, &(_, g))| unit(n, g))
+                .map(|(n, &k)| unit(n, k as u32))
                 .collect(),
             primary_group,
             extra_keys,
@@ -133,7 +140,7 @@ impl GroupNormals {
 
     fn get(&self, v: u32, g: u32) -> Vec3 {
         if self.primary_group[v as usize] != g {
-            if let Ok(i) = self.extra_keys.binary_search(&(v, g)) {
+            if let Ok(i) = self.extra_keys.binary_search(&key(v, g)) {
                 return self.extra[i];
             }
         }
