@@ -149,20 +149,19 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
 
 /// Issue #5: the STEP path knows the exact surfaces and the topology, so it should cost no
 /// more than the mesh path (`<name>_fine.obj` with its sidecar) at the same tolerance.
-/// `slack` is what is left of the gap on a file (block_fillet3: 569 vs 566 bytes, 679
-/// before the STEP path's local refinement of closed patches).
+/// `slack` is what is left of the gap on a file.
 #[test]
 fn step_path_no_larger_than_mesh_path() {
     let Some(corpus) = corpus_dir() else { return };
-    // trj10 (511 vs 505 B in format 2.0, a different fit of the same planes) and
-    // block_fillet3 (527 vs 514 B, its sphere corner) are not there yet: the slack keeps the
-    // gap from growing unnoticed.
+    // trj10 (506 vs 505 B: the same control vertices, other triangles and face order, which
+    // move the codec's output by a few percent either way) and block_fillet3 (519 vs 514 B,
+    // its sphere corner) are not there yet: the slack keeps the gap from growing unnoticed.
     for (file, slack) in [
         ("tr8_bv1_ec.stp", 1.0),
-        ("trj10_ap209-eb.stp", 1.03),
+        ("trj10_ap209-eb.stp", 1.01),
         ("four_cone.step", 1.0),
         ("bug3883_xr2-ct-214_plate.stp", 1.0),
-        ("block_fillet3.step", 1.05),
+        ("block_fillet3.step", 1.02),
     ] {
         let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
         let fine_path = fine_tessellation(&corpus, stem).expect("fine tessellation");
