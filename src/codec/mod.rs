@@ -20,6 +20,7 @@ pub mod geometry;
 mod names;
 mod patches;
 pub mod rangecoder;
+mod ranks;
 pub mod samples;
 
 use std::collections::BTreeSet;
@@ -225,6 +226,9 @@ struct Features {
     /// Patches: range-coded, directions by reference, cylinder origins with two coordinates
     /// (§9 *Patches*, version 3); versions 1 and 2 store bytes.
     coded_patches: bool,
+    /// Connectivity: group symbols with vertex candidates and recency ranks (§6.5,
+    /// version 3).
+    groups_v3: bool,
 }
 
 fn features_for(major: u8, _minor: u8) -> Result<Features> {
@@ -237,6 +241,7 @@ fn features_for(major: u8, _minor: u8) -> Result<Features> {
             names_in_input_order: false,
             arc_prediction: false,
             coded_patches: false,
+            groups_v3: false,
         }),
         2 => Ok(Features {
             known_flags: KNOWN_FLAGS,
@@ -244,6 +249,7 @@ fn features_for(major: u8, _minor: u8) -> Result<Features> {
             names_in_input_order: true,
             arc_prediction: false,
             coded_patches: false,
+            groups_v3: false,
         }),
         3 => Ok(Features {
             known_flags: KNOWN_FLAGS,
@@ -251,6 +257,7 @@ fn features_for(major: u8, _minor: u8) -> Result<Features> {
             names_in_input_order: true,
             arc_prediction: true,
             coded_patches: true,
+            groups_v3: true,
         }),
         _ => Err(Error::format(
             "header",
@@ -282,20 +289,31 @@ const SYM_M: usize = 9;
 const LABEL_PRIOR: [u32; LABEL_SYMBOLS] = [4, 4, 1, 1, 4, 1, 1, 1, 1, 1];
 
 /// Group of a mesh face, relative to the groups of its already-decoded neighbours
-/// (spec §6.4).
+/// (spec §6.5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum GroupSym {
     /// The `i`-th distinct group among the candidates (`i < GROUP_CANDIDATES`).
     Candidate(u8),
     /// The next group id not used so far.
     New,
-    /// An already used group id, given explicitly.
+    /// Versions 1-2: an already used group id, given explicitly.
     Explicit(u32),
+    /// Version 3: the `i`-th distinct group among the faces around the face's vertices.
+    Vertex(u8),
+    /// Version 3: an already used group, by how many groups were used since (0 = the most
+    /// recently used one). A face that re-enters a CAD face usually does so near where it
+    /// left it.
+    Recent(u32),
 }
 
-/// Candidate symbols; the alphabet is these plus `New` and `Explicit`.
+/// Candidate symbols; the alphabet is these plus `New` and `Explicit` (versions 1-2) and the
+/// vertex candidates (version 3).
 const GROUP_CANDIDATES: usize = 3;
 const GROUP_SYMBOLS: usize = GROUP_CANDIDATES + 2;
+const GROUP_SYMBOLS_V3: usize = GROUP_SYMBOLS + GROUP_CANDIDATES;
+/// Version-3 group contexts (before the previous symbol): at most one candidate; two with
+/// as many edges to each, more to the first, more to the second; three.
+const GROUP_CLASSES_V3: usize = 5;
 
 struct ConnModels {
     labels: Vec<FreqModel>,
@@ -304,6 +322,9 @@ struct ConnModels {
     m_depth: IntModel,
     m_length: IntModel,
     groups: Vec<FreqModel>,
+    /// Version 3: group symbols 0..8 with the context classes; else the version-1 alphabet.
+    groups_v3: bool,
+    recent: IntModel,
     prev: [usize; 2],
     prev_group: usize,
     /// Bits spent on face groups while decoding (for `inspect`; not part of the format).
@@ -311,16 +332,23 @@ struct ConnModels {
 }
 
 impl ConnModels {
-    fn new() -> Self {
+    fn new(groups_v3: bool) -> Self {
+        let (symbols, classes) = if groups_v3 {
+            (GROUP_SYMBOLS_V3, GROUP_CLASSES_V3)
+        } else {
+            (GROUP_SYMBOLS, 3)
+        };
         ConnModels {
             labels: vec![FreqModel::with_counts(&LABEL_PRIOR); LABEL_CONTEXTS],
             face_degree: IntModel::default(),
             hole_degree: IntModel::default(),
             m_depth: IntModel::default(),
             m_length: IntModel::default(),
-            groups: vec![FreqModel::new(GROUP_SYMBOLS); 3 * (GROUP_SYMBOLS + 1)],
+            groups: vec![FreqModel::new(symbols); classes * (symbols + 1)],
+            groups_v3,
+            recent: IntModel::default(),
             prev: [LABEL_CONTEXT_NONE; 2],
-            prev_group: GROUP_SYMBOLS,
+            prev_group: symbols,
             group_bits: 0.0,
         }
     }
@@ -392,38 +420,63 @@ impl ConnModels {
         })
     }
 
-    /// Context: number of candidates (0-1, 2, 3+) x previous group symbol.
-    fn group_ctx(&self, candidates: usize) -> usize {
-        (candidates.clamp(1, 3) - 1) * (GROUP_SYMBOLS + 1) + self.prev_group
+    /// Context: class (versions 1-2: number of candidates 0-1, 2, 3+; version 3:
+    /// [`group_class`]) x previous group symbol.
+    fn group_ctx(&self, class: usize) -> usize {
+        let symbols = if self.groups_v3 {
+            GROUP_SYMBOLS_V3
+        } else {
+            GROUP_SYMBOLS
+        };
+        class * (symbols + 1) + self.prev_group
     }
 
-    fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, seen: u32, candidates: usize) {
+    /// Encodes a version-3 group symbol (`seen` groups used so far).
+    fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, class: usize, seen: u32) {
         let s = match g {
             GroupSym::Candidate(i) => usize::from(i),
             GroupSym::New => GROUP_CANDIDATES,
-            GroupSym::Explicit(_) => GROUP_CANDIDATES + 1,
+            GroupSym::Recent(_) | GroupSym::Explicit(_) => GROUP_CANDIDATES + 1,
+            GroupSym::Vertex(i) => GROUP_SYMBOLS + usize::from(i),
         };
-        let c = self.group_ctx(candidates);
+        let c = self.group_ctx(class);
         self.groups[c].encode(enc, s);
         self.prev_group = s;
-        if let GroupSym::Explicit(id) = g {
-            encode_below(enc, id, seen);
+        if let GroupSym::Recent(r) = g {
+            debug_assert!(r < seen);
+            self.recent.encode(enc, r);
         }
     }
 
+    /// Decodes a group symbol; `class` as in [`Self::group_ctx`].
     fn decode_group(
         &mut self,
         dec: &mut RangeDecoder,
         seen: u32,
-        candidates: usize,
+        class: usize,
     ) -> Result<GroupSym> {
-        let c = self.group_ctx(candidates);
+        let c = self.group_ctx(class);
         let (s, cost) = self.groups[c].decode_with_cost(dec)?;
         self.group_bits += cost;
         self.prev_group = s;
+        let no_groups = || {
+            Error::format(
+                "connectivity",
+                "group_id",
+                "an already used group, but no group is used yet",
+            )
+        };
         Ok(match s {
             i if i < GROUP_CANDIDATES => GroupSym::Candidate(i as u8),
             GROUP_CANDIDATES => GroupSym::New,
+            i if i > GROUP_CANDIDATES + 1 => GroupSym::Vertex((i - GROUP_SYMBOLS) as u8),
+            _ if self.groups_v3 => {
+                let max = seen.checked_sub(1).ok_or_else(no_groups)?;
+                let before = self.recent.clone();
+                let r = self.recent.decode(dec, max, "group_rank")?;
+                self.group_bits += before.cost(r);
+                GroupSym::Recent(r)
+            }
             _ => {
                 self.group_bits += f64::from(bits_for(u64::from(seen)));
                 let id = decode_below(dec, seen)?;
@@ -487,6 +540,110 @@ fn group_candidates(
         if let Some(p) = prev_real {
             out.push(face_group[p]);
         }
+    }
+}
+
+/// Version-3 context class of a face with candidate list `cands` (spec §6.5): 0 for at most
+/// one candidate, 4 for three or more; with two, 1, 2 or 3 as the face has as many, more or
+/// fewer edges to earlier faces of the first candidate's group than of the second's.
+fn group_class(rb: &Rebuilt, f: usize, face_group: &[u32], cands: &[u32]) -> usize {
+    match cands.len() {
+        0 | 1 => 0,
+        2 => {
+            let (mut n0, mut n1) = (0u32, 0u32);
+            let rf = rb.faces[f];
+            let mut h = rf.first;
+            for _ in 0..rf.degree {
+                let k = rb.face[rb.twin[h as usize] as usize] as usize;
+                if k < f && !rb.faces[k].hole {
+                    n0 += u32::from(face_group[k] == cands[0]);
+                    n1 += u32::from(face_group[k] == cands[1]);
+                }
+                h = rb.next[h as usize];
+            }
+            match n0.cmp(&n1) {
+                std::cmp::Ordering::Equal => 1,
+                std::cmp::Ordering::Greater => 2,
+                std::cmp::Ordering::Less => 3,
+            }
+        }
+        _ => 4,
+    }
+}
+
+/// Version-3 vertex candidates of mesh face `f` (spec §6.5): for the face's vertices in
+/// cycle order from the entry half-edge, the faces around each vertex in rotation order
+/// (from its first outgoing half-edge, `next = twin(prev(h))`); the groups of those that are
+/// earlier mesh faces, each once, not among the edge candidates `cands`; at most
+/// `GROUP_CANDIDATES`.
+fn vertex_candidates(
+    rb: &Rebuilt,
+    f: usize,
+    face_group: &[u32],
+    cands: &[u32],
+    out: &mut Vec<u32>,
+) {
+    out.clear();
+    let rf = rb.faces[f];
+    let mut h = rf.first;
+    for _ in 0..rf.degree {
+        let start = rb.vertex_out[rb.vertex[h as usize] as usize];
+        let mut e = start;
+        for _ in 0..rb.next.len() {
+            let k = rb.face[e as usize] as usize;
+            if k < f && !rb.faces[k].hole {
+                let g = face_group[k];
+                if !cands.contains(&g) && !out.contains(&g) {
+                    out.push(g);
+                    if out.len() == GROUP_CANDIDATES {
+                        return;
+                    }
+                }
+            }
+            e = rb.twin[rb.prev[e as usize] as usize];
+            if e == start {
+                break;
+            }
+        }
+        h = rb.next[h as usize];
+    }
+}
+
+/// Recency order of the groups used so far (version 3, §6.5): each used group's last face,
+/// flagged in a Fenwick tree over faces, so the rank "groups used since" and its inverse are
+/// O(log n).
+struct Recency {
+    last_face: Vec<u32>,
+    flags: ranks::Flags,
+    used: u32,
+}
+
+impl Recency {
+    fn new(groups: usize, faces: usize) -> Self {
+        Recency {
+            last_face: vec![NONE; groups],
+            flags: ranks::Flags::none(faces),
+            used: 0,
+        }
+    }
+
+    /// Number of groups used since group `g` was (`g` used before).
+    fn rank_of(&self, g: u32) -> u32 {
+        self.used - 1 - self.flags.rank(self.last_face[g as usize] as usize)
+    }
+
+    /// The face whose group has recency rank `r` (`r < used`).
+    fn face_of(&self, r: u32) -> usize {
+        self.flags.select(self.used - 1 - r)
+    }
+
+    fn assign(&mut self, g: u32, face: usize) {
+        match self.last_face[g as usize] {
+            NONE => self.used += 1,
+            last => self.flags.take(last as usize),
+        }
+        self.flags.put(face);
+        self.last_face[g as usize] = face as u32;
     }
 }
 
@@ -675,33 +832,36 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let mut face_group_new = vec![NONE; rb.faces.len()];
     let mut group_syms = Vec::new();
     let mut prev_real = None;
-    let mut cands = Vec::new();
+    let (mut cands, mut vcands) = (Vec::new(), Vec::new());
+    let mut recency = Recency::new(mesh.groups.len(), rb.faces.len());
     for (i, rf) in rb.faces.iter().enumerate() {
         if rf.hole {
             continue;
         }
         let og = mesh.face_groups[rebuilt_face_source[i] as usize] as usize;
         group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
+        let class = group_class(&rb, i, &face_group_new, &cands);
+        let seen = next_group;
         let sym = if group_new[og] == NONE {
             group_new[og] = next_group;
             next_group += 1;
             GroupSym::New
         } else {
-            match cands
-                .iter()
-                .take(GROUP_CANDIDATES)
-                .position(|&g| g == group_new[og])
-            {
+            let g = group_new[og];
+            match cands.iter().take(GROUP_CANDIDATES).position(|&c| c == g) {
                 Some(c) => GroupSym::Candidate(c as u8),
-                None => GroupSym::Explicit(group_new[og]),
+                None => {
+                    vertex_candidates(&rb, i, &face_group_new, &cands, &mut vcands);
+                    match vcands.iter().position(|&c| c == g) {
+                        Some(c) => GroupSym::Vertex(c as u8),
+                        None => GroupSym::Recent(recency.rank_of(g)),
+                    }
+                }
             }
         };
-        group_syms.push((
-            sym,
-            next_group - u32::from(sym == GroupSym::New),
-            cands.len(),
-        ));
+        group_syms.push((sym, class, seen));
         face_group_new[i] = group_new[og];
+        recency.assign(group_new[og], i);
         prev_real = Some(i);
     }
     for g in group_new.iter_mut().filter(|g| **g == NONE) {
@@ -719,13 +879,13 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     put_varint(&mut conn, tr.labels.len() as u64);
     {
         let mut enc = RangeEncoder::new();
-        let mut models = ConnModels::new();
+        let mut models = ConnModels::new(true);
         for &l in &tr.labels {
             models.encode_label(&mut enc, l);
         }
         if group_count > 1 {
-            for &(sym, seen, nc) in &group_syms {
-                models.encode_group(&mut enc, sym, seen, nc);
+            for &(sym, class, seen) in &group_syms {
+                models.encode_group(&mut enc, sym, class, seen);
             }
         }
         conn.extend_from_slice(&enc.finish());
@@ -1167,7 +1327,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         ));
     }
     let mut dec = RangeDecoder::new(coded, "connectivity")?;
-    let mut models = ConnModels::new();
+    let mut models = ConnModels::new(features.groups_v3);
     let mut labels = Vec::new();
     let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
     for _ in 0..label_count {
@@ -1205,7 +1365,9 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut face_group = vec![NONE; rb.faces.len()];
     let mut next_group = 0u32;
     let mut prev_real = None;
-    let mut cands = Vec::new();
+    let (mut cands, mut vcands) = (Vec::new(), Vec::new());
+    let mut recency =
+        (features.groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
     for i in 0..rb.faces.len() {
         if rb.faces[i].hole {
             continue;
@@ -1214,19 +1376,40 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             0
         } else {
             group_candidates(&rb, i, &face_group, prev_real, &mut cands);
-            match models.decode_group(&mut dec, next_group, cands.len())? {
+            let class = if features.groups_v3 {
+                group_class(&rb, i, &face_group, &cands)
+            } else {
+                cands.len().clamp(1, 3) - 1
+            };
+            let missing = |what: &str, c: u8, n: usize| {
+                Error::format(
+                    "connectivity",
+                    "group",
+                    format!("face {i} refers to {what} candidate group {c} of {n}"),
+                )
+            };
+            match models.decode_group(&mut dec, next_group, class)? {
                 GroupSym::New => {
                     next_group += 1;
                     next_group - 1
                 }
                 GroupSym::Explicit(id) => id,
-                GroupSym::Candidate(c) => match cands.get(usize::from(c)) {
-                    Some(&g) => g,
-                    None => {
+                GroupSym::Candidate(c) => *cands
+                    .get(usize::from(c))
+                    .ok_or_else(|| missing("edge", c, cands.len()))?,
+                GroupSym::Vertex(c) => {
+                    vertex_candidates(&rb, i, &face_group, &cands, &mut vcands);
+                    *vcands
+                        .get(usize::from(c))
+                        .ok_or_else(|| missing("vertex", c, vcands.len()))?
+                }
+                GroupSym::Recent(r) => match &recency {
+                    Some(rc) if r < rc.used => face_group[rc.face_of(r)],
+                    _ => {
                         return Err(Error::format(
                             "connectivity",
-                            "group",
-                            format!("face {i} refers to candidate group {c} of {}", cands.len()),
+                            "group_rank",
+                            format!("rank {r} among the groups used so far"),
                         ))
                     }
                 },
@@ -1240,6 +1423,9 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             ));
         }
         face_group[i] = g;
+        if let Some(rc) = &mut recency {
+            rc.assign(g, i);
+        }
         prev_real = Some(i);
     }
     dec.finish()?;

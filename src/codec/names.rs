@@ -9,70 +9,12 @@
 
 use super::bytes::{put_varint, Reader};
 use super::rangecoder::{BitModel, RangeDecoder, RangeEncoder};
+use super::ranks::Flags;
 use super::{decode_below, encode_below, unzigzag64, zigzag64};
 use crate::error::Result;
 
 /// Largest number a name may end in to be split as stem + number (18 decimal digits).
 const MAX_NUMBER: u64 = 999_999_999_999_999_999;
-
-/// Order-statistics over `0..n` (a Fenwick tree of "still unused" flags): the rank of an
-/// index among the unused ones, and the unused index of a given rank, both in O(log n). The
-/// group order is coded as ranks, so both sides need exactly these two queries.
-struct Unused {
-    tree: Vec<u32>,
-    top: usize,
-}
-
-impl Unused {
-    fn new(n: usize) -> Self {
-        let mut tree = vec![0u32; n + 1];
-        for i in 1..=n {
-            tree[i] += 1;
-            let j = i + (i & i.wrapping_neg());
-            if j <= n {
-                tree[j] += tree[i];
-            }
-        }
-        let top = if n == 0 {
-            0
-        } else {
-            1 << (usize::BITS - 1 - n.leading_zeros())
-        };
-        Unused { tree, top }
-    }
-
-    /// Number of unused indices below `x` (`x <= n`).
-    fn rank(&self, x: usize) -> u32 {
-        let (mut i, mut s) = (x, 0);
-        while i > 0 {
-            s += self.tree[i];
-            i &= i - 1;
-        }
-        s
-    }
-
-    /// The unused index with `k` unused indices below it (`k` < number unused).
-    fn select(&self, mut k: u32) -> usize {
-        let (mut pos, mut step) = (0usize, self.top);
-        while step > 0 {
-            let next = pos + step;
-            if next < self.tree.len() && self.tree[next] <= k {
-                pos = next;
-                k -= self.tree[next];
-            }
-            step >>= 1;
-        }
-        pos
-    }
-
-    fn take(&mut self, x: usize) {
-        let mut i = x + 1;
-        while i < self.tree.len() {
-            self.tree[i] -= 1;
-            i += i & i.wrapping_neg();
-        }
-    }
-}
 
 /// Splits a name into a stem and the decimal number it ends in, when that number reads back
 /// to the same digits (no leading zero, at most 18 digits).
@@ -87,7 +29,7 @@ fn split(name: &str) -> (&str, Option<u64>) {
 
 /// The rank (among the `left` unused input indices) expected for the next coded group: that
 /// of the first unused index after the previous group's, wrapping to 0.
-fn predicted_rank(unused: &Unused, prev: Option<u32>, left: u32) -> u32 {
+fn predicted_rank(unused: &Flags, prev: Option<u32>, left: u32) -> u32 {
     let r = prev.map_or(0, |p| unused.rank(p as usize + 1));
     if r >= left {
         0
@@ -108,7 +50,7 @@ pub fn write(names: &[&str], original_of_coded: &[u32]) -> Vec<u8> {
     let mut enc = RangeEncoder::new();
     let mut hit_models = [BitModel::default(); 2];
     let mut prev_hit = true;
-    let mut unused = Unused::new(names.len());
+    let mut unused = Flags::all(names.len());
     let mut prev = None;
     for (&o, left) in original_of_coded.iter().zip((1..=names.len() as u32).rev()) {
         let predicted = predicted_rank(&unused, prev, left);
@@ -161,7 +103,7 @@ pub fn read(payload: &[u8], group_count: usize) -> Result<(Vec<String>, Vec<u32>
         let mut dec = RangeDecoder::new(order, "names")?;
         let mut hit_models = [BitModel::default(); 2];
         let mut prev_hit = true;
-        let mut unused = Unused::new(group_count);
+        let mut unused = Flags::all(group_count);
         let mut prev = None;
         for left in (1..=group_count as u32).rev() {
             let predicted = predicted_rank(&unused, prev, left);
@@ -247,19 +189,6 @@ mod tests {
             split("x1234567890123456789"),
             ("x1234567890123456789", None)
         );
-    }
-
-    #[test]
-    fn unused_ranks_and_selects() {
-        let mut u = Unused::new(10);
-        u.take(3);
-        u.take(0);
-        assert_eq!(u.rank(4), 2);
-        assert_eq!(u.select(0), 1);
-        assert_eq!(u.select(2), 4);
-        assert_eq!(u.select(7), 9);
-        let e = Unused::new(0);
-        assert_eq!(e.rank(0), 0);
     }
 
     fn round_trip(names: &[&str], order: &[u32]) -> usize {

@@ -418,6 +418,24 @@ impl IntModel {
         }
     }
 
+    /// Ideal cost of coding `v` now, in bits (for measurements).
+    pub fn cost(&self, v: u32) -> f64 {
+        let x = u64::from(v) + 1;
+        let k = 63 - x.leading_zeros() as usize;
+        let mut node = 1usize;
+        let mut bits = 0.0;
+        for i in (0..5).rev() {
+            let bit = (k >> i) & 1 == 1;
+            bits += self.tree[node].cost(bit);
+            node = node * 2 + usize::from(bit);
+        }
+        if k >= 1 {
+            let rest = x - (1u64 << k);
+            bits += self.first_mantissa[k].cost((rest >> (k - 1)) & 1 == 1) + (k - 1) as f64;
+        }
+        bits
+    }
+
     /// Decodes a value; `max` bounds it (a larger value is a format error in `field`).
     pub fn decode(&mut self, dec: &mut RangeDecoder, max: u32, field: &'static str) -> Result<u32> {
         let mut node = 1usize;
