@@ -31,13 +31,13 @@ pub struct ModelEncodeOptions {
     /// evenly spaced faces and keep the smallest file (0 or 1: the fit's order only). The
     /// codec's traversal starts at the first face, and where it starts moves the file by a
     /// few percent either way (trj10's STEP fit: 497..523 bytes over 16 starts, block_fillet3:
-    /// 518..540) while the control mesh, and so the decoded surface, is the same. On for STEP
-    /// input (the STEP path keeps the size of its first start or less), off for meshes.
+    /// 518..540) while the control mesh, and so the decoded surface, is the same. Default
+    /// [`DEFAULT_START_FACES`]: about a millisecond per start per thousand control faces.
     pub try_start_faces: usize,
 }
 
-/// Starts [`encode_step`] tries (see [`ModelEncodeOptions::try_start_faces`]).
-pub const STEP_START_FACES: usize = 16;
+/// Traversal starts tried by default (see [`ModelEncodeOptions::try_start_faces`]).
+pub const DEFAULT_START_FACES: usize = 16;
 
 /// Largest input (faces) [`ModelEncodeOptions::try_local_refinement`] fits twice.
 pub const LOCAL_REFINEMENT_MAX_TRIANGLES: usize = 20_000;
@@ -49,7 +49,7 @@ impl Default for ModelEncodeOptions {
             quantization_bits: None,
             store_group_names: true,
             try_local_refinement: false,
-            try_start_faces: 0,
+            try_start_faces: DEFAULT_START_FACES,
         }
     }
 }
@@ -85,7 +85,6 @@ pub fn encode_step(
     let model = crate::io::step::read_step(path, &step_options_for(tolerance, relative))?;
     let mut opts = opts.clone();
     opts.try_local_refinement = true;
-    opts.try_start_faces = opts.try_start_faces.max(STEP_START_FACES);
     opts.fit.tolerance = tolerance.map(|t| {
         if relative {
             t * model.mesh.diagonal()

@@ -174,11 +174,8 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
             store_group_names: !args.no_names,
             ..Default::default()
         };
-        // See `ModelEncodeOptions::try_local_refinement` and `try_start_faces`.
+        // See `ModelEncodeOptions::try_local_refinement`.
         opts.try_local_refinement = from_step;
-        if from_step {
-            opts.try_start_faces = scode::pipeline::STEP_START_FACES;
-        }
         opts.fit.tolerance = args.tolerance.map(|t| {
             if args.relative {
                 t * mesh.diagonal()
