@@ -1581,6 +1581,10 @@ pub fn fit_model(
             group_chains[g as usize].push(ci);
         }
     }
+    let group_max_chord: Vec<f64> = group_triangles
+        .iter()
+        .map(|ids| ids.iter().fold(0.0f64, |m, &t| m.max(chord[t as usize])))
+        .collect();
     let meter = ErrorMeter {
         mesh: &mesh,
         input_samples: sample_surface(
@@ -1595,6 +1599,7 @@ pub fn fit_model(
         own_faces: OwnFaces {
             surfaces: &group_surfaces,
             triangles: &group_triangles,
+            max_allowance: &group_max_chord,
         },
         error_samples: opts.error_samples,
         tol,
