@@ -34,6 +34,9 @@ pub(crate) struct OwnFaces<'a> {
     pub surfaces: &'a [Option<TriangleSurface>],
     /// Indexed by group: global triangle index of each of the group surface's triangles.
     pub triangles: &'a [Vec<u32>],
+    /// Indexed by group: the largest allowance of its triangles (at least 0), which bounds
+    /// how far its own triangles need searching; a group without one is searched everywhere.
+    pub max_allowance: &'a [f64],
 }
 
 impl OwnFaces<'_> {
@@ -52,7 +55,21 @@ impl OwnFaces<'_> {
         else {
             return nearest_excess;
         };
-        let hit = surface.closest_point(p);
+        // An own triangle farther than `nearest_excess` plus the largest allowance cannot
+        // beat `nearest_excess`, so search only that far (padded for rounding): a hit within
+        // it is the same closest point as an unbounded search finds.
+        let bound = self
+            .max_allowance
+            .get(group)
+            .map(|&a| (nearest_excess + a) * (1.0 + 1e-9) + 1e-300)
+            .filter(|b| b.is_finite());
+        let hit = match bound {
+            Some(b) => match surface.closest_point_within(p, b) {
+                Some(hit) => hit,
+                None => return nearest_excess,
+            },
+            None => surface.closest_point(p),
+        };
         let allowance = ids
             .get(hit.triangle as usize)
             .and_then(|&t| chord.get(t as usize))
@@ -311,6 +328,7 @@ mod tests {
         let faces = OwnFaces {
             surfaces: &own,
             triangles: &ids,
+            max_allowance: &[1.0, 0.0],
         };
         let q = DVec3::new(1.0, 1.0, 1.2);
         // Against the nearest triangle (group 1): 0.3 - 0 = 0.3; against its own: 1.2 - 1.

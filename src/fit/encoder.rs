@@ -1242,17 +1242,28 @@ impl ErrorMeter<'_> {
             d_in[i] = h.distance;
             in_geom[i] = new_index.geom(h.triangle);
         }
-        let added_surface = if added.is_empty() || !reuse_in {
+        // Only samples that keep their old hit look at the new triangles: when every sample
+        // needs a full query (the whole surface moved), there is nothing to build.
+        let added_surface = if added.is_empty() || !reuse_in || full.len() == n_in {
             None
         } else {
-            Some(TriangleSurface::with_blocks(
-                new_index.positions.clone(),
-                added
-                    .iter()
-                    .map(|&t| new_index.triangles[t as usize])
-                    .collect(),
-                block,
-            )?)
+            // The added triangles' own vertices only (the same corners, so the same boxes and
+            // closest points), not a copy of every position.
+            let mut local = vec![u32::MAX; new_index.positions.len()];
+            let mut positions = Vec::new();
+            let triangles: Vec<[u32; 3]> = added
+                .iter()
+                .map(|&t| {
+                    new_index.triangles[t as usize].map(|v| {
+                        if local[v as usize] == u32::MAX {
+                            local[v as usize] = positions.len() as u32;
+                            positions.push(new_index.positions[v as usize]);
+                        }
+                        local[v as usize]
+                    })
+                })
+                .collect();
+            Some(TriangleSurface::with_blocks(positions, triangles, block)?)
         };
         for i in (0..n_in).filter(|&i| !is_full[i]) {
             let (d_old, g_old) = cache.in_hits[i];
@@ -1570,6 +1581,10 @@ pub fn fit_model(
             group_chains[g as usize].push(ci);
         }
     }
+    let group_max_chord: Vec<f64> = group_triangles
+        .iter()
+        .map(|ids| ids.iter().fold(0.0f64, |m, &t| m.max(chord[t as usize])))
+        .collect();
     let meter = ErrorMeter {
         mesh: &mesh,
         input_samples: sample_surface(
@@ -1584,6 +1599,7 @@ pub fn fit_model(
         own_faces: OwnFaces {
             surfaces: &group_surfaces,
             triangles: &group_triangles,
+            max_allowance: &group_max_chord,
         },
         error_samples: opts.error_samples,
         tol,
