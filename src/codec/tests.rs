@@ -340,11 +340,18 @@ fn make_random_mesh(r: &RandomMesh) -> ControlMesh {
         bi += 1;
         b % n
     };
-    let ngroups = 1 + next(4) as u32;
+    let ngroups = 1 + next(8) as u32;
     for g in 0..ngroups {
-        let patch = match next(3) {
+        let patch = match next(4) {
             0 => PatchKind::Closed,
             1 => PatchKind::Boundary(BoundarySurface::Plane),
+            // Parallel axes, every other one on the same line.
+            2 => PatchKind::Boundary(BoundarySurface::Cylinder {
+                axis: Axis {
+                    origin: DVec3::new(f64::from(g / 2), 1.0, f64::from(g)),
+                    direction: DVec3::new(0.0, 0.0, if g % 3 == 0 { -1.0 } else { 1.0 }),
+                },
+            }),
             _ => PatchKind::Boundary(BoundarySurface::Cone {
                 axis: Axis {
                     origin: DVec3::new(0.1, 0.2, g as f64),
