@@ -231,10 +231,23 @@ struct Features {
     groups_v3: bool,
 }
 
+/// Whether this build reads versions 1 and 2 (feature `legacy-formats`, on by default; the
+/// WebAssembly viewer leaves it out to stay within its size budget). Code that only those
+/// versions need is behind `LEGACY &&`, so builds without it drop that code.
+const LEGACY: bool = cfg!(feature = "legacy-formats");
+
 fn features_for(major: u8, _minor: u8) -> Result<Features> {
     // Minor versions may only add skippable sections; every decoder of a major version reads
     // the flags it knows and rejects the others.
     match major {
+        1 | 2 if !LEGACY => Err(Error::format(
+            "header",
+            "version",
+            format!(
+                "version {major} files are read by builds with the `legacy-formats` feature \
+                 (the scode command-line tool); this one reads version {FORMAT_VERSION_MAJOR}"
+            ),
+        )),
         1 => Ok(Features {
             known_flags: KNOWN_FLAGS,
             crease_prediction: false,
@@ -477,7 +490,7 @@ impl ConnModels {
                 self.group_bits += before.cost(r);
                 GroupSym::Recent(r)
             }
-            _ => {
+            _ if LEGACY => {
                 self.group_bits += f64::from(bits_for(u64::from(seen)));
                 let id = decode_below(dec, seen)?;
                 if id >= seen {
@@ -488,6 +501,13 @@ impl ConnModels {
                     ));
                 }
                 GroupSym::Explicit(id)
+            }
+            _ => {
+                return Err(Error::format(
+                    "connectivity",
+                    "group",
+                    "symbol of an older version",
+                ))
             }
         })
     }
@@ -1446,8 +1466,8 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
 
     // Patches.
     let (patch_kinds, grid_axes) = match &payloads[SEC_PATCHES as usize] {
-        Some(p) if features.coded_patches => patches::decode(p, group_count, &quant)?,
-        Some(p) => patches::decode_v1(p, group_count, &quant)?,
+        Some(p) if LEGACY && !features.coded_patches => patches::decode_v1(p, group_count, &quant)?,
+        Some(p) => patches::decode(p, group_count, &quant)?,
         None => (
             vec![PatchKind::Closed; group_count],
             vec![None; group_count],
@@ -1543,12 +1563,12 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     let mut names = vec![String::new(); group_count];
     let mut input_of_coded: Option<Vec<u32>> = None;
     if let Some(p) = &payloads[SEC_NAMES as usize] {
-        if features.names_in_input_order {
+        if LEGACY && !features.names_in_input_order {
+            names = names::read_v1(p, group_count)?;
+        } else {
             let (n, order) = names::read(p, group_count)?;
             names = n;
             input_of_coded = Some(order);
-        } else {
-            names = names::read_v1(p, group_count)?;
         }
     }
     let mut patch_kinds = patch_kinds;
