@@ -444,8 +444,10 @@ impl ConnModels {
         class * (symbols + 1) + self.prev_group
     }
 
-    /// Encodes a version-3 group symbol (`seen` groups used so far).
+    /// Encodes a version-3 group symbol (`seen` groups used so far). The encoder never makes
+    /// `Explicit` (versions 1-2 only).
     fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, class: usize, seen: u32) {
+        debug_assert!(!matches!(g, GroupSym::Explicit(_)));
         let s = match g {
             GroupSym::Candidate(i) => usize::from(i),
             GroupSym::New => GROUP_CANDIDATES,
@@ -968,7 +970,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             groups_new_order.len(),
             bits,
             Some(&crease_he),
-            Some(&ArcAxes {
+            (!axes.is_empty()).then_some(&ArcAxes {
                 face_axis: &face_axis,
                 axes: &axes,
             }),
@@ -1509,7 +1511,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             group_count,
             quant.bits,
             features.crease_prediction.then_some(crease_he.as_slice()),
-            features.arc_prediction.then_some(&arcs),
+            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
             &mut q,
             &mut gd,
         )?;

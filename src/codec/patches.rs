@@ -47,12 +47,6 @@ fn kind_of(patch: &PatchKind) -> (u8, Option<Axis>) {
     }
 }
 
-fn too_far(name: &str) -> Error {
-    Error::Mesh(format!(
-        "group `{name}`: axis origin is too far from the mesh to quantise"
-    ))
-}
-
 /// The axis as version 3 stores it: direction as i16 components; the origin in grid units,
 /// for a cylinder moved along the (stored) direction to the point whose dominant coordinate
 /// (largest |component|, lowest index on ties) is the middle of the grid, `2^(bits-1)`.
@@ -91,7 +85,9 @@ fn quantize_axis(kind: u8, axis: &Axis, quant: &Quantizer, name: &str) -> Result
     for i in 0..3 {
         let q = g[i].round();
         if !q.is_finite() || q.abs() > MAX_ORIGIN as f64 {
-            return Err(too_far(name));
+            return Err(Error::Mesh(format!(
+                "group `{name}`: axis origin is too far from the mesh to quantise"
+            )));
         }
         origin[i] = q as i64;
     }
@@ -292,7 +288,8 @@ pub fn decode(payload: &[u8], group_count: usize, quant: &Quantizer) -> Result<D
     let mut m = Models::new();
     let mut recent = RecentDirections::default();
     let mut prev_kind = KINDS;
-    // Every group costs at least a fraction of a bit: bound the allocation by the bytes.
+    // A capacity hint only (the vectors grow if a file really holds more groups per byte);
+    // `group_count` itself is already within the limits.
     let cap = group_count.min(payload.len().saturating_mul(64));
     let (mut out, mut grid) = (Vec::with_capacity(cap), Vec::with_capacity(cap));
     for _ in 0..group_count {
