@@ -156,17 +156,19 @@ pub fn put_section(
     crc_from_file_start: bool,
 ) {
     let start = if crc_from_file_start { 0 } else { out.len() };
-    let mut deflated = None;
+    let mut deflated: Option<Vec<u8>> = None;
     if allow_deflate && payload.len() >= MIN_DEFLATE_TRY {
         let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
         // Writing into a Vec cannot fail.
-        if z.write_all(payload).is_ok() {
-            if let Ok(c) = z.finish() {
-                let mut overhead = Vec::new();
-                put_varint(&mut overhead, payload.len() as u64);
-                if c.len() + overhead.len() < payload.len() {
-                    deflated = Some(c);
-                }
+        let dynamic = z.write_all(payload).ok().and_then(|()| z.finish().ok());
+        let mut overhead = Vec::new();
+        put_varint(&mut overhead, payload.len() as u64);
+        for c in [dynamic, zlib_static_blocks(payload)].into_iter().flatten() {
+            let best = deflated
+                .as_ref()
+                .map_or(payload.len(), |d| d.len() + overhead.len());
+            if c.len() + overhead.len() < best {
+                deflated = Some(c);
             }
         }
     }
@@ -185,6 +187,26 @@ pub fn put_section(
     }
     let crc = crc32fast::hash(&out[start..]);
     out.extend_from_slice(&crc.to_le_bytes());
+}
+
+/// A zlib stream of `payload` made only of deflate's fixed-Huffman blocks. miniz_oxide (behind
+/// flate2) always writes dynamic blocks, whose code tables cost 30-40 bytes: on a section of a
+/// few hundred bytes (group names: `face_1, face_2, ...` and their order) fixed codes are
+/// smaller, as zlib itself would choose (bm2's names: 77 -> 49 bytes).
+fn zlib_static_blocks(payload: &[u8]) -> Option<Vec<u8>> {
+    use miniz_oxide::deflate::core::{
+        compress, create_comp_flags_from_zip_params, CompressionStrategy, CompressorOxide,
+        TDEFLFlush, TDEFLStatus,
+    };
+    let flags = create_comp_flags_from_zip_params(9, 1, CompressionStrategy::Fixed as i32);
+    let mut compressor = CompressorOxide::new(flags);
+    // Fixed codes spend at most 9 bits on a literal: this always suffices.
+    let mut out = vec![0u8; payload.len() + payload.len() / 4 + 64];
+    let (status, read, written) = compress(&mut compressor, payload, &mut out, TDEFLFlush::Finish);
+    (status == TDEFLStatus::Done && read == payload.len()).then(|| {
+        out.truncate(written);
+        out
+    })
 }
 
 /// One framed section as read from the file.
@@ -299,5 +321,37 @@ mod tests {
         let mut r = Reader::new(&out, "file");
         read_section(&mut r, None, true, 1 << 20).unwrap();
         assert!(read_section(&mut r, None, true, 10).is_err());
+    }
+
+    #[test]
+    fn small_sections_take_fixed_huffman_codes_when_smaller() {
+        // A names-like payload: 30 incompressible bytes, then a stem and a run of 1s.
+        let mut payload: Vec<u8> = (0..30u32).map(|i| (i * 97 + 13) as u8).collect();
+        payload.extend_from_slice(b"\x14face_\x02");
+        payload.extend(std::iter::repeat_n(1u8, 50));
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        z.write_all(&payload).unwrap();
+        let dynamic = z.finish().unwrap();
+        let fixed = zlib_static_blocks(&payload).unwrap();
+        assert!(
+            fixed.len() + 10 < dynamic.len(),
+            "{} vs {}",
+            fixed.len(),
+            dynamic.len()
+        );
+        let mut out = Vec::new();
+        put_section(&mut out, 6, &payload, true, false);
+        // tag, two one-byte lengths, the fixed-code stream, CRC.
+        assert_eq!(out.len(), 3 + fixed.len() + 4);
+        let mut r = Reader::new(&out, "file");
+        let s = read_section(&mut r, None, true, 1 << 20).unwrap();
+        assert_eq!(s.payload, payload);
+        // Data that fixed codes cannot shrink stays stored.
+        let noise: Vec<u8> = (0..200u32)
+            .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+            .collect();
+        let mut out = Vec::new();
+        put_section(&mut out, 6, &noise, true, false);
+        assert_eq!(out[0], 6);
     }
 }
