@@ -696,6 +696,78 @@ fn lower_cost_near(
     lowered
 }
 
+/// Points thinned to at most one per cell of side `cell` (first come first kept).
+fn thin_points(points: &[DVec3], cell: f64) -> Vec<DVec3> {
+    if !(cell > 0.0 && cell.is_finite()) {
+        return points.to_vec();
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    points
+        .iter()
+        .copied()
+        .filter(|p| {
+            let c = (*p / cell).floor();
+            seen.insert((c.x as i64, c.y as i64, c.z as i64))
+        })
+        .collect()
+}
+
+/// Which chains of the failing groups to refine: for each point where a group is out of
+/// tolerance, the group's chains within `slack` of the nearest one (the nearest chain is
+/// what shapes a boundary patch's error there), and for closed patches only chains within
+/// `reach[g]` of the point (farther, the patch's interior is what is off).
+#[allow(clippy::too_many_arguments)]
+fn chains_near_failures(
+    mesh: &ControlMesh,
+    net: &CurveNetwork,
+    group_chains: &[Vec<usize>],
+    bad_group: &[bool],
+    bad_points: &[Vec<DVec3>],
+    plans: &[GroupPlan],
+    reach: &[f64],
+    tol: f64,
+) -> Vec<bool> {
+    let mut refine = vec![false; net.chains.len()];
+    for (g, &bad) in bad_group.iter().enumerate() {
+        if !bad || group_chains[g].is_empty() {
+            continue;
+        }
+        let closed = matches!(plans[g].kind, PatchKind::Closed);
+        let pts = thin_points(&bad_points[g], 2.0 * tol);
+        if pts.is_empty() {
+            // No located failure: refine them all, as before.
+            for &c in &group_chains[g] {
+                refine[c] = true;
+            }
+            continue;
+        }
+        let lines: Vec<Vec<DVec3>> = group_chains[g]
+            .iter()
+            .map(|&c| {
+                net.chains[c]
+                    .vertices
+                    .iter()
+                    .map(|&v| mesh.positions[v as usize])
+                    .collect()
+            })
+            .collect();
+        for p in pts {
+            let d: Vec<f64> = lines
+                .iter()
+                .map(|line| (closest_on_polyline(p, line) - p).length())
+                .collect();
+            let dmin = d.iter().copied().fold(f64::INFINITY, f64::min);
+            for (k, &c) in group_chains[g].iter().enumerate() {
+                let near = d[k] <= 1.5 * dmin + 2.0 * tol;
+                if near && (!closed || d[k] <= reach[g]) {
+                    refine[c] = true;
+                }
+            }
+        }
+    }
+    refine
+}
+
 /// Everything one build round produces.
 struct Built {
     control: ControlMesh,
@@ -716,6 +788,7 @@ fn build_topology(
     tol: f64,
     chain_loop_len: &[usize],
     vertex_cost: &[f64],
+    group_surfaces: &[Option<TriangleSurface>],
 ) -> Built {
     let nv = mesh.vertex_count();
     let mut roles = vec![VertexRole::Interior; nv];
@@ -774,6 +847,7 @@ fn build_topology(
         rules: &rules,
         // Distance factors to the squared-distance units of `max_cost`.
         cost_scale: Some(&vertex_cost.iter().map(|f| f * f).collect::<Vec<f64>>()),
+        domain: Some((group_surfaces, tol)),
     });
     // Compact into a control mesh.
     let mut index = vec![u32::MAX; nv];
@@ -1625,6 +1699,7 @@ pub fn fit_model(
             tol,
             &chain_loop_len,
             &vertex_cost,
+            &group_surfaces,
         );
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
@@ -1700,6 +1775,38 @@ pub fn fit_model(
             levels_tried = Some(5);
         }
         prev_worst = Some(worst);
+        // Chains are refined only near where their groups fail (a plane with a hundred
+        // holes failing at one of them: nist 1152 -> 879 control vertices); the last rounds
+        // refine every chain of a failing group, convergence first.
+        let chain_refine = if round + 4 >= opts.max_rounds {
+            let mut all = vec![false; net.chains.len()];
+            for g in (0..mesh.groups.len()).filter(|&g| bad_group[g]) {
+                for &c in &group_chains[g] {
+                    all[c] = true;
+                }
+            }
+            all
+        } else {
+            let reach: Vec<f64> = (0..mesh.groups.len())
+                .map(|g| {
+                    if bad_group[g] && matches!(plans[g].kind, PatchKind::Closed) {
+                        0.5 * mean_group_edge(&built.control, g as u32)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            chains_near_failures(
+                &mesh,
+                &net,
+                &group_chains,
+                &bad_group,
+                &measured.bad_points,
+                &plans,
+                &reach,
+                tol,
+            )
+        };
         let mut refitted_closed = Vec::new();
         for (g, bad) in bad_group.iter().enumerate() {
             if !bad {
@@ -1734,7 +1841,9 @@ pub fn fit_model(
                 plan.cost_factor = 2.0;
                 refitted_closed.push(g);
             }
-            for &c in &group_chains[g] {
+        }
+        for (c, &r) in chain_refine.iter().enumerate() {
+            if r {
                 chain_tol[c] *= 0.5;
                 chain_step[c] = (chain_step[c] * 0.6).max(5f64.to_radians());
             }
