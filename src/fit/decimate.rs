@@ -888,11 +888,18 @@ mod tests {
         let rules = [plane_rule()];
         let surfaces = [Some(TriangleSurface::new(p.clone(), t.clone()).unwrap())];
         let dist = 0.02;
+        // Interior edges (two faces) only: the boundary ones are decoded as curves.
         let off_edges = |out: &Decimated| {
-            out.triangles
-                .iter()
-                .flat_map(|tri| (0..3).map(move |k| (tri[k], tri[(k + 1) % 3])))
-                .filter(|&(a, b)| {
+            let mut uses = std::collections::BTreeMap::new();
+            for tri in &out.triangles {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                }
+            }
+            uses.into_iter()
+                .filter(|&(_, n)| n == 2)
+                .filter(|&((a, b), _)| {
                     let m = 0.5 * (p[a as usize] + p[b as usize]);
                     surfaces[0]
                         .as_ref()
