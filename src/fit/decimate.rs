@@ -24,8 +24,8 @@ use std::collections::BinaryHeap;
 
 use glam::DVec3;
 
+use super::domain::PlaneDomain;
 use crate::mesh::Axis;
-use crate::metrics::TriangleSurface;
 
 /// What decimation may do with a vertex.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -110,10 +110,10 @@ pub struct DecimateInput<'a> {
     /// `None`): the encoder lowers it where the decoded surface was too far off, so a patch
     /// gets control points where its error is instead of everywhere.
     pub cost_scale: Option<&'a [f64]>,
-    /// Per group, its input surface and a distance: a collapse in a plane patch may not
-    /// create an interior edge whose points are farther than that from it (a long diagonal
-    /// of a curved strip cuts outside the face, and a plane's interior edges stay straight).
-    pub domain: Option<(&'a [Option<TriangleSurface>], f64)>,
+    /// Per group, where a plane face lies in its plane: a collapse in a plane patch may not
+    /// create an interior edge that leaves it (a long diagonal of a curved strip, or one
+    /// across a hole, cuts outside the face, and a plane's interior edges stay straight).
+    pub domain: Option<&'a [Option<PlaneDomain>]>,
 }
 
 /// The decimated mesh, still indexing the input's vertices.
@@ -519,20 +519,16 @@ impl<'a> State<'a> {
             }
             let group = self.input.face_groups[f as usize];
             let rule = &self.input.rules[group as usize];
-            if let (Some((surfaces, dist)), SurfaceRef::Plane { .. }) =
-                (self.input.domain, rule.surface)
-            {
-                if let Some(Some(surface)) = surfaces.get(group as usize) {
+            if let (Some(domains), SurfaceRef::Plane { .. }) = (self.input.domain, rule.surface) {
+                if let Some(Some(domain)) = domains.get(group as usize) {
                     for &w in &t {
                         if w == u || self.edge_on_group_boundary(u, w) {
                             continue;
                         }
                         let pw = self.pos(w);
-                        let off = [0.25, 0.5, 0.75].iter().any(|&s| {
-                            surface
-                                .closest_point_within(pv + (pw - pv) * s, dist)
-                                .is_none()
-                        });
+                        let off = [0.25, 0.5, 0.75]
+                            .iter()
+                            .any(|&s| !domain.contains(pv + (pw - pv) * s));
                         if off {
                             return false;
                         }
@@ -886,8 +882,10 @@ mod tests {
             })
             .collect();
         let rules = [plane_rule()];
-        let surfaces = [Some(TriangleSurface::new(p.clone(), t.clone()).unwrap())];
+        let surface = crate::metrics::TriangleSurface::new(p.clone(), t.clone()).unwrap();
         let dist = 0.02;
+        let corners: Vec<[DVec3; 3]> = t.iter().map(|f| f.map(|v| p[v as usize])).collect();
+        let domains = [PlaneDomain::new(&corners, DVec3::Z, dist)];
         // Interior edges (two faces) only: the boundary ones are decoded as curves.
         let off_edges = |out: &Decimated| {
             let mut uses = std::collections::BTreeMap::new();
@@ -900,12 +898,9 @@ mod tests {
             uses.into_iter()
                 .filter(|&(_, n)| n == 2)
                 .filter(|&((a, b), _)| {
+                    // The raster admits up to a cell diagonal more than `dist`.
                     let m = 0.5 * (p[a as usize] + p[b as usize]);
-                    surfaces[0]
-                        .as_ref()
-                        .unwrap()
-                        .closest_point_within(m, dist)
-                        .is_none()
+                    surface.closest_point_within(m, 2.5 * dist).is_none()
                 })
                 .count()
         };
@@ -918,7 +913,7 @@ mod tests {
             roles: &roles,
             rules: &rules,
             cost_scale: None,
-            domain: Some((&surfaces, dist)),
+            domain: Some(&domains),
         });
         assert_eq!(off_edges(&out), 0, "{out:?}");
         assert_eq!(euler(&out.triangles), 1);
