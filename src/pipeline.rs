@@ -27,6 +27,11 @@ pub struct ModelEncodeOptions {
     /// for STEP input (block_fillet3: 679 -> 569 bytes, its sphere corner failing only at
     /// its three corners), off for meshes (the mesh path's sizes stay as they were).
     pub try_local_refinement: bool,
+    /// Also fit without [`FitOptions::keep_planes_on_faces`] and keep the smaller file, for
+    /// inputs of at most [`PLAIN_PLANES_MAX_TRIANGLES`] faces (default on): keeping plane
+    /// patches on their faces wins on most models but not all (plate 448 -> 518 bytes, screw
+    /// 458 -> 467), and a second fit of a small model takes a second or two.
+    pub try_plain_planes: bool,
     /// Also encode the fitted control mesh with its face list rotated to start at this many
     /// evenly spaced faces and keep the smallest file (0 or 1: the fit's order only). The
     /// codec's traversal starts at the first face, and where it starts moves the file by a
@@ -42,6 +47,9 @@ pub const DEFAULT_START_FACES: usize = 16;
 /// Largest input (faces) [`ModelEncodeOptions::try_local_refinement`] fits twice.
 pub const LOCAL_REFINEMENT_MAX_TRIANGLES: usize = 20_000;
 
+/// Largest input (faces) [`ModelEncodeOptions::try_plain_planes`] fits twice.
+pub const PLAIN_PLANES_MAX_TRIANGLES: usize = 25_000;
+
 impl Default for ModelEncodeOptions {
     fn default() -> Self {
         ModelEncodeOptions {
@@ -49,6 +57,7 @@ impl Default for ModelEncodeOptions {
             quantization_bits: None,
             store_group_names: true,
             try_local_refinement: false,
+            try_plain_planes: true,
             try_start_faces: DEFAULT_START_FACES,
         }
     }
@@ -138,43 +147,61 @@ pub fn bits_for_tolerance(extent: f64, tolerance: f64, fraction: f64) -> u8 {
 }
 
 /// Fits `input` and encodes the control mesh. Returns the `.scode` bytes and what the fit did.
+///
+/// Besides the fit `opts` asks for, small inputs are also fitted the other ways the options
+/// allow ([`ModelEncodeOptions::try_plain_planes`], [`ModelEncodeOptions::try_local_refinement`])
+/// and the smallest file is kept (the first on a tie; a fit within tolerance beats one that
+/// is not).
 pub fn encode_fitted(
     input: &ControlMesh,
     hints: &[SurfaceHint],
     opts: &ModelEncodeOptions,
 ) -> Result<(Vec<u8>, FitReport)> {
     let first = encode_fitted_once(input, hints, opts)?;
-    if !opts.try_local_refinement
-        || opts.fit.local_refinement
-        || input.face_count() > LOCAL_REFINEMENT_MAX_TRIANGLES
+    let mut others: Vec<(ModelEncodeOptions, &str)> = Vec::new();
+    if opts.try_plain_planes
+        && opts.fit.keep_planes_on_faces
+        && input.face_count() <= PLAIN_PLANES_MAX_TRIANGLES
     {
-        return Ok(first);
+        let mut o = opts.clone();
+        o.fit.keep_planes_on_faces = false;
+        others.push((
+            o,
+            "with plane patches decimated freely and all chains of a failing group refined",
+        ));
     }
-    let mut local = opts.clone();
-    local.fit.local_refinement = true;
-    match encode_fitted_once(input, hints, &local) {
-        Ok((bytes, mut report))
-            if bytes.len() < first.0.len()
-                && (report.within_tolerance || !first.1.within_tolerance) =>
-        {
-            report.notes.push(format!(
-                "kept the fit with closed patches refined only where they failed: {} bytes \
-                 instead of {}",
-                bytes.len(),
-                first.0.len()
-            ));
-            Ok((bytes, report))
-        }
-        Ok(_) => Ok(first),
-        Err(e) => {
-            // The first fit stands; say why the second was not considered.
-            let (bytes, mut report) = first;
-            report.notes.push(format!(
-                "the fit with closed patches refined only where they failed did not finish: {e}"
-            ));
-            Ok((bytes, report))
+    if opts.try_local_refinement
+        && !opts.fit.local_refinement
+        && input.face_count() <= LOCAL_REFINEMENT_MAX_TRIANGLES
+    {
+        let mut o = opts.clone();
+        o.fit.local_refinement = true;
+        others.push((o, "with closed patches refined only where they failed"));
+    }
+    let mut best = first;
+    for (o, what) in others {
+        match encode_fitted_once(input, hints, &o) {
+            Ok((bytes, mut report))
+                if bytes.len() < best.0.len()
+                    && (report.within_tolerance || !best.1.within_tolerance) =>
+            {
+                report.notes.push(format!(
+                    "kept the fit {what}: {} bytes instead of {}",
+                    bytes.len(),
+                    best.0.len()
+                ));
+                best = (bytes, report);
+            }
+            Ok(_) => {}
+            Err(e) => {
+                // The fit so far stands; say why this one was not considered.
+                best.1
+                    .notes
+                    .push(format!("the fit {what} did not finish: {e}"));
+            }
         }
     }
+    Ok(best)
 }
 
 /// One fit and encode of [`encode_fitted`].

@@ -24,6 +24,7 @@ use std::collections::BinaryHeap;
 
 use glam::DVec3;
 
+use super::domain::PlaneDomain;
 use crate::mesh::Axis;
 
 /// What decimation may do with a vertex.
@@ -109,6 +110,10 @@ pub struct DecimateInput<'a> {
     /// `None`): the encoder lowers it where the decoded surface was too far off, so a patch
     /// gets control points where its error is instead of everywhere.
     pub cost_scale: Option<&'a [f64]>,
+    /// Per group, where a plane face lies in its plane: a collapse in a plane patch may not
+    /// create an interior edge that leaves it (a long diagonal of a curved strip, or one
+    /// across a hole, cuts outside the face, and a plane's interior edges stay straight).
+    pub domain: Option<&'a [Option<PlaneDomain>]>,
 }
 
 /// The decimated mesh, still indexing the input's vertices.
@@ -356,6 +361,14 @@ impl<'a> State<'a> {
         (count, first)
     }
 
+    /// Whether edge (u, w) has one face or faces in two groups.
+    fn edge_on_group_boundary(&self, u: u32, w: u32) -> bool {
+        let (n, f) = self.edge_faces(u, w);
+        n == 1
+            || (n == 2
+                && self.input.face_groups[f[0] as usize] != self.input.face_groups[f[1] as usize])
+    }
+
     /// Whether collapsing `u` onto `v` turns face `f` (corners `t`, holding `u`, not `v`) of a
     /// closed patch into an *ear along a chain*: a triangle whose corners are all on the
     /// patch boundary and one of which, `w`, keeps this triangle as its only face in the
@@ -504,7 +517,24 @@ impl<'a> State<'a> {
             if n_new.length_squared() <= self.min_area2 {
                 return false;
             }
-            let rule = &self.input.rules[self.input.face_groups[f as usize] as usize];
+            let group = self.input.face_groups[f as usize];
+            let rule = &self.input.rules[group as usize];
+            if let (Some(domains), SurfaceRef::Plane { .. }) = (self.input.domain, rule.surface) {
+                if let Some(Some(domain)) = domains.get(group as usize) {
+                    for &w in &t {
+                        if w == u || self.edge_on_group_boundary(u, w) {
+                            continue;
+                        }
+                        let pw = self.pos(w);
+                        let off = [0.25, 0.5, 0.75]
+                            .iter()
+                            .any(|&s| !domain.contains(pv + (pw - pv) * s));
+                        if off {
+                            return false;
+                        }
+                    }
+                }
+            }
             let centroid = (new[0] + new[1] + new[2]) / 3.0;
             match rule.surface.normal_at(centroid) {
                 Some(s) => {
@@ -778,6 +808,7 @@ mod tests {
             roles,
             rules,
             cost_scale: None,
+            domain: None,
         })
     }
 
@@ -820,6 +851,73 @@ mod tests {
         for t in &out.triangles {
             assert!(tri_normal(t.map(|i| p[i as usize])).z > 0.0);
         }
+    }
+
+    #[test]
+    fn plane_patch_edges_stay_on_the_face_with_a_domain() {
+        // A half annulus (radii 1 and 1.1): its four ends alone make a quad whose straight
+        // diagonal runs across the hole.
+        let n = 32;
+        let mut p = Vec::new();
+        for k in 0..=n {
+            let a = std::f64::consts::PI * k as f64 / n as f64;
+            for r in [1.0, 1.1] {
+                p.push(DVec3::new(r * a.cos(), r * a.sin(), 0.0));
+            }
+        }
+        let mut t = Vec::new();
+        for k in 0..n as u32 {
+            let (i0, o0, i1, o1) = (2 * k, 2 * k + 1, 2 * k + 2, 2 * k + 3);
+            t.push([i0, o0, o1]);
+            t.push([i0, o1, i1]);
+        }
+        let g = vec![0u32; t.len()];
+        let roles: Vec<VertexRole> = (0..p.len())
+            .map(|i| {
+                if i < 2 || i >= p.len() - 2 {
+                    VertexRole::Keep
+                } else {
+                    VertexRole::ChainDrop
+                }
+            })
+            .collect();
+        let rules = [plane_rule()];
+        let surface = crate::metrics::TriangleSurface::new(p.clone(), t.clone()).unwrap();
+        let dist = 0.02;
+        let corners: Vec<[DVec3; 3]> = t.iter().map(|f| f.map(|v| p[v as usize])).collect();
+        let domains = [PlaneDomain::new(&corners, DVec3::Z, dist)];
+        // Interior edges (two faces) only: the boundary ones are decoded as curves.
+        let off_edges = |out: &Decimated| {
+            let mut uses = std::collections::BTreeMap::new();
+            for tri in &out.triangles {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                }
+            }
+            uses.into_iter()
+                .filter(|&(_, n)| n == 2)
+                .filter(|&((a, b), _)| {
+                    // The raster admits up to a cell diagonal more than `dist`.
+                    let m = 0.5 * (p[a as usize] + p[b as usize]);
+                    surface.closest_point_within(m, 2.5 * dist).is_none()
+                })
+                .count()
+        };
+        let plain = run(&p, &t, &g, &roles, &rules);
+        assert!(off_edges(&plain) > 0, "{plain:?}");
+        let out = decimate(&DecimateInput {
+            positions: &p,
+            triangles: &t,
+            face_groups: &g,
+            roles: &roles,
+            rules: &rules,
+            cost_scale: None,
+            domain: Some(&domains),
+        });
+        assert_eq!(off_edges(&out), 0, "{out:?}");
+        assert_eq!(euler(&out.triangles), 1);
+        assert!(out.vertices.len() < p.len() / 2, "{}", out.vertices.len());
     }
 
     #[test]

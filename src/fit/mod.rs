@@ -8,6 +8,7 @@ mod adjacency;
 mod allowance;
 pub mod curves;
 pub mod decimate;
+pub mod domain;
 pub mod encoder;
 mod linalg;
 pub mod primitives;
