@@ -158,25 +158,31 @@ pub fn encode_fitted(
     opts: &ModelEncodeOptions,
 ) -> Result<(Vec<u8>, FitReport)> {
     let first = encode_fitted_once(input, hints, opts)?;
-    let mut others: Vec<(ModelEncodeOptions, &str)> = Vec::new();
-    if opts.try_plain_planes
+    // The other fits: every combination of the two alternatives that apply.
+    let plain = opts.try_plain_planes
         && opts.fit.keep_planes_on_faces
-        && input.face_count() <= PLAIN_PLANES_MAX_TRIANGLES
-    {
-        let mut o = opts.clone();
-        o.fit.keep_planes_on_faces = false;
-        others.push((
-            o,
-            "with plane patches decimated freely and all chains of a failing group refined",
-        ));
-    }
-    if opts.try_local_refinement
+        && input.face_count() <= PLAIN_PLANES_MAX_TRIANGLES;
+    let local = opts.try_local_refinement
         && !opts.fit.local_refinement
-        && input.face_count() <= LOCAL_REFINEMENT_MAX_TRIANGLES
-    {
+        && input.face_count() <= LOCAL_REFINEMENT_MAX_TRIANGLES;
+    let mut others: Vec<(ModelEncodeOptions, String)> = Vec::new();
+    for (p, l) in [(true, false), (false, true), (true, true)] {
+        if (p && !plain) || (l && !local) {
+            continue;
+        }
         let mut o = opts.clone();
-        o.fit.local_refinement = true;
-        others.push((o, "with closed patches refined only where they failed"));
+        let mut what = Vec::new();
+        if p {
+            o.fit.keep_planes_on_faces = false;
+            what.push(
+                "with plane patches decimated freely and all chains of a failing group refined",
+            );
+        }
+        if l {
+            o.fit.local_refinement = true;
+            what.push("with closed patches refined only where they failed");
+        }
+        others.push((o, what.join(", ")));
     }
     let mut best = first;
     for (o, what) in others {
