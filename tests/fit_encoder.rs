@@ -160,3 +160,31 @@ fn fandisk_at_the_seed_coders_operating_point() {
     assert!(rel.max <= 1e-2, "max {:.3e} of the diagonal", rel.max);
     assert!(bytes.len() < 1000, "{} bytes", bytes.len());
 }
+
+#[test]
+fn default_fit_is_no_larger_than_either_plane_treatment_alone() {
+    // `ModelEncodeOptions::try_plain_planes`: plane patches kept on their faces win on most
+    // models, decimated freely on some (the plate); by default small inputs get the better.
+    let Some(dir) = corpus_dir() else {
+        eprintln!("skipped: ../shared/corpus not found");
+        return;
+    };
+    let path = dir.join("tess/bug3883_xr2-ct-214_plate_fine.obj");
+    let (input, _) = scode::io::read_mesh(&path).unwrap();
+    let hints = sidecar_hints(&path, &input).unwrap().unwrap().1;
+    let size = |keep: bool, try_plain: bool| {
+        let mut opts = ModelEncodeOptions {
+            try_plain_planes: try_plain,
+            ..Default::default()
+        };
+        opts.fit.keep_planes_on_faces = keep;
+        let (bytes, report) = encode_fitted(&input, &hints, &opts).unwrap();
+        assert!(report.within_tolerance, "{:?}", report.error);
+        bytes.len()
+    };
+    let (kept, plain, default) = (size(true, false), size(false, false), size(true, true));
+    println!(
+        "plate: planes kept on faces {kept} B, decimated freely {plain} B, default {default} B"
+    );
+    assert_eq!(default, kept.min(plain));
+}

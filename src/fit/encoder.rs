@@ -729,9 +729,10 @@ fn thin_points(points: &[DVec3], cell: f64) -> Vec<DVec3> {
 }
 
 /// Which chains of the failing groups to refine: for each point where a group is out of
-/// tolerance, the group's chains within `slack` of the nearest one (the nearest chain is
-/// what shapes a boundary patch's error there), and for closed patches only chains within
-/// `reach[g]` of the point (farther, the patch's interior is what is off).
+/// tolerance (thinned to one per 2 tol), the group's chains at most 1.5 times as far from it
+/// as the nearest one, plus 2 tol (the nearest chain is what shapes a boundary patch's error
+/// there), and for closed patches only chains within `reach[g]` of the point (farther, the
+/// patch's interior is what is off).
 #[allow(clippy::too_many_arguments)]
 fn chains_near_failures(
     mesh: &ControlMesh,
