@@ -29,7 +29,7 @@ pub struct ModelEncodeOptions {
     pub try_local_refinement: bool,
     /// Also fit without [`FitOptions::keep_planes_on_faces`] and keep the smaller file, for
     /// inputs of at most [`PLAIN_PLANES_MAX_TRIANGLES`] faces (default on): keeping plane
-    /// patches on their faces wins on most models but not all (plate: 518 bytes with it, 448
+    /// patches on their faces wins on most models but not all (plate: 498 bytes with it, 448
     /// without), and a second fit of a small model takes a second or two.
     pub try_plain_planes: bool,
     /// Also encode the fitted control mesh with its face list rotated to start at this many

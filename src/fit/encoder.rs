@@ -83,7 +83,7 @@ pub struct FitOptions {
     /// collapse that would make an interior edge leave the face (across a hole or a concave
     /// notch; a plane's interior edges decode straight), and a failing group refines only the
     /// boundary chains near where it fails, not all of them (nist 4,086 -> 3,575 bytes,
-    /// bug27693 2,443 -> 2,021, bm2 735 -> 640; plate 448 -> 518). On by default, for face
+    /// bug27693 2,443 -> 2,021, bm2 735 -> 640; plate 448 -> 498). On by default, for face
     /// groups from the input (a segmented mesh is fitted as before: at the seed coder's
     /// operating point fandisk's mean error went over 1e-3 of the diagonal); see
     /// `ModelEncodeOptions::try_plain_planes`.
