@@ -519,22 +519,6 @@ impl<'a> State<'a> {
             }
             let group = self.input.face_groups[f as usize];
             let rule = &self.input.rules[group as usize];
-            if let (Some(domains), SurfaceRef::Plane { .. }) = (self.input.domain, rule.surface) {
-                if let Some(Some(domain)) = domains.get(group as usize) {
-                    for &w in &t {
-                        if w == u || self.edge_on_group_boundary(u, w) {
-                            continue;
-                        }
-                        let pw = self.pos(w);
-                        let off = [0.25, 0.5, 0.75]
-                            .iter()
-                            .any(|&s| !domain.contains(pv + (pw - pv) * s));
-                        if off {
-                            return false;
-                        }
-                    }
-                }
-            }
             let centroid = (new[0] + new[1] + new[2]) / 3.0;
             match rule.surface.normal_at(centroid) {
                 Some(s) => {
@@ -557,6 +541,23 @@ impl<'a> State<'a> {
                 for &w in &t {
                     if w != u && angle_about(&axis, pv, self.pos(w)) > rule.max_edge_angle {
                         return false;
+                    }
+                }
+            }
+            // Last: the cheaper tests above reject most collapses first.
+            if let (Some(domains), SurfaceRef::Plane { .. }) = (self.input.domain, rule.surface) {
+                if let Some(Some(domain)) = domains.get(group as usize) {
+                    for &w in &t {
+                        if w == u || self.edge_on_group_boundary(u, w) {
+                            continue;
+                        }
+                        let pw = self.pos(w);
+                        let off = [0.25, 0.5, 0.75]
+                            .iter()
+                            .any(|&s| !domain.contains(pv + (pw - pv) * s));
+                        if off {
+                            return false;
+                        }
                     }
                 }
             }
