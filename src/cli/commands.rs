@@ -156,7 +156,6 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         codec::encode(&mesh, &opts)
             .with_context(|| format!("cannot encode {}", args.input.display()))?
     } else {
-        let from_step = step_hints.is_some();
         let sidecar = match step_hints {
             Some(_) => None,
             None => sidecar_hints(&args.input, &mesh)?,
@@ -174,8 +173,6 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
             store_group_names: !args.no_names,
             ..Default::default()
         };
-        // See `ModelEncodeOptions::try_local_refinement`.
-        opts.try_local_refinement = from_step;
         opts.fit.tolerance = args.tolerance.map(|t| {
             if args.relative {
                 t * mesh.diagonal()
