@@ -6,6 +6,7 @@ use common::corpus_dir;
 use std::path::Path;
 
 use scode::codec::{self, Content, EncodeOptions, Limits};
+use scode::fit::encoder::{FitReport, SurfaceHint};
 use scode::metrics::{hausdorff, DistanceOptions, SampleCount};
 use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 use scode::subdiv::{subdivide, SubdivOptions};
@@ -161,30 +162,76 @@ fn fandisk_at_the_seed_coders_operating_point() {
     assert!(bytes.len() < 1000, "{} bytes", bytes.len());
 }
 
+/// A face-grouped corpus model with its sidecar's surface hints; `None` without the corpus.
+fn corpus_model(file: &str) -> Option<(scode::ControlMesh, Vec<SurfaceHint>)> {
+    let Some(dir) = corpus_dir() else {
+        eprintln!("skipped: ../shared/corpus not found");
+        return None;
+    };
+    let path = dir.join(file);
+    let (input, _) = scode::io::read_mesh(&path).unwrap();
+    let hints = sidecar_hints(&path, &input).unwrap().unwrap().1;
+    Some((input, hints))
+}
+
+/// Bytes and report of a fitted encode, which must meet the tolerance.
+fn fitted(
+    model: &(scode::ControlMesh, Vec<SurfaceHint>),
+    opts: &ModelEncodeOptions,
+) -> (usize, FitReport) {
+    let (bytes, report) = encode_fitted(&model.0, &model.1, opts).unwrap();
+    assert!(report.within_tolerance, "{:?}", report.error);
+    (bytes.len(), report)
+}
+
 #[test]
 fn default_fit_is_no_larger_than_either_plane_treatment_alone() {
     // `ModelEncodeOptions::try_plain_planes`: plane patches kept on their faces win on most
     // models, decimated freely on some (the plate); by default small inputs get the better.
-    let Some(dir) = corpus_dir() else {
-        eprintln!("skipped: ../shared/corpus not found");
+    let Some(model) = corpus_model("tess/bug3883_xr2-ct-214_plate_fine.obj") else {
         return;
     };
-    let path = dir.join("tess/bug3883_xr2-ct-214_plate_fine.obj");
-    let (input, _) = scode::io::read_mesh(&path).unwrap();
-    let hints = sidecar_hints(&path, &input).unwrap().unwrap().1;
     let size = |keep: bool, try_plain: bool| {
         let mut opts = ModelEncodeOptions {
             try_plain_planes: try_plain,
             ..Default::default()
         };
         opts.fit.keep_planes_on_faces = keep;
-        let (bytes, report) = encode_fitted(&input, &hints, &opts).unwrap();
-        assert!(report.within_tolerance, "{:?}", report.error);
-        bytes.len()
+        fitted(&model, &opts).0
     };
     let (kept, plain, default) = (size(true, false), size(false, false), size(true, true));
     println!(
         "plate: planes kept on faces {kept} B, decimated freely {plain} B, default {default} B"
     );
     assert_eq!(default, kept.min(plain));
+}
+
+#[test]
+fn default_fit_is_no_larger_than_either_closed_patch_refinement_alone() {
+    // `ModelEncodeOptions::try_local_refinement`: the screw's torus patches fail in early
+    // rounds; refining them only where they fail wins there (and loses elsewhere), so small
+    // inputs are fitted both ways and the smaller file is kept.
+    let Some(model) = corpus_model("tess/screw_fine.obj") else {
+        return;
+    };
+    let size = |local: bool, try_local: bool| {
+        let mut opts = ModelEncodeOptions {
+            try_local_refinement: try_local,
+            ..Default::default()
+        };
+        opts.fit.local_refinement = local;
+        let (bytes, report) = fitted(&model, &opts);
+        (bytes, report.closed_refinements)
+    };
+    let ((everywhere, refinements), (local, _), (default, _)) =
+        (size(false, false), size(true, false), size(false, true));
+    println!(
+        "screw: closed patches refined everywhere {everywhere} B ({refinements} refinements), \
+         near failures {local} B, default {default} B"
+    );
+    assert!(
+        refinements > 0,
+        "the screw's closed patches no longer fail: pick another model"
+    );
+    assert_eq!(default, everywhere.min(local));
 }
