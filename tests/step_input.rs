@@ -131,7 +131,11 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
     // corner between cylinder fillets (periodic faces cut along a seam, a pole); an
     // 18-solid assembly of planes and cylinders; a spindle torus (minor radius larger
     // than the major one) and cones, which need the exact surfaces from the STEP
-    // records (truck's conversion misses the edges); planes, cylinders and a cone.
+    // records (truck's conversion misses the edges); planes, cylinders and a cone; rational
+    // B-spline strips and tori, where the projection from the previous edge point stopped
+    // off the surface (the loop crossed itself) until it learnt to restart between
+    // neighbours. (bug27693 was fixed the same way and encodes all 110 faces, but its fine
+    // tessellation's vertices are 0.34 tol rms from the decoded surface: in the sweep.)
     // Files whose fit does not meet the tolerance yet (an encoder limit, also on their
     // mesh twins) are in the ignored sweep.
     for file in [
@@ -142,6 +146,7 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
         "trj2_as1-ec-214.stp",
         "screw.step",
         "bm2_ec_lever-A.stp",
+        "linkrods.step",
     ] {
         check_encodes_within_tolerance(&corpus, file);
     }

@@ -42,7 +42,7 @@ pub(super) struct ConformingMesh {
 
 /// A boundary point in the parameter plane with the vertex it stands for. The same vertex
 /// may appear at several (u, v) (both sides of a seam, every point of a pole line).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct UvPoint {
     uv: [f64; 2],
     vertex: FaceVertex,
@@ -184,6 +184,67 @@ fn nearest_rep(x: f64, reference: f64, period: Option<f64>) -> f64 {
     }
 }
 
+/// A boundary point farther than this fraction of the chordal tolerance from the surface at
+/// its parameters is projected again (edge points lie on their faces' surfaces to the
+/// file's precision, far closer than that).
+const REPROJECT_OFF: f64 = 0.1;
+
+/// Projects again, from between its nearest well-projected neighbours along the loop, each
+/// point of a projected loop whose search stopped off the surface, and keeps the new
+/// parameters when they are nearer; then unwraps periodic parameters along the loop again.
+/// The search from the previous point's parameters can stop in a local minimum a few
+/// tolerances off the surface (linkrods: a rational B-spline strip, three points in a row
+/// up to 16 tolerances off, put next to the strip's far edge, so the loop crossed itself),
+/// while a start between the neighbours on either side finds the point.
+fn reproject_between_neighbours<S: UvSurface>(
+    surface: &S,
+    lp: &[(u32, DVec3)],
+    pts: &mut [UvPoint],
+    offs: &mut [f64],
+    tol: f64,
+) {
+    let periods = surface.periods();
+    let good = |o: f64| o <= REPROJECT_OFF * tol;
+    let n = pts.len();
+    if offs.iter().all(|&o| good(o)) || !offs.iter().any(|&o| good(o)) {
+        return;
+    }
+    let mut changed = false;
+    for i in 0..n {
+        if good(offs[i]) {
+            continue;
+        }
+        let before = (1..n).map(|k| (i + n - k) % n).find(|&j| good(offs[j]));
+        let after = (1..n).map(|k| (i + k) % n).find(|&j| good(offs[j]));
+        let (Some(b), Some(a)) = (before, after) else {
+            continue;
+        };
+        let (db, da) = ((i + n - b) % n, (a + n - i) % n);
+        let t = db as f64 / (db + da) as f64;
+        let ub = pts[b].uv;
+        let ua = [0, 1].map(|k| nearest_rep(pts[a].uv[k], ub[k], periods[k]));
+        let hint = [0, 1].map(|k| ub[k] + t * (ua[k] - ub[k]));
+        let p = lp[i].1;
+        let Some(uv) = surface.project(p, Some(hint)) else {
+            continue;
+        };
+        let off = surface.point(uv[0], uv[1]).distance(p);
+        if off < offs[i] {
+            pts[i].uv = [0, 1].map(|k| nearest_rep(uv[k], hint[k], periods[k]));
+            offs[i] = off;
+            changed = true;
+        }
+    }
+    if changed {
+        for i in 1..n {
+            let q = pts[i - 1].uv;
+            for k in 0..2 {
+                pts[i].uv[k] = nearest_rep(pts[i].uv[k], q[k], periods[k]);
+            }
+        }
+    }
+}
+
 /// Tessellates the face of `surface` bounded by `loops` (each a cyclic list of pool vertices
 /// with their body-coordinate positions, in the face's wire order). `tol` is the chordal
 /// tolerance in body units. Errors say why the face cannot be done this way.
@@ -205,6 +266,8 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
             return Err(format!("a boundary loop has {} points", lp.len()));
         }
         let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
+        // Distance of each point from the surface at its parameters.
+        let mut offs: Vec<f64> = Vec::with_capacity(lp.len());
         let mut prev: Option<[f64; 2]> = None;
         for &(id, p) in lp {
             let Some(mut uv) = surface.project(p, prev) else {
@@ -232,11 +295,13 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
                 }
             }
             prev = Some(uv);
+            offs.push(off);
             pts.push(UvPoint {
                 uv,
                 vertex: FaceVertex::Pool(id),
             });
         }
+        reproject_between_neighbours(surface, lp, &mut pts, &mut offs, tol);
         let (mut pts, poles) = split_singular(surface, pts);
         let first = pts[0].uv;
         let last = pts[pts.len() - 1].uv;
@@ -956,6 +1021,71 @@ fn triangulate<S: UvSurface>(
 mod tests {
     use super::*;
     use std::collections::BTreeSet;
+
+    /// The plane z = 0 whose projection finds a point only from a start within 0.3 of it
+    /// (else it stays at the start: a local minimum).
+    struct NearSighted;
+
+    impl UvSurface for NearSighted {
+        fn source(&self) -> &'static str {
+            ""
+        }
+        fn point(&self, u: f64, v: f64) -> DVec3 {
+            DVec3::new(u, v, 0.0)
+        }
+        fn periods(&self) -> [Option<f64>; 2] {
+            [None, None]
+        }
+        fn ranges(&self) -> [Option<(f64, f64)>; 2] {
+            [None, None]
+        }
+        fn project(&self, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
+            match hint {
+                Some(h) if (h[0] - p.x).abs().max((h[1] - p.y).abs()) > 0.3 => Some(h),
+                _ => Some([p.x, p.y]),
+            }
+        }
+        fn division(&self, _: ((f64, f64), (f64, f64)), _: f64) -> (Vec<f64>, Vec<f64>) {
+            (Vec::new(), Vec::new())
+        }
+    }
+
+    #[test]
+    fn points_stuck_off_the_surface_are_projected_from_between_their_neighbours() {
+        // A unit square's boundary in steps of 0.25; points 5 and 6 were left where the
+        // search stopped, 0.6 and 0.8 off the surface.
+        let xy: Vec<[f64; 2]> = (0..4)
+            .flat_map(|k| (0..4).map(move |i| (k, 0.25 * f64::from(i))))
+            .map(|(k, t)| match k {
+                0 => [t, 0.0],
+                1 => [1.0, t],
+                2 => [1.0 - t, 1.0],
+                _ => [0.0, 1.0 - t],
+            })
+            .collect();
+        let lp: Vec<(u32, DVec3)> = (0u32..)
+            .zip(&xy)
+            .map(|(i, q)| (i, DVec3::new(q[0], q[1], 0.0)))
+            .collect();
+        let mut pts: Vec<UvPoint> = lp
+            .iter()
+            .map(|&(i, p)| UvPoint {
+                uv: [p.x, p.y],
+                vertex: FaceVertex::Pool(i),
+            })
+            .collect();
+        let mut offs = vec![0.0; pts.len()];
+        let untouched = pts.clone();
+        reproject_between_neighbours(&NearSighted, &lp, &mut pts, &mut offs, 0.01);
+        assert_eq!(pts, untouched, "a loop on the surface is left as it is");
+        for (i, wrong) in [(5, [0.4, 0.25]), (6, [0.2, 0.5])] {
+            pts[i].uv = wrong;
+            offs[i] = NearSighted.point(wrong[0], wrong[1]).distance(lp[i].1);
+        }
+        reproject_between_neighbours(&NearSighted, &lp, &mut pts, &mut offs, 0.01);
+        assert_eq!(pts, untouched);
+        assert!(offs.iter().all(|&o| o == 0.0), "{offs:?}");
+    }
     use truck_stepio::r#in::alias::{ElementarySurface, Line, Plane, Processor, RevolutedCurve};
     use truck_stepio::r#in::alias::{Point3 as P3, Vector3};
 
