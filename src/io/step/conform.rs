@@ -1021,6 +1021,8 @@ fn triangulate<S: UvSurface>(
 mod tests {
     use super::*;
     use std::collections::BTreeSet;
+    use truck_stepio::r#in::alias::{ElementarySurface, Line, Plane, Processor, RevolutedCurve};
+    use truck_stepio::r#in::alias::{Point3 as P3, Vector3};
 
     /// The plane z = 0 whose projection finds a point only from a start within 0.3 of it
     /// (else it stays at the start: a local minimum).
@@ -1086,8 +1088,6 @@ mod tests {
         assert_eq!(pts, untouched);
         assert!(offs.iter().all(|&o| o == 0.0), "{offs:?}");
     }
-    use truck_stepio::r#in::alias::{ElementarySurface, Line, Plane, Processor, RevolutedCurve};
-    use truck_stepio::r#in::alias::{Point3 as P3, Vector3};
 
     fn circle(n: u32, z: f64, first_id: u32, forward: bool) -> Vec<(u32, DVec3)> {
         let mut pts: Vec<(u32, DVec3)> = (0..n)
