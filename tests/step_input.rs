@@ -154,23 +154,22 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
 
 /// Issue #5: the STEP path knows the exact surfaces and the topology, so it should cost no
 /// more than the mesh path (`<name>_fine.obj` with its sidecar) at the same tolerance.
-/// `slack` is what is left of the gap on a file.
 #[test]
 fn step_path_no_larger_than_mesh_path() {
     let Some(corpus) = corpus_dir() else { return };
-    // block_fillet3 (490 vs 460 B, its sphere corner) is not there yet: the slack keeps the
-    // gap from growing unnoticed. The STEP path has stayed at 490 B since session 6 while the
-    // mesh path went 468 -> 464 (plane patches kept on faces, session 7) -> 460 (local
-    // refinement tried for small meshes too, session 8); the slack followed (1.05, 1.06,
-    // 1.07). Why the gap: the corpus tessellation's sphere facets sag up to 0.45 tol from
-    // the sphere and the encoder does not charge a fit for the input's own chord error, so
-    // the mesh path is held to a looser standard there than ours (our chord: 0.25 tol).
-    for (file, slack) in [
-        ("tr8_bv1_ec.stp", 1.0),
-        ("trj10_ap209-eb.stp", 1.0),
-        ("four_cone.step", 1.0),
-        ("bug3883_xr2-ct-214_plate.stp", 1.0),
-        ("block_fillet3.step", 1.07),
+    // block_fillet3, screw and bm2 were larger until session 9 (490/460, 457/446, 636/619 B):
+    // the corpus tessellation's sphere facets sag up to 0.45 tol and the mesh path is not
+    // charged for its input's chord error, while ours were at 0.25 tol. The STEP path now
+    // measures its analytic faces against their exact surfaces and also tries them
+    // tessellated at 0.45 tol (`encode_step`): 442/460, 419/446, 617/619 B.
+    for file in [
+        "tr8_bv1_ec.stp",
+        "trj10_ap209-eb.stp",
+        "four_cone.step",
+        "bug3883_xr2-ct-214_plate.stp",
+        "block_fillet3.step",
+        "screw.step",
+        "bm2_ec_lever-A.stp",
     ] {
         let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
         let fine_path = fine_tessellation(&corpus, stem).expect("fine tessellation");
@@ -194,7 +193,7 @@ fn step_path_no_larger_than_mesh_path() {
             mesh_bytes.len()
         );
         assert!(
-            step_bytes.len() as f64 <= slack * mesh_bytes.len() as f64,
+            step_bytes.len() <= mesh_bytes.len(),
             "{file}: STEP path {} bytes, mesh path {} bytes",
             step_bytes.len(),
             mesh_bytes.len()
@@ -304,6 +303,100 @@ fn faces_are_tessellated_on_their_edges() {
             "{file}: fine tessellation is {:.3e} from ours (chordal tolerance {:.3e})",
             c.max_vertices,
             model.chordal_tolerance
+        );
+    }
+}
+
+/// Faces on exact analytic surfaces may be tessellated coarser than the rest
+/// (`StepOptions::analytic_chordal_factor`): on linkrods (cylinders, planes, tori and
+/// rational B-spline strips) the B-spline faces and every edge they touch keep the fine
+/// chord, so their triangles are the same as with one chord for all, the analytic faces get
+/// fewer, and the model stays closed.
+#[test]
+fn analytic_faces_take_their_own_chord_and_the_model_stays_closed() {
+    let Some(corpus) = corpus_dir() else { return };
+    let path = corpus.join("step/linkrods.step");
+    let uniform = read_step(&path, &StepOptions::default()).unwrap();
+    let coarse = read_step(
+        &path,
+        &StepOptions {
+            analytic_chordal_factor: 2.0,
+            ..StepOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(uniform.skipped.is_empty() && coarse.skipped.is_empty());
+    assert_eq!(uniform.faces, coarse.faces);
+    let per_group = |m: &StepModel| {
+        let mut n = vec![0usize; m.mesh.groups.len()];
+        for &g in &m.mesh.face_groups {
+            n[g as usize] += 1;
+        }
+        n
+    };
+    let (nu, nc) = (per_group(&uniform), per_group(&coarse));
+    let exact = scode::pipeline::step_exact_surfaces(&uniform);
+    let (mut freeform, mut analytic_u, mut analytic_c) = (0, 0, 0);
+    for g in 0..nu.len() {
+        if exact[g].is_some() {
+            analytic_u += nu[g];
+            analytic_c += nc[g];
+        } else {
+            assert_eq!(nu[g], nc[g], "{}", uniform.mesh.groups[g].name);
+            freeform += 1;
+        }
+    }
+    assert!(freeform > 0, "linkrods has B-spline faces");
+    assert!(
+        (analytic_c as f64) < 0.8 * analytic_u as f64,
+        "{analytic_c} vs {analytic_u} analytic triangles"
+    );
+    assert!(is_closed(&uniform) && is_closed(&coarse));
+}
+
+/// Issue #5 item 2, fitting against the exact surface: the decoded surface of every face on
+/// a sphere, torus, cylinder, cone or plane stays within the tolerance of that surface
+/// (encoded as `encode_step` does, which also tries the analytic faces at a coarser chord).
+/// Checked on the decoded vertices away from the faces' boundaries (a vertex there may be
+/// nearer the neighbouring face, which is what the tolerance asks). What fails without the
+/// exact surfaces is the other direction, on bm2: the fine tessellation's vertices were 2.1
+/// tol from the decoded surface (`corpus_subset_encodes_within_tolerance_of_fine_tessellation`
+/// catches it; session 9).
+#[test]
+fn decoded_analytic_faces_stay_on_their_exact_surfaces() {
+    let Some(corpus) = corpus_dir() else { return };
+    for file in ["block_fillet3.step", "screw.step", "bm2_ec_lever-A.stp"] {
+        let path = corpus.join("step").join(file);
+        let (model, bytes, report) =
+            encode_step(&path, None, false, &ModelEncodeOptions::default()).unwrap();
+        assert!(report.within_tolerance, "{file}: {:?}", report.error);
+        let exact = scode::pipeline::step_exact_surfaces(&model);
+        let decoded = decoded_surface(&bytes);
+        // Decoded groups keep the input's order.
+        assert_eq!(decoded.groups.len(), exact.len());
+        let mut groups_of: Vec<Vec<u32>> = vec![Vec::new(); decoded.vertex_count()];
+        for (f, &g) in decoded.face_groups.iter().enumerate() {
+            for &v in decoded.face(f) {
+                groups_of[v as usize].push(g);
+            }
+        }
+        let mut checked = 0usize;
+        let mut worst = 0.0f64;
+        for (v, gs) in groups_of.iter().enumerate() {
+            let g = gs[0];
+            if gs.iter().any(|&h| h != g) {
+                continue;
+            }
+            if let Some(s) = &exact[g as usize] {
+                worst = worst.max(s.distance(decoded.positions[v]) / report.tolerance);
+                checked += 1;
+            }
+        }
+        eprintln!("{file}: {checked} interior vertices, worst {worst:.3} tol");
+        assert!(checked > 1000, "{file}: {checked}");
+        assert!(
+            worst <= 1.05,
+            "{file}: {worst:.3} tol from the exact surface"
         );
     }
 }

@@ -14,7 +14,7 @@ use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, Subdivide
 use scode::fit::encoder::SurfaceHint;
 use scode::io::step;
 use scode::pipeline::{
-    decode_surface, encode_fitted, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
+    decode_surface, encode_fitted, encode_step, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
 };
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
@@ -78,17 +78,16 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
     bar
 }
 
-/// Reads a STEP file for `encode`, with the tessellation tied to the encode tolerance,
-/// prints what was read and warns about every skipped face.
-fn read_step_input(args: &EncodeArgs) -> Result<(ControlMesh, Vec<SurfaceHint>)> {
+/// Reads a STEP file for `encode --raw` (its tessellation, with the chordal tolerance tied
+/// to the encode tolerance), prints what was read and warns about every skipped face.
+fn read_step_input(args: &EncodeArgs) -> Result<ControlMesh> {
     let opts = scode::pipeline::step_options_for(args.tolerance, args.relative);
     let bar = spinner(&format!("reading {}", args.input.display()));
     let result = step::read_step(&args.input, &opts);
     bar.finish_and_clear();
     let model = result?;
     print_step_summary(&args.input, &model, args.verbose);
-    let hints = scode::pipeline::step_hints(&model);
-    Ok((model.mesh, hints))
+    Ok(model.mesh)
 }
 
 fn print_step_summary(path: &Path, model: &step::StepModel, verbose: bool) {
@@ -134,9 +133,23 @@ fn print_step_summary(path: &Path, model: &step::StepModel, verbose: bool) {
 pub fn encode(args: &EncodeArgs) -> Result<()> {
     let output = args.output.path()?;
     let t0 = Instant::now();
-    let (mesh, step_hints) = if step::is_step_path(&args.input) {
-        let (mesh, hints) = read_step_input(args)?;
-        (mesh, Some(hints))
+    let model_opts = ModelEncodeOptions {
+        quantization_bits: args.bits,
+        store_group_names: !args.no_names,
+        ..Default::default()
+    };
+    let is_step = step::is_step_path(&args.input);
+    // A STEP file is read and fitted in one call (it tries two tessellations).
+    let (mesh, step_fit) = if is_step && !args.raw {
+        let bar = spinner(&format!("reading and fitting {}", args.input.display()));
+        let result = encode_step(&args.input, args.tolerance, args.relative, &model_opts);
+        bar.finish_and_clear();
+        let (model, bytes, fit) =
+            result.with_context(|| format!("cannot encode {}", args.input.display()))?;
+        print_step_summary(&args.input, &model, args.verbose);
+        (model.mesh, Some((bytes, fit)))
+    } else if is_step {
+        (read_step_input(args)?, None)
     } else {
         let (mesh, report) = io::read_mesh(&args.input)?;
         print_read_report(&args.input, &report);
@@ -156,35 +169,30 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         codec::encode(&mesh, &opts)
             .with_context(|| format!("cannot encode {}", args.input.display()))?
     } else {
-        let sidecar = match step_hints {
-            Some(_) => None,
-            None => sidecar_hints(&args.input, &mesh)?,
-        };
-        let hints = match sidecar {
-            _ if step_hints.is_some() => step_hints.unwrap_or_default(),
-            Some((side, hints)) if !args.no_sidecar => {
-                println!("using surface types from {}", side.display());
-                hints
+        let (bytes, fit) = match step_fit {
+            Some(done) => done,
+            None => {
+                let hints = match sidecar_hints(&args.input, &mesh)? {
+                    Some((side, hints)) if !args.no_sidecar => {
+                        println!("using surface types from {}", side.display());
+                        hints
+                    }
+                    _ => Vec::new(),
+                };
+                let mut opts = model_opts.clone();
+                opts.fit.tolerance = args.tolerance.map(|t| {
+                    if args.relative {
+                        t * mesh.diagonal()
+                    } else {
+                        t
+                    }
+                });
+                let bar = spinner(&format!("fitting {}", args.input.display()));
+                let result = encode_fitted(&mesh, &hints, &opts);
+                bar.finish_and_clear();
+                result.with_context(|| format!("cannot fit {}", args.input.display()))?
             }
-            _ => Vec::new(),
         };
-        let mut opts = ModelEncodeOptions {
-            quantization_bits: args.bits,
-            store_group_names: !args.no_names,
-            ..Default::default()
-        };
-        opts.fit.tolerance = args.tolerance.map(|t| {
-            if args.relative {
-                t * mesh.diagonal()
-            } else {
-                t
-            }
-        });
-        let bar = spinner(&format!("fitting {}", args.input.display()));
-        let result = encode_fitted(&mesh, &hints, &opts);
-        bar.finish_and_clear();
-        let (bytes, fit) =
-            result.with_context(|| format!("cannot fit {}", args.input.display()))?;
         let kinds: Vec<String> = fit
             .patch_kinds
             .iter()

@@ -17,6 +17,7 @@
 
 use glam::DVec3;
 
+use super::exact::ExactSurface;
 use crate::mesh::{Axis, BoundarySurface, PatchKind};
 use crate::metrics::TriangleSurface;
 
@@ -37,17 +38,44 @@ pub(crate) struct OwnFaces<'a> {
     /// Indexed by group: the largest allowance of its triangles (at least 0), which bounds
     /// how far its own triangles need searching; a group without one is searched everywhere.
     pub max_allowance: &'a [f64],
+    /// Indexed by group: the face's exact surface when the input knows it (STEP faces), or
+    /// empty. A decoded point's excess against a group with one is at least its distance to
+    /// that surface ([`ExactSurface`] says why).
+    pub exact: &'a [Option<ExactSurface>],
 }
 
 impl OwnFaces<'_> {
+    /// Distance from `p` to group `g`'s exact surface; minus infinity without one.
+    fn exact_distance(&self, p: DVec3, g: usize) -> f64 {
+        match self.exact.get(g) {
+            Some(Some(s)) => s.distance(p),
+            _ => f64::NEG_INFINITY,
+        }
+    }
+
     /// Excess over the chord allowance of a decoded point `p` of group `group`, given its
-    /// excess `nearest_excess` against the nearest input triangle: the smaller of that and
-    /// the excess against the group's own input triangles. Both are a distance to an input
-    /// triangle minus that triangle's allowance, so the result is never below the excess
-    /// over the input thickened by its allowances (the minimum over all triangles).
-    pub fn excess(&self, p: DVec3, group: usize, nearest_excess: f64, chord: &[f64]) -> f64 {
-        if nearest_excess <= 0.0 {
-            // Only positive excesses are reported: skip the second query.
+    /// excess `nearest_excess` against the nearest input triangle (of group
+    /// `nearest_group`): the smaller of the excess against that triangle's group and against
+    /// `group`'s own input triangles. Against one group it is a distance to one of its
+    /// triangles minus that triangle's allowance, raised to the distance to the group's exact
+    /// surface where there is one, so the result is never below the excess over the input
+    /// thickened by its allowances (the minimum over all triangles).
+    pub fn excess(
+        &self,
+        p: DVec3,
+        group: usize,
+        nearest_group: usize,
+        nearest_excess: f64,
+        chord: &[f64],
+    ) -> f64 {
+        let nearest_excess = nearest_excess.max(self.exact_distance(p, nearest_group));
+        if nearest_excess <= 0.0 || nearest_group == group {
+            // Only positive excesses are reported, and the nearest triangle of the own
+            // group is also its nearest own triangle: skip the second query.
+            return nearest_excess;
+        }
+        let own_exact = self.exact_distance(p, group);
+        if own_exact >= nearest_excess {
             return nearest_excess;
         }
         let (Some(Some(surface)), Some(ids)) =
@@ -75,7 +103,7 @@ impl OwnFaces<'_> {
             .and_then(|&t| chord.get(t as usize))
             .copied()
             .unwrap_or(0.0);
-        nearest_excess.min(hit.distance - allowance)
+        nearest_excess.min((hit.distance - allowance).max(own_exact))
     }
 }
 
@@ -329,15 +357,52 @@ mod tests {
             surfaces: &own,
             triangles: &ids,
             max_allowance: &[1.0, 0.0],
+            exact: &[],
         };
         let q = DVec3::new(1.0, 1.0, 1.2);
         // Against the nearest triangle (group 1): 0.3 - 0 = 0.3; against its own: 1.2 - 1.
-        let e = faces.excess(q, 0, 0.3, &chord);
+        let e = faces.excess(q, 0, 1, 0.3, &chord);
         assert!((e - 0.2).abs() < 1e-12, "{e}");
         // A point of group 1 keeps the smaller nearest excess.
-        assert!((faces.excess(q, 1, 0.3, &chord) - 0.3).abs() < 1e-12);
+        assert!((faces.excess(q, 1, 1, 0.3, &chord) - 0.3).abs() < 1e-12);
         // Non-positive excesses are returned as they are; unknown groups too.
-        assert_eq!(faces.excess(q, 0, -0.5, &chord), -0.5);
-        assert_eq!(faces.excess(q, 7, 0.3, &chord), 0.3);
+        assert_eq!(faces.excess(q, 0, 1, -0.5, &chord), -0.5);
+        assert_eq!(faces.excess(q, 7, 1, 0.3, &chord), 0.3);
+    }
+
+    #[test]
+    fn exact_surface_charges_the_concave_side_of_a_sagging_facet() {
+        // A sphere of radius 10 about the origin and one facet of it: a chord plane at
+        // z = 9 (sagitta 1 at its middle, which is its allowance).
+        let h = 19f64.sqrt(); // (h, 0, 9) is on the sphere
+        let p = vec![
+            DVec3::new(h, 0.0, 9.0),
+            DVec3::new(-h / 2.0, h * 0.75f64.sqrt(), 9.0),
+            DVec3::new(-h / 2.0, -h * 0.75f64.sqrt(), 9.0),
+        ];
+        let own = [Some(TriangleSurface::new(p, vec![[0, 1, 2]]).unwrap())];
+        let ids = [vec![0u32]];
+        let chord = [1.0];
+        let exact = [ExactSurface::Sphere {
+            centre: DVec3::ZERO,
+            radius: 10.0,
+        }
+        .normalized()];
+        let with = OwnFaces {
+            surfaces: &own,
+            triangles: &ids,
+            max_allowance: &[1.0],
+            exact: &exact,
+        };
+        let without = OwnFaces { exact: &[], ..with };
+        // Below the facet, 1.5 inside it: 2.5 from the sphere. Against the facet only the
+        // excess is 1.5 - 1 = 0.5; the sphere says 2.5.
+        let q = DVec3::new(0.0, 0.0, 7.5);
+        assert!((without.excess(q, 0, 0, 0.5, &chord) - 0.5).abs() < 1e-12);
+        assert!((with.excess(q, 0, 0, 0.5, &chord) - 2.5).abs() < 1e-12);
+        // Above the facet, on the sphere: no excess either way.
+        let q = DVec3::new(0.0, 0.0, 10.0);
+        assert!(without.excess(q, 0, 0, 0.0, &chord) <= 0.0);
+        assert!(with.excess(q, 0, 0, 0.0, &chord).abs() < 1e-12);
     }
 }

@@ -34,6 +34,7 @@ use super::allowance::{add_analytic_surface_allowance, OwnFaces};
 use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
 use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole};
 use super::domain::PlaneDomain;
+pub use super::exact::ExactSurface;
 use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
 use super::segment::{segment, SegmentOptions};
 use crate::error::{Error, Result};
@@ -89,6 +90,11 @@ pub struct FitOptions {
     /// operating point fandisk's mean error went over 1e-3 of the diagonal); see
     /// `ModelEncodeOptions::try_plain_planes`.
     pub keep_planes_on_faces: bool,
+    /// By input group: the face's exact surface where the input knows it (a STEP face's
+    /// plane, cylinder, cone, sphere or torus), else `None`; empty for none at all. The
+    /// decoded surface of a group is then held within the tolerance of that surface too,
+    /// not only of its facets (see [`ExactSurface`]).
+    pub exact_surfaces: Vec<Option<ExactSurface>>,
 }
 
 /// When a round's worst excess stays above this fraction of the previous round's, adding
@@ -107,6 +113,7 @@ impl Default for FitOptions {
             max_coarser_bits: 3,
             local_refinement: false,
             keep_planes_on_faces: true,
+            exact_surfaces: Vec::new(),
         }
     }
 }
@@ -1279,6 +1286,7 @@ impl ErrorMeter<'_> {
                 let e = self.own_faces.excess(
                     s.point,
                     g,
+                    self.mesh.face_groups[h.triangle as usize] as usize,
                     h.distance - self.chord[h.triangle as usize],
                     self.chord,
                 );
@@ -1436,9 +1444,13 @@ impl ErrorMeter<'_> {
         let mut excess_out = Vec::with_capacity(n_out);
         for (s, h) in s_samples.iter().zip(&out_hits) {
             let g = surface_mesh.face_groups[s.triangle as usize] as usize;
-            let e = self
-                .own_faces
-                .excess(s.point, g, h.0 - self.chord[h.1 as usize], self.chord);
+            let e = self.own_faces.excess(
+                s.point,
+                g,
+                self.mesh.face_groups[h.1 as usize] as usize,
+                h.0 - self.chord[h.1 as usize],
+                self.chord,
+            );
             excess_out.push(e);
             worst = worst.max(e);
             if g < group_excess.len() && e > group_excess[g].0 {
@@ -1700,6 +1712,17 @@ pub fn fit_model(
         .iter()
         .map(|ids| ids.iter().fold(0.0f64, |m, &t| m.max(chord[t as usize])))
         .collect();
+    let exact_faces = if segmented {
+        0
+    } else {
+        opts.exact_surfaces.iter().flatten().count()
+    };
+    if exact_faces > 0 {
+        report.notes.push(format!(
+            "{exact_faces} of {} faces measured against their exact surfaces too",
+            mesh.groups.len()
+        ));
+    }
     let meter = ErrorMeter {
         mesh: &mesh,
         input_samples: sample_surface(
@@ -1715,6 +1738,8 @@ pub fn fit_model(
             surfaces: &group_surfaces,
             triangles: &group_triangles,
             max_allowance: &group_max_chord,
+            // A segmented input's groups are not the input's: no exact surfaces then.
+            exact: if segmented { &[] } else { &opts.exact_surfaces },
         },
         error_samples: opts.error_samples,
         tol,

@@ -10,6 +10,7 @@ pub mod curves;
 pub mod decimate;
 pub mod domain;
 pub mod encoder;
+mod exact;
 mod linalg;
 pub mod primitives;
 pub mod segment;

@@ -69,6 +69,13 @@ pub struct StepOptions {
     /// encoder's default tolerance (1e-3 of the diagonal), so the tessellation's own chord
     /// error takes a small part of the error budget.
     pub relative_chordal_tolerance: f64,
+    /// Faces on a plane, cylinder, cone, sphere or torus read from the record are
+    /// tessellated at this multiple of the chordal tolerance, and so are the edges only such
+    /// faces share (default 1: one chordal tolerance for all). The encoder measures those
+    /// faces against their exact surface ([`crate::pipeline::step_exact_surfaces`]), so
+    /// their facets need not be as fine as the others', which are measured against their
+    /// facets alone; [`crate::pipeline::step_options_for`] sets it for the encoder.
+    pub analytic_chordal_factor: f64,
     /// Convert to millimetres using the file's LENGTH_UNIT (default true). When false, or when
     /// the file names no length unit, positions stay in file units.
     pub to_millimetres: bool,
@@ -88,6 +95,7 @@ impl Default for StepOptions {
         StepOptions {
             chordal_tolerance: None,
             relative_chordal_tolerance: 2.5e-4,
+            analytic_chordal_factor: 1.0,
             to_millimetres: true,
             timeout: Duration::from_secs(60),
             face_timeout: Duration::from_secs(10),

@@ -221,10 +221,32 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     let started = std::time::Instant::now();
     let total_faces: usize = parsed.bodies.iter().map(|b| b.faces.len()).sum();
     let mut faces_done = 0usize;
+    let analytic_factor = opts.analytic_chordal_factor;
+    if !(analytic_factor > 0.0 && analytic_factor.is_finite()) {
+        return Err(Error::Parameter(format!(
+            "the chordal factor of analytic faces must be positive, got {analytic_factor}"
+        )));
+    }
     for (bi, body) in parsed.bodies.iter().enumerate() {
         let first_group = mesh.groups.len() as u32;
         let place = body.placement;
         let unplace = place.inverse();
+        // Edges of this body used only by faces with an exact analytic surface: those get
+        // the analytic faces' (coarser) chord, the others the finer one.
+        let mut analytic_only: BTreeMap<usize, bool> = BTreeMap::new();
+        for f in &body.faces {
+            for ei in f.face.boundaries.iter().flatten() {
+                let e = analytic_only.entry(ei.index).or_insert(true);
+                *e &= f.exact.is_some();
+            }
+        }
+        let edge_chord = |ge: usize| {
+            if analytic_only.get(&ge).copied().unwrap_or(false) {
+                chord * analytic_factor
+            } else {
+                chord
+            }
+        };
         for (face_index, pf) in body.faces.iter().enumerate() {
             if started.elapsed() > opts.total_timeout {
                 return Err(Error::input(
@@ -249,15 +271,15 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             };
             // a. Edge polylines (truck's polylining of the edge curve): the first face that
             // uses an edge fixes its polyline in the pool; later faces reuse those points.
-            let need: Vec<(usize, Curve3D)> = edges_global
+            let need: Vec<(usize, Curve3D, f64)> = edges_global
                 .iter()
                 .filter(|&&ge| !edge_pool.contains_key(&(bi, ge)))
-                .map(|&ge| (ge, body.edges[ge].curve.clone()))
+                .map(|&ge| (ge, body.edges[ge].curve.clone(), edge_chord(ge)))
                 .collect();
             if !need.is_empty() {
                 let watched = run_with_timeout("scode-step-edges", opts.face_timeout, move || {
                     need.into_iter()
-                        .map(|(ge, c)| {
+                        .map(|(ge, c, chord)| {
                             let range = c.range_tuple();
                             (ge, PolylineCurve::from_curve(&c, range, chord).0)
                         })
@@ -416,16 +438,19 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             // surface was), else truck's.
             let surface = pf.face.surface.clone();
             let (exact, same_sense) = (pf.exact, pf.same_sense);
+            let face_chord = chord * analytic_factor;
             let watched =
                 run_with_timeout("scode-step-face", opts.face_timeout, move || match exact {
-                    Some(a) => conform::conforming_tessellation(&a, &loops, chord).map(|mut cm| {
-                        if !same_sense {
-                            for t in &mut cm.triangles {
-                                t.swap(1, 2);
+                    Some(a) => {
+                        conform::conforming_tessellation(&a, &loops, face_chord).map(|mut cm| {
+                            if !same_sense {
+                                for t in &mut cm.triangles {
+                                    t.swap(1, 2);
+                                }
                             }
-                        }
-                        cm
-                    }),
+                            cm
+                        })
+                    }
                     None => conform::conforming_tessellation(&surface, &loops, chord),
                 });
             let mut face_tris: Vec<[u32; 3]> = Vec::new();
