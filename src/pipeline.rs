@@ -123,27 +123,32 @@ pub fn step_exact_surfaces(model: &crate::io::step::StepModel) -> Vec<Option<Exa
 #[cfg(feature = "step")]
 pub const STEP_CHORD_FRACTION: f64 = 0.25;
 
-/// The coarser chordal tolerance [`encode_step`] also tries for faces on planes, cylinders,
-/// cones, spheres and tori, as a fraction of the encode tolerance. Those faces are measured
-/// against their exact surfaces, so their facets' chord error is not an allowance the fit
-/// may spend twice; a coarser input changes what the fit starts from (session 9, corpus:
-/// 0.45 gave smaller files than 0.25 on 8 of 14 encoded files, larger on 4; 0.55 and 0.7
-/// were larger again on the small models tried).
+/// The coarser chordal tolerance [`encode_step`] also tries, as a fraction of the encode
+/// tolerance (session 9, corpus: at 0.45 the files were smaller than at 0.25 on 8 of 14
+/// encoded files; 0.55 and 0.7 were larger again on the small models tried).
 #[cfg(feature = "step")]
-pub const STEP_ANALYTIC_CHORD_FRACTION: f64 = 0.45;
+pub const STEP_COARSE_CHORD_FRACTION: f64 = 0.45;
 
 /// Reads a STEP file with its tessellation tied to the encode tolerance, fits it with the
 /// B-rep's surface types and its faces' exact surfaces, and encodes it. `tolerance` is in
 /// millimetres (the model's output unit) or, with `relative`, a fraction of the
 /// bounding-box diagonal; `None` is 1e-3 of the diagonal.
 ///
-/// Two tessellations are encoded and the better file is kept: every face at
-/// [`STEP_CHORD_FRACTION`] of the tolerance, and the analytic faces (and the edges only
-/// they share) at [`STEP_ANALYTIC_CHORD_FRACTION`]. Better is: fewer skipped faces, then
-/// the tolerance met, then fewer bytes; the second is not fitted when it gives the same
-/// mesh (a model of planes only). The fit measures both against the same exact surfaces,
-/// so either meets the same standard, and which one is smaller varies by model. When one
-/// fit fails the other's file is kept; when both fail, the first error is returned.
+/// Which tessellation fits best varies by model (and not smoothly), so three are fitted
+/// and the best file is kept, all held to the same standard:
+/// 1. every face at [`STEP_CHORD_FRACTION`] of the tolerance;
+/// 2. faces on planes, cylinders, cones, spheres and tori (and the edges only they share)
+///    at [`STEP_COARSE_CHORD_FRACTION`]: those are measured against their exact surfaces,
+///    so their facets' chord error is no allowance the fit may spend;
+/// 3. every face at [`STEP_COARSE_CHORD_FRACTION`], measured against tessellation 1 (which
+///    has the same faces) rather than against itself, so B-spline faces too are held to
+///    the fine facets ([`FitOptions::reference`]).
+///
+/// Best is: fewer skipped faces, then the tolerance met, then fewer bytes. A tessellation
+/// equal to an earlier one is not fitted again (a model of planes only), nor is 3 when its
+/// faces differ from 1's (a face skipped in one of them). When a fit fails the others'
+/// files are kept; when all fail, the first error is returned. The chosen model's notes
+/// say which tessellation it was.
 #[cfg(feature = "step")]
 pub fn encode_step(
     path: &Path,
@@ -151,18 +156,44 @@ pub fn encode_step(
     relative: bool,
     opts: &ModelEncodeOptions,
 ) -> Result<(crate::io::step::StepModel, Vec<u8>, FitReport)> {
-    type Encoded = (crate::io::step::StepModel, Vec<u8>, FitReport);
-    let mut best: Option<Encoded> = None;
+    use crate::io::step::{read_step, StepModel};
+    let coarse = STEP_COARSE_CHORD_FRACTION / STEP_CHORD_FRACTION;
+    let variants: [(&str, f64, f64, bool); 3] = [
+        ("every face at the chordal tolerance", 1.0, 1.0, false),
+        (
+            "analytic faces at a coarser chord, measured against their exact surfaces",
+            1.0,
+            coarse,
+            false,
+        ),
+        (
+            "every face at a coarser chord, measured against the finer tessellation",
+            coarse,
+            1.0,
+            true,
+        ),
+    ];
+    let mut best: Option<(StepModel, Vec<u8>, FitReport)> = None;
     let mut first_error = None;
-    let mut first_mesh: Option<ControlMesh> = None;
-    let factors = [1.0, STEP_ANALYTIC_CHORD_FRACTION / STEP_CHORD_FRACTION];
-    for factor in factors {
+    let mut fitted_meshes: Vec<ControlMesh> = Vec::new();
+    // Tessellation 1's mesh, the reference of 3.
+    let mut fine: Option<ControlMesh> = None;
+    for (what, chord_factor, analytic_factor, against_fine) in variants {
         let mut step_opts = step_options_for(tolerance, relative);
-        step_opts.analytic_chordal_factor = factor;
-        let model = crate::io::step::read_step(path, &step_opts)?;
-        if first_mesh.as_ref() == Some(&model.mesh) {
+        if let Some(c) = &mut step_opts.chordal_tolerance {
+            *c *= chord_factor;
+        }
+        step_opts.relative_chordal_tolerance *= chord_factor;
+        step_opts.analytic_chordal_factor = analytic_factor;
+        let mut model = read_step(path, &step_opts)?;
+        if fitted_meshes.contains(&model.mesh) {
             continue;
         }
+        let reference = match (against_fine, &fine) {
+            (false, _) => None,
+            (true, Some(f)) if same_faces(f, &model.mesh) => Some(f.clone()),
+            (true, _) => continue,
+        };
         let mut opts = opts.clone();
         opts.fit.tolerance = tolerance.map(|t| {
             if relative {
@@ -172,13 +203,15 @@ pub fn encode_step(
             }
         });
         opts.fit.exact_surfaces = step_exact_surfaces(&model);
+        opts.fit.reference = reference;
         let fitted = encode_fitted(&model.mesh, &step_hints(&model), &opts);
-        if first_mesh.is_none() {
-            first_mesh = Some(model.mesh.clone());
+        if fine.is_none() {
+            fine = Some(model.mesh.clone());
         }
+        fitted_meshes.push(model.mesh.clone());
         match fitted {
             Ok((bytes, report)) => {
-                let key = |m: &crate::io::step::StepModel, b: &[u8], r: &FitReport| {
+                let key = |m: &StepModel, b: &[u8], r: &FitReport| {
                     (m.skipped.len(), !r.within_tolerance, b.len())
                 };
                 let better = match &best {
@@ -186,6 +219,10 @@ pub fn encode_step(
                     Some((m, b, r)) => key(&model, &bytes, &report) < key(m, b, r),
                 };
                 if better {
+                    model.notes.push(format!(
+                        "encoded from the tessellation with {what} ({} bytes)",
+                        bytes.len()
+                    ));
                     best = Some((model, bytes, report));
                 }
             }
@@ -201,6 +238,16 @@ pub fn encode_step(
             "no STEP tessellation was fitted".into(),
         )),
     }
+}
+
+/// Whether two tessellations hold the same faces: the same group names in the same order.
+#[cfg(feature = "step")]
+fn same_faces(a: &ControlMesh, b: &ControlMesh) -> bool {
+    a.groups.len() == b.groups.len()
+        && a.groups
+            .iter()
+            .zip(&b.groups)
+            .all(|(x, y)| x.name == y.name)
 }
 
 /// STEP reading options with one chordal tolerance for all faces,

@@ -95,6 +95,10 @@ pub struct FitOptions {
     /// decoded surface of a group is then held within the tolerance of that surface too,
     /// not only of its facets (see [`ExactSurface`]).
     pub exact_surfaces: Vec<Option<ExactSurface>>,
+    /// A finer tessellation of the same faces (the same groups, by name, in the same order)
+    /// to measure the decoded surface against instead of the input; the fit still starts
+    /// from and fits to the input's triangles. `None`: measured against the input.
+    pub reference: Option<ControlMesh>,
 }
 
 /// When a round's worst excess stays above this fraction of the previous round's, adding
@@ -114,6 +118,7 @@ impl Default for FitOptions {
             local_refinement: false,
             keep_planes_on_faces: true,
             exact_surfaces: Vec::new(),
+            reference: None,
         }
     }
 }
@@ -1531,6 +1536,66 @@ pub(crate) fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
     ))
 }
 
+/// A closest-point structure per group over the group's own triangles (`None` for a group
+/// without any). Each holds the group's own vertices only (in first-use order): the same
+/// triangles in the same order, so the same closest points, without a copy of every
+/// position per group (bug33398: 422 groups x 53k vertices).
+fn group_surfaces_of(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    group_triangles: &[Vec<u32>],
+) -> Vec<Option<TriangleSurface>> {
+    let mut local = vec![u32::MAX; mesh.vertex_count()];
+    group_triangles
+        .iter()
+        .map(|ids| {
+            let t: Vec<[u32; 3]> = ids.iter().map(|&t| tris[t as usize]).collect();
+            if t.is_empty() {
+                return None;
+            }
+            let mut positions = Vec::new();
+            let mut used = Vec::new();
+            let t: Vec<[u32; 3]> = t
+                .iter()
+                .map(|tri| {
+                    tri.map(|v| {
+                        if local[v as usize] == u32::MAX {
+                            local[v as usize] = positions.len() as u32;
+                            positions.push(mesh.positions[v as usize]);
+                            used.push(v);
+                        }
+                        local[v as usize]
+                    })
+                })
+                .collect();
+            for v in used {
+                local[v as usize] = u32::MAX;
+            }
+            TriangleSurface::new(positions, t).ok()
+        })
+        .collect()
+}
+
+/// Triangles of `m` (polygons fan-split) and, per group, the indices of its triangles.
+fn triangles_by_group(m: &ControlMesh) -> (Vec<[u32; 3]>, Vec<u32>, Vec<Vec<u32>>) {
+    let mut tris = Vec::new();
+    let mut groups = Vec::new();
+    for f in 0..m.face_count() {
+        let face = m.face(f);
+        for i in 1..face.len().saturating_sub(1) {
+            tris.push([face[0], face[i], face[i + 1]]);
+            groups.push(m.face_groups[f]);
+        }
+    }
+    let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); m.groups.len()];
+    for (t, &g) in groups.iter().enumerate() {
+        if let Some(b) = by_group.get_mut(g as usize) {
+            b.push(t as u32);
+        }
+    }
+    (tris, groups, by_group)
+}
+
 /// Fits a control mesh to `input` (a triangle or polygon mesh; polygons are fan-split).
 /// `hints[g]` is what the input says group g's surface is (or `Unknown`). `reconstruct`
 /// must return the control mesh exactly as the decoder will see it (quantised `coarser`
@@ -1655,38 +1720,7 @@ pub fn fit_model(
     } else {
         Vec::new()
     };
-    // Each group's own vertices only (in first-use order): the same triangles in the same
-    // order, so the same closest points, without a copy of every position per group
-    // (bug33398: 422 groups x 53k vertices).
-    let mut local = vec![u32::MAX; mesh.vertex_count()];
-    let group_surfaces: Vec<Option<TriangleSurface>> = group_triangles
-        .iter()
-        .map(|ids| {
-            let t: Vec<[u32; 3]> = ids.iter().map(|&t| tris[t as usize]).collect();
-            if t.is_empty() {
-                return None;
-            }
-            let mut positions = Vec::new();
-            let mut used = Vec::new();
-            let t: Vec<[u32; 3]> = t
-                .iter()
-                .map(|tri| {
-                    tri.map(|v| {
-                        if local[v as usize] == u32::MAX {
-                            local[v as usize] = positions.len() as u32;
-                            positions.push(mesh.positions[v as usize]);
-                            used.push(v);
-                        }
-                        local[v as usize]
-                    })
-                })
-                .collect();
-            for v in used {
-                local[v as usize] = u32::MAX;
-            }
-            TriangleSurface::new(positions, t).ok()
-        })
-        .collect();
+    let group_surfaces = group_surfaces_of(&mesh, &tris, &group_triangles);
     let input_surface = TriangleSurface::new(mesh.positions.clone(), tris.clone())?;
     let mut chord = chord_allowance(&mesh, &tris);
     add_curved_edge_allowance(&mesh, &tris, &net, &mut chord);
@@ -1708,9 +1742,71 @@ pub fn fit_model(
             group_chains[g as usize].push(ci);
         }
     }
-    let group_max_chord: Vec<f64> = group_triangles
+    // What the decoded surface is measured against: the input, or the finer tessellation of
+    // the same faces the caller gave (`FitOptions::reference`).
+    let reference = opts.reference.as_ref().filter(|r| {
+        !segmented
+            && r.groups.len() == mesh.groups.len()
+            && r.groups
+                .iter()
+                .zip(&mesh.groups)
+                .all(|(a, b)| a.name == b.name)
+    });
+    if opts.reference.is_some() && reference.is_none() {
+        report.notes.push(
+            "the reference tessellation's groups are not the input's: measured against the input"
+                .into(),
+        );
+    }
+    let ref_parts = match reference {
+        Some(r) => {
+            let (r_tris, r_groups, r_group_tris) = triangles_by_group(r);
+            let mut r_mesh = ControlMesh::new();
+            r_mesh.positions = r.positions.clone();
+            r_mesh.groups = r.groups.clone();
+            for (t, &g) in r_tris.iter().zip(&r_groups) {
+                r_mesh.push_face(t, g);
+            }
+            let r_surface = TriangleSurface::new(r_mesh.positions.clone(), r_tris.clone())?;
+            let mut r_chord = chord_allowance(&r_mesh, &r_tris);
+            add_analytic_surface_allowance(
+                &r_mesh.positions,
+                &r_tris,
+                &r_mesh.face_groups,
+                &kinds,
+                &mut r_chord,
+            );
+            let r_group_surfaces = group_surfaces_of(&r_mesh, &r_tris, &r_group_tris);
+            report.notes.push(format!(
+                "measured against a reference tessellation of {} triangles (input: {})",
+                r_tris.len(),
+                tris.len()
+            ));
+            Some((
+                r_mesh,
+                r_tris,
+                r_group_tris,
+                r_surface,
+                r_chord,
+                r_group_surfaces,
+            ))
+        }
+        None => None,
+    };
+    let (m_mesh, m_tris, m_group_tris, m_surface, m_chord, m_group_surfaces) = match &ref_parts {
+        Some((a, b, c, d, e, f)) => (a, b, c, d, e, f),
+        None => (
+            &mesh,
+            &tris,
+            &group_triangles,
+            &input_surface,
+            &chord,
+            &group_surfaces,
+        ),
+    };
+    let group_max_chord: Vec<f64> = m_group_tris
         .iter()
-        .map(|ids| ids.iter().fold(0.0f64, |m, &t| m.max(chord[t as usize])))
+        .map(|ids| ids.iter().fold(0.0f64, |m, &t| m.max(m_chord[t as usize])))
         .collect();
     let exact_faces = if segmented {
         0
@@ -1724,19 +1820,19 @@ pub fn fit_model(
         ));
     }
     let meter = ErrorMeter {
-        mesh: &mesh,
+        mesh: m_mesh,
         input_samples: sample_surface(
-            &mesh.positions,
-            &tris,
+            &m_mesh.positions,
+            m_tris,
             SampleCount::Total(opts.error_samples),
             true,
             0x5C0D_E000_0000_0001,
         ),
-        input_surface: &input_surface,
-        chord: &chord,
+        input_surface: m_surface,
+        chord: m_chord,
         own_faces: OwnFaces {
-            surfaces: &group_surfaces,
-            triangles: &group_triangles,
+            surfaces: m_group_surfaces,
+            triangles: m_group_tris,
             max_allowance: &group_max_chord,
             // A segmented input's groups are not the input's: no exact surfaces then.
             exact: if segmented { &[] } else { &opts.exact_surfaces },
