@@ -7,6 +7,8 @@ use std::path::Path;
 use crate::codec::{self, Content, EncodeOptions, Limits};
 use crate::error::Result;
 use crate::fit::encoder::{fit_model, ExactSurface, FitOptions, FitReport, SurfaceHint};
+#[cfg(feature = "step")]
+use crate::fit::primitives::Primitive;
 use crate::io::faces_json::{self, SurfaceType};
 use crate::mesh::ControlMesh;
 
@@ -92,27 +94,30 @@ pub fn step_exact_surfaces(model: &crate::io::step::StepModel) -> Vec<Option<Exa
         .map(|f| {
             let axis = f.axis?;
             let s = match f.surface {
-                SurfaceType::Plane => ExactSurface::Plane { axis },
-                SurfaceType::Cylinder => ExactSurface::Cylinder {
+                SurfaceType::Plane => Primitive::Plane {
+                    point: axis.origin,
+                    normal: axis.direction,
+                },
+                SurfaceType::Cylinder => Primitive::Cylinder {
                     axis,
                     radius: f.radius?,
                 },
-                SurfaceType::Cone => ExactSurface::Cone {
+                SurfaceType::Cone => Primitive::Cone {
                     axis,
                     half_angle: f.half_angle?,
                 },
-                SurfaceType::Sphere => ExactSurface::Sphere {
-                    centre: axis.origin,
+                SurfaceType::Sphere => Primitive::Sphere {
+                    center: axis.origin,
                     radius: f.radius?,
                 },
-                SurfaceType::Torus => ExactSurface::Torus {
+                SurfaceType::Torus => Primitive::Torus {
                     axis,
-                    major: f.radius?,
-                    minor: f.minor_radius?,
+                    major_radius: f.radius?,
+                    minor_radius: f.minor_radius?,
                 },
                 _ => return None,
             };
-            s.normalized()
+            ExactSurface::new(s)
         })
         .collect()
 }

@@ -1751,10 +1751,21 @@ pub fn fit_model(
                 .iter()
                 .zip(&mesh.groups)
                 .all(|(a, b)| a.name == b.name)
+            // Indices in range and finite positions (it is the caller's mesh, not checked
+            // like the input).
+            && r.face_groups.len() == r.face_count()
+            && r.face_groups.iter().all(|&g| (g as usize) < r.groups.len())
+            && (0..r.face_count()).all(|f| {
+                r.face(f)
+                    .iter()
+                    .all(|&v| (v as usize) < r.positions.len())
+            })
+            && r.positions.iter().all(|p| p.is_finite())
     });
     if opts.reference.is_some() && reference.is_none() {
         report.notes.push(
-            "the reference tessellation's groups are not the input's: measured against the input"
+            "the reference tessellation does not hold the input's faces (or has invalid indices or \
+             positions): measured against the input"
                 .into(),
         );
     }

@@ -11,50 +11,21 @@
 
 use glam::DVec3;
 
+use super::primitives::Primitive;
 use crate::mesh::Axis;
 
-/// The untrimmed analytic surface under one input face (model units). Only the surfaces
-/// whose distance is closed-form are here; a face on any other surface has none and is
-/// measured against its facets alone.
+/// The untrimmed analytic surface under one input face (model units): a [`Primitive`] with
+/// finite parameters and unit directions, whose cone has both nappes (a STEP cone face may
+/// lie on either side of the apex; a fitted cone is the one nappe its points are on). A
+/// face on any other surface has none and is measured against its facets alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ExactSurface {
-    /// Through `axis.origin`, normal `axis.direction`.
-    Plane {
-        axis: Axis,
-    },
-    Cylinder {
-        axis: Axis,
-        radius: f64,
-    },
-    /// Apex at `axis.origin`, axis along `axis.direction`; both nappes.
-    Cone {
-        axis: Axis,
-        half_angle: f64,
-    },
-    Sphere {
-        centre: DVec3,
-        radius: f64,
-    },
-    /// Centre `axis.origin`, the tube's centre circle of radius `major` about the axis.
-    Torus {
-        axis: Axis,
-        major: f64,
-        minor: f64,
-    },
-}
-
-/// Height along the axis and distance from it.
-fn axial(axis: &Axis, p: DVec3) -> (f64, f64) {
-    let d = p - axis.origin;
-    let h = d.dot(axis.direction);
-    (h, (d - h * axis.direction).length())
-}
+pub struct ExactSurface(Primitive);
 
 impl ExactSurface {
-    /// The same surface with a unit axis direction, or `None` when a parameter is not finite,
-    /// a radius is negative or the direction is zero (such a surface would measure nothing
-    /// sensible; the face is then measured against its facets alone).
-    pub fn normalized(self) -> Option<ExactSurface> {
+    /// The surface, with unit directions; `None` when a parameter is not finite, a radius
+    /// is negative, a cone's half angle is not strictly between 0 and 90 degrees or a
+    /// direction is zero (such a surface would measure nothing sensible).
+    pub fn new(surface: Primitive) -> Option<ExactSurface> {
         let unit = |a: Axis| -> Option<Axis> {
             let direction = a.direction.try_normalize()?;
             a.origin.is_finite().then_some(Axis {
@@ -63,68 +34,60 @@ impl ExactSurface {
             })
         };
         let radius_ok = |r: f64| r.is_finite() && r >= 0.0;
-        let s = match self {
-            ExactSurface::Plane { axis } => ExactSurface::Plane { axis: unit(axis)? },
-            ExactSurface::Cylinder { axis, radius } if radius_ok(radius) => {
-                ExactSurface::Cylinder {
-                    axis: unit(axis)?,
-                    radius,
+        let s = match surface {
+            Primitive::Plane { point, normal } => {
+                let axis = unit(Axis {
+                    origin: point,
+                    direction: normal,
+                })?;
+                Primitive::Plane {
+                    point: axis.origin,
+                    normal: axis.direction,
                 }
             }
-            ExactSurface::Cone { axis, half_angle }
+            Primitive::Cylinder { axis, radius } if radius_ok(radius) => Primitive::Cylinder {
+                axis: unit(axis)?,
+                radius,
+            },
+            Primitive::Cone { axis, half_angle }
                 if half_angle > 0.0 && half_angle < std::f64::consts::FRAC_PI_2 =>
             {
-                ExactSurface::Cone {
+                Primitive::Cone {
                     axis: unit(axis)?,
                     half_angle,
                 }
             }
-            ExactSurface::Sphere { centre, radius } if radius_ok(radius) && centre.is_finite() => {
-                ExactSurface::Sphere { centre, radius }
+            Primitive::Sphere { center, radius } if radius_ok(radius) && center.is_finite() => {
+                Primitive::Sphere { center, radius }
             }
-            ExactSurface::Torus { axis, major, minor } if radius_ok(major) && radius_ok(minor) => {
-                ExactSurface::Torus {
-                    axis: unit(axis)?,
-                    major,
-                    minor,
-                }
-            }
+            Primitive::Torus {
+                axis,
+                major_radius,
+                minor_radius,
+            } if radius_ok(major_radius) && radius_ok(minor_radius) => Primitive::Torus {
+                axis: unit(axis)?,
+                major_radius,
+                minor_radius,
+            },
             _ => return None,
         };
-        Some(s)
+        Some(ExactSurface(s))
     }
 
-    /// Distance from `p` to the surface (the axis direction must be a unit vector, as
-    /// [`ExactSurface::normalized`] makes it).
+    /// Distance from `p` to the surface (a cone's nearer nappe).
     pub fn distance(&self, p: DVec3) -> f64 {
-        match *self {
-            ExactSurface::Plane { axis } => (p - axis.origin).dot(axis.direction).abs(),
-            ExactSurface::Cylinder { axis, radius } => (axial(&axis, p).1 - radius).abs(),
-            ExactSurface::Cone { axis, half_angle } => {
-                // Both nappes (a STEP cone face may lie on either side of the apex): in p's
-                // half-plane through the axis they are the rays (cos a, sin a) t and
-                // (-cos a, sin a) t, t >= 0.
-                let (h, r) = axial(&axis, p);
-                let (s, c) = half_angle.sin_cos();
-                let ray = |h: f64| {
-                    if h * c + r * s >= 0.0 {
-                        (r * c - h * s).abs()
-                    } else {
-                        h.hypot(r)
-                    }
+        match self.0 {
+            Primitive::Cone { axis, half_angle } => {
+                let other = Primitive::Cone {
+                    axis: Axis {
+                        origin: axis.origin,
+                        direction: -axis.direction,
+                    },
+                    half_angle,
                 };
-                ray(h).min(ray(-h))
+                self.0.distance(p).min(other.distance(p))
             }
-            ExactSurface::Sphere { centre, radius } => ((p - centre).length() - radius).abs(),
-            ExactSurface::Torus { axis, major, minor } => {
-                // The tube's cross-section in p's plane through the axis is two circles, at
-                // +major and -major from the axis; with minor > major (a spindle torus, as
-                // STEP allows) the nearer part may be the far one.
-                let (h, r) = axial(&axis, p);
-                let near = ((r - major).hypot(h) - minor).abs();
-                let far = ((r + major).hypot(h) - minor).abs();
-                near.min(far)
-            }
+            s => s.distance(p),
         }
     }
 }
@@ -151,12 +114,15 @@ mod tests {
         let (n, x) = (a.direction, across());
         let cases = [
             (
-                ExactSurface::Plane { axis: a },
+                Primitive::Plane {
+                    point: a.origin,
+                    normal: n,
+                },
                 a.origin + 0.3 * n + 5.0 * x,
                 0.3,
             ),
             (
-                ExactSurface::Cylinder {
+                Primitive::Cylinder {
                     axis: a,
                     radius: 2.0,
                 },
@@ -164,18 +130,18 @@ mod tests {
                 0.5,
             ),
             (
-                ExactSurface::Sphere {
-                    centre: a.origin,
+                Primitive::Sphere {
+                    center: a.origin,
                     radius: 2.0,
                 },
                 a.origin + 1.5 * x,
                 0.5,
             ),
             (
-                ExactSurface::Torus {
+                Primitive::Torus {
                     axis: a,
-                    major: 5.0,
-                    minor: 1.0,
+                    major_radius: 5.0,
+                    minor_radius: 1.0,
                 },
                 a.origin + 5.0 * x + 0.25 * n,
                 0.75,
@@ -183,17 +149,17 @@ mod tests {
             // A spindle torus: the point 2 from the axis at the centre's height is on the
             // tube circle about the opposite side's centre (v = pi: 1 + 3 cos v = -2).
             (
-                ExactSurface::Torus {
+                Primitive::Torus {
                     axis: a,
-                    major: 1.0,
-                    minor: 3.0,
+                    major_radius: 1.0,
+                    minor_radius: 3.0,
                 },
                 a.origin + 2.0 * x,
                 0.0,
             ),
         ];
         for (s, p, want) in cases {
-            let s = s.normalized().unwrap();
+            let s = ExactSurface::new(s).unwrap();
             assert!(
                 (s.distance(p) - want).abs() < 1e-12,
                 "{s:?}: {}",
@@ -207,11 +173,10 @@ mod tests {
         let a = tilted();
         let (n, x) = (a.direction, across());
         // 45 degrees: the generator through (h, r) = (1, 1).
-        let s = ExactSurface::Cone {
+        let s = ExactSurface::new(Primitive::Cone {
             axis: a,
             half_angle: std::f64::consts::FRAC_PI_4,
-        }
-        .normalized()
+        })
         .unwrap();
         // On the axis at height 2: sqrt(2) from the generator.
         assert!((s.distance(a.origin + 2.0 * n) - 2f64.sqrt()).abs() < 1e-12);
@@ -232,35 +197,35 @@ mod tests {
             direction: DVec3::ZERO,
         };
         for s in [
-            ExactSurface::Plane { axis: zero },
-            ExactSurface::Cylinder {
+            Primitive::Plane {
+                point: zero.origin,
+                normal: zero.direction,
+            },
+            Primitive::Cylinder {
                 axis: a,
                 radius: f64::NAN,
             },
-            ExactSurface::Cone {
+            Primitive::Cone {
                 axis: a,
                 half_angle: 0.0,
             },
-            ExactSurface::Sphere {
-                centre: DVec3::splat(f64::INFINITY),
+            Primitive::Sphere {
+                center: DVec3::splat(f64::INFINITY),
                 radius: 1.0,
             },
-            ExactSurface::Torus {
+            Primitive::Torus {
                 axis: a,
-                major: 2.0,
-                minor: -1.0,
+                major_radius: 2.0,
+                minor_radius: -1.0,
             },
         ] {
-            assert_eq!(s.normalized(), None, "{s:?}");
+            assert_eq!(ExactSurface::new(s), None, "{s:?}");
         }
         // A non-unit direction is normalised.
-        let s = ExactSurface::Plane {
-            axis: Axis {
-                origin: DVec3::ZERO,
-                direction: DVec3::new(0.0, 0.0, 4.0),
-            },
-        }
-        .normalized()
+        let s = ExactSurface::new(Primitive::Plane {
+            point: DVec3::ZERO,
+            normal: DVec3::new(0.0, 0.0, 4.0),
+        })
         .unwrap();
         assert!((s.distance(DVec3::new(3.0, 1.0, 2.0)) - 2.0).abs() < 1e-12);
     }

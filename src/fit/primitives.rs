@@ -133,8 +133,13 @@ impl Primitive {
                 major_radius,
                 minor_radius,
             } => {
+                // The tube's section in p's plane through the axis is two circles, at
+                // +major and -major from the axis; with the minor radius larger (a spindle
+                // torus, as STEP allows) the far one may be nearer.
                 let (h, rho, _) = axial(&axis, p);
-                (((rho - major_radius).powi(2) + h * h).sqrt() - minor_radius).abs()
+                let near = ((rho - major_radius).hypot(h) - minor_radius).abs();
+                let far = ((rho + major_radius).hypot(h) - minor_radius).abs();
+                near.min(far)
             }
         }
     }
