@@ -24,13 +24,20 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Compress a mesh into a .scode file.
+    /// Compress a mesh or a STEP file into a .scode file.
     ///
     /// By default the model is fitted: every CAD face (OBJ group, PLY face id, glTF
     /// primitive; an ungrouped mesh is segmented first) becomes a subdivision patch, and the
     /// coarse control mesh is stored. The encoder measures the decoded surface against the
     /// input and adds control points until --tolerance holds. A `<name>.faces.json` sidecar
     /// next to the input (as in the corpus) supplies each face's surface type.
+    ///
+    /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex
+    /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the
+    /// tolerance, its surface type decides the patch kind, and faces on planes, cylinders,
+    /// cones, spheres and tori are held to the tolerance of their exact surfaces. Three
+    /// tessellations are fitted and the best file kept (--verbose says which). Faces the
+    /// reader cannot handle are named and skipped; `scode info part.step` shows the plan.
     ///
     /// With --raw the input mesh itself is stored as the control mesh (no fitting): a
     /// Draco-class lossy-by-quantisation coder. Faces keep their degree (quads and n-gons are
@@ -39,6 +46,7 @@ pub enum Command {
     /// Examples: scode encode part.obj part.scode
     ///           scode encode --tolerance 0.002 --relative part.obj -o part.scode
     ///           scode encode --raw part.obj part.scode
+    ///           scode encode --verbose part.step part.scode
     #[command(verbatim_doc_comment)]
     Encode(EncodeArgs),
     /// Decompress a .scode file into a mesh (format chosen by the output extension).
@@ -125,7 +133,7 @@ impl OutputArg {
 
 #[derive(Args, Debug)]
 pub struct EncodeArgs {
-    /// Input mesh (.obj .ply .stl .glb .gltf .off).
+    /// Input mesh (.obj .ply .stl .glb .gltf .off) or STEP file (.step .stp).
     pub input: PathBuf,
     #[command(flatten)]
     pub output: OutputArg,
