@@ -1491,7 +1491,8 @@ impl ErrorMeter<'_> {
 }
 
 /// Adds to a mesh error the CAD faces (groups) whose control faces break the control mesh's
-/// topology (a side used twice in one direction, or by more than two faces), so a failing
+/// topology (a side used twice in one direction, or by more than two faces; else the faces
+/// around a vertex with more than two open sides, where holes touch), so a failing
 /// fit names the B-rep faces to look at instead of only vertex numbers.
 pub(crate) fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
     let Error::Mesh(msg) = e else { return e };
@@ -1510,6 +1511,27 @@ pub(crate) fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
         let forward = faces.iter().filter(|u| u.1).count();
         if faces.len() > 2 || forward > 1 || faces.len() - forward > 1 {
             for &(f, _) in faces {
+                if let Some(&g) = control.face_groups.get(f) {
+                    groups.insert(g);
+                }
+            }
+        }
+    }
+    if groups.is_empty() {
+        // A vertex where two holes touch (more than two open sides): the faces around it.
+        let mut open_sides: BTreeMap<u32, usize> = BTreeMap::new();
+        for (&(a, b), faces) in &uses {
+            if faces.len() == 1 {
+                *open_sides.entry(a).or_default() += 1;
+                *open_sides.entry(b).or_default() += 1;
+            }
+        }
+        for f in 0..control.face_count() {
+            if control
+                .face(f)
+                .iter()
+                .any(|v| open_sides.get(v).is_some_and(|&n| n > 2))
+            {
                 if let Some(&g) = control.face_groups.get(f) {
                     groups.insert(g);
                 }
@@ -2115,4 +2137,55 @@ pub fn fit_model(
         default_level: level,
         report,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two triangles of groups `a` and `b` touching at vertex 0 only, and a third group
+    /// elsewhere: the error names the two faces around the pinch, not the third.
+    #[test]
+    fn faces_around_a_pinched_vertex_are_named() {
+        let mut m = ControlMesh::new();
+        for p in [
+            DVec3::ZERO,
+            DVec3::X,
+            DVec3::Y,
+            -DVec3::X,
+            -DVec3::Y,
+            DVec3::new(5.0, 0.0, 0.0),
+            DVec3::new(6.0, 0.0, 0.0),
+            DVec3::new(5.0, 1.0, 0.0),
+        ] {
+            m.push_vertex(p);
+        }
+        for name in ["a", "b", "c"] {
+            m.push_group(name, PatchKind::Closed);
+        }
+        m.push_face(&[0, 1, 2], 0);
+        m.push_face(&[0, 3, 4], 1);
+        m.push_face(&[5, 6, 7], 2);
+        let e = with_faces_involved(Error::Mesh("vertex 0 is pinched".into()), &m).to_string();
+        assert!(e.contains("'a'") && e.contains("'b'"), "{e}");
+        assert!(!e.contains("'c'"), "{e}");
+        // Other errors pass through as they are.
+        let e = with_faces_involved(Error::Parameter("p".into()), &m);
+        assert!(matches!(e, Error::Parameter(_)));
+    }
+
+    /// A side used twice in one direction names the faces using it.
+    #[test]
+    fn faces_sharing_a_side_in_one_direction_are_named() {
+        let mut m = ControlMesh::new();
+        for p in [DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::NEG_Y] {
+            m.push_vertex(p);
+        }
+        m.push_group("a", PatchKind::Closed);
+        m.push_group("b", PatchKind::Closed);
+        m.push_face(&[0, 1, 2], 0);
+        m.push_face(&[0, 1, 3], 1);
+        let e = with_faces_involved(Error::Mesh("edge".into()), &m).to_string();
+        assert!(e.contains("CAD faces involved: 'a', 'b'"), "{e}");
+    }
 }
