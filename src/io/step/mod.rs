@@ -74,7 +74,7 @@ pub struct StepOptions {
     /// faces share (default 1: one chordal tolerance for all). The encoder measures those
     /// faces against their exact surface ([`crate::pipeline::step_exact_surfaces`]), so
     /// their facets need not be as fine as the others', which are measured against their
-    /// facets alone; [`crate::pipeline::step_options_for`] sets it for the encoder.
+    /// facets alone; [`crate::pipeline::encode_step`] tries it besides 1.
     pub analytic_chordal_factor: f64,
     /// Convert to millimetres using the file's LENGTH_UNIT (default true). When false, or when
     /// the file names no length unit, positions stay in file units.
