@@ -149,6 +149,7 @@ pub const STEP_COARSE_CHORD_FRACTION: f64 = 0.45;
 ///    has the same faces) rather than against itself, so B-spline faces too are held to
 ///    the fine facets ([`FitOptions::reference`]).
 ///
+/// The file is parsed and its faces converted once ([`crate::io::step::read_step_tessellations`]).
 /// Best is: fewer skipped faces, then the tolerance met, then fewer bytes. A tessellation
 /// equal to an earlier one is not fitted again (a model of planes only), nor is 3 when its
 /// faces differ from 1's (a face skipped in one of them). When a fit fails the others'
@@ -161,7 +162,7 @@ pub fn encode_step(
     relative: bool,
     opts: &ModelEncodeOptions,
 ) -> Result<(crate::io::step::StepModel, Vec<u8>, FitReport)> {
-    use crate::io::step::{read_step, StepModel};
+    use crate::io::step::{read_step_tessellations, StepModel};
     let coarse = STEP_COARSE_CHORD_FRACTION / STEP_CHORD_FRACTION;
     let variants: [(&str, f64, f64, bool); 3] = [
         ("every face at the chordal tolerance", 1.0, 1.0, false),
@@ -178,19 +179,27 @@ pub fn encode_step(
             true,
         ),
     ];
+    let step_opts: Vec<_> = variants
+        .iter()
+        .map(|&(_, chord_factor, analytic_factor, _)| {
+            let mut o = step_options_for(tolerance, relative);
+            if let Some(c) = &mut o.chordal_tolerance {
+                *c *= chord_factor;
+            }
+            o.relative_chordal_tolerance *= chord_factor;
+            o.analytic_chordal_factor = analytic_factor;
+            o
+        })
+        .collect();
+    // One parse and one conversion of the faces (truck's conversion timeouts are waited
+    // for once), three tessellations.
+    let models = read_step_tessellations(path, &step_opts)?;
     let mut best: Option<(StepModel, Vec<u8>, FitReport)> = None;
     let mut first_error = None;
     let mut fitted_meshes: Vec<ControlMesh> = Vec::new();
     // Tessellation 1's mesh, the reference of 3.
     let mut fine: Option<ControlMesh> = None;
-    for (what, chord_factor, analytic_factor, against_fine) in variants {
-        let mut step_opts = step_options_for(tolerance, relative);
-        if let Some(c) = &mut step_opts.chordal_tolerance {
-            *c *= chord_factor;
-        }
-        step_opts.relative_chordal_tolerance *= chord_factor;
-        step_opts.analytic_chordal_factor = analytic_factor;
-        let mut model = read_step(path, &step_opts)?;
+    for ((what, _, _, against_fine), mut model) in variants.into_iter().zip(models) {
         if fitted_meshes.contains(&model.mesh) {
             continue;
         }

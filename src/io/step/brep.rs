@@ -57,6 +57,7 @@ pub(super) struct ParsedBody {
     pub faces: Vec<ParsedFace>,
 }
 
+#[derive(Clone)]
 pub(super) struct Parsed {
     pub bodies: Vec<ParsedBody>,
     pub skipped: Vec<SkippedFace>,

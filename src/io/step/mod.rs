@@ -253,6 +253,34 @@ pub fn read_step(path: &Path, opts: &StepOptions) -> Result<StepModel> {
 
 /// [`read_step`] on bytes already in memory; `path` is only used in messages.
 pub fn read_step_bytes(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<StepModel> {
+    let parsed = parse_and_convert(path, bytes, opts)?;
+    tessellate::tessellate(path, parsed, opts)
+}
+
+/// [`read_step`] once per entry of `tessellations`, parsing the file and converting its
+/// faces once: the parse, the units and the conversion's timeouts are the first entry's,
+/// each tessellation uses its own entry's chordal tolerances and timeouts. All models hold
+/// the same faces, skipped or not, up to faces whose tessellation failed in one of them.
+pub fn read_step_tessellations(
+    path: &Path,
+    tessellations: &[StepOptions],
+) -> Result<Vec<StepModel>> {
+    let Some(first) = tessellations.first() else {
+        return Err(Error::Parameter(
+            "read_step_tessellations: no tessellation asked for".into(),
+        ));
+    };
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let parsed = parse_and_convert(path, &bytes, first)?;
+    tessellations
+        .iter()
+        .map(|opts| tessellate::tessellate(path, parsed.clone(), opts))
+        .collect()
+}
+
+/// The file's B-rep with every face converted to truck (what does not depend on the
+/// tessellation options; `opts`' timeouts and units apply).
+fn parse_and_convert(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<brep::Parsed> {
     let text = String::from_utf8_lossy(bytes).into_owned();
     if !text.trim_start().starts_with("ISO-10303-21") {
         return Err(Error::input(
@@ -284,8 +312,7 @@ pub fn read_step_bytes(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<
             ))
         }
     };
-    let parsed = brep::convert(parsed, opts);
-    tessellate::tessellate(path, parsed, opts)
+    Ok(brep::convert(parsed, opts))
 }
 
 /// How a watched computation ended.
