@@ -1598,24 +1598,29 @@ fn group_surfaces_of(
         .collect()
 }
 
-/// Triangles of `m` (polygons fan-split) and, per group, the indices of its triangles.
-fn triangles_by_group(m: &ControlMesh) -> (Vec<[u32; 3]>, Vec<u32>, Vec<Vec<u32>>) {
-    let mut tris = Vec::new();
-    let mut groups = Vec::new();
+/// `m` with its polygons fan-split into triangles (same vertices, groups and face groups).
+fn triangulated(m: &ControlMesh) -> ControlMesh {
+    let mut t = ControlMesh::new();
+    t.positions = m.positions.clone();
+    t.groups = m.groups.clone();
     for f in 0..m.face_count() {
         let face = m.face(f);
         for i in 1..face.len().saturating_sub(1) {
-            tris.push([face[0], face[i], face[i + 1]]);
-            groups.push(m.face_groups[f]);
+            t.push_face(&[face[0], face[i], face[i + 1]], m.face_groups[f]);
         }
     }
+    t
+}
+
+/// Per group of a triangle mesh, the indices of its triangles (faces).
+fn triangles_by_group(m: &ControlMesh) -> Vec<Vec<u32>> {
     let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); m.groups.len()];
-    for (t, &g) in groups.iter().enumerate() {
+    for (t, &g) in m.face_groups.iter().enumerate() {
         if let Some(b) = by_group.get_mut(g as usize) {
             b.push(t as u32);
         }
     }
-    (tris, groups, by_group)
+    by_group
 }
 
 /// Fits a control mesh to `input` (a triangle or polygon mesh; polygons are fan-split).
@@ -1636,15 +1641,7 @@ pub fn fit_model(
         return Err(Error::Mesh("the input has no faces".into()));
     }
     // Fan-split polygons: the fit works on the input's triangles.
-    let mut mesh = ControlMesh::new();
-    mesh.positions = input.positions.clone();
-    mesh.groups = input.groups.clone();
-    for f in 0..input.face_count() {
-        let face = input.face(f);
-        for i in 1..face.len() - 1 {
-            mesh.push_face(&[face[0], face[i], face[i + 1]], input.face_groups[f]);
-        }
-    }
+    let mut mesh = triangulated(input);
     let diag = mesh.diagonal();
     let tol = opts.tolerance.unwrap_or(1e-3 * diag);
     if !(tol > 0.0 && tol.is_finite()) {
@@ -1719,10 +1716,7 @@ pub fn fit_model(
         }
     }
     // Input triangles of each group (global indices), for the per-face surfaces below.
-    let mut group_triangles: Vec<Vec<u32>> = vec![Vec::new(); mesh.groups.len()];
-    for (t, &g) in mesh.face_groups.iter().enumerate() {
-        group_triangles[g as usize].push(t as u32);
-    }
+    let group_triangles = triangles_by_group(&mesh);
     // Where each plane face lies in its plane, for the decimation's domain test.
     let plane_domains: Vec<Option<PlaneDomain>> = if keep_planes_on_faces {
         group_triangles
@@ -1793,13 +1787,9 @@ pub fn fit_model(
     }
     let ref_parts = match reference {
         Some(r) => {
-            let (r_tris, r_groups, r_group_tris) = triangles_by_group(r);
-            let mut r_mesh = ControlMesh::new();
-            r_mesh.positions = r.positions.clone();
-            r_mesh.groups = r.groups.clone();
-            for (t, &g) in r_tris.iter().zip(&r_groups) {
-                r_mesh.push_face(t, g);
-            }
+            let r_mesh = triangulated(r);
+            let r_tris: Vec<[u32; 3]> = r_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
+            let r_group_tris = triangles_by_group(&r_mesh);
             let r_surface = TriangleSurface::new(r_mesh.positions.clone(), r_tris.clone())?;
             let mut r_chord = chord_allowance(&r_mesh, &r_tris);
             add_analytic_surface_allowance(
