@@ -358,6 +358,84 @@ fn analytic_faces_take_their_own_chord_and_the_model_stays_closed() {
     assert!(is_closed(&uniform) && is_closed(&coarse));
 }
 
+/// Two faces of bug33398 meeting at a knife edge each closed an ear on the same two edge
+/// segments when its analytic faces were tessellated at `encode_step`'s coarser chord: one
+/// triangle in both faces, four triangles on one edge, and the fit failed. The reader splits
+/// the ear in one of the two faces; the model is closed and oriented, and it fits.
+#[test]
+fn faces_meeting_at_a_knife_edge_keep_the_model_manifold() {
+    let Some(corpus) = corpus_dir() else { return };
+    let path = corpus.join("step/bug33398.step");
+    let (fine, _) = scode::io::read_mesh(&corpus.join("tess/bug33398_fine.obj")).unwrap();
+    let tol = 1e-3 * fine.diagonal();
+    let mut opts = scode::pipeline::step_options_for(Some(tol), false);
+    opts.analytic_chordal_factor =
+        scode::pipeline::STEP_COARSE_CHORD_FRACTION / scode::pipeline::STEP_CHORD_FRACTION;
+    let model = read_step(&path, &opts).unwrap();
+    assert!(model.skipped.is_empty());
+    assert!(
+        model.notes.iter().any(|n| n.contains("knife edge")),
+        "{:?}",
+        model.notes
+    );
+    assert!(is_closed(&model));
+    let mut directed = std::collections::BTreeSet::new();
+    for f in model.mesh.faces() {
+        for k in 0..f.len() {
+            assert!(directed.insert((f[k], f[(k + 1) % f.len()])));
+        }
+    }
+    let mut fit = ModelEncodeOptions::default();
+    fit.fit.tolerance = Some(tol);
+    fit.fit.exact_surfaces = scode::pipeline::step_exact_surfaces(&model);
+    let (_, report) = encode_fitted(&model.mesh, &scode::pipeline::step_hints(&model), &fit)
+        .expect("the knife-edge faces fit");
+    assert!(report.within_tolerance, "{:?}", report.error);
+}
+
+/// trj6's faces bounded by a PARABOLA hung in truck's conversion (each was abandoned after
+/// its timeout, its thread spinning on; which other faces then missed their own timeout
+/// depended on the machine's load). The reader rewrites parabolas as the quadratic
+/// B-splines they are: no face times out, the eight faces are read, and their tessellations
+/// lie on their cones and planes.
+#[test]
+fn faces_bounded_by_parabolas_are_read() {
+    let Some(corpus) = corpus_dir() else { return };
+    let model = read_step(
+        &corpus.join("step/trj6_b1-ec-214.stp"),
+        &StepOptions::default(),
+    )
+    .unwrap();
+    assert!(
+        model.notes.iter().any(|n| n.contains("PARABOLA")),
+        "{:?}",
+        model.notes
+    );
+    for s in &model.skipped {
+        assert!(!s.reason.contains("did not finish"), "{s}");
+    }
+    let exact = scode::pipeline::step_exact_surfaces(&model);
+    for id in [459, 697, 1157, 1395, 1936, 2418, 4123, 4641] {
+        let g = model
+            .faces
+            .iter()
+            .position(|f| f.face_id == id)
+            .unwrap_or_else(|| panic!("face #{id} is read"));
+        let surface = exact[g].as_ref().expect("a cone or a plane");
+        let mut uses = 0;
+        for f in 0..model.mesh.face_count() {
+            if model.mesh.face_groups[f] as usize == g {
+                for &v in model.mesh.face(f) {
+                    let d = surface.distance(model.mesh.positions[v as usize]);
+                    assert!(d <= model.chordal_tolerance, "face #{id}: {d}");
+                    uses += 1;
+                }
+            }
+        }
+        assert!(uses > 0, "face #{id} has triangles");
+    }
+}
+
 /// Issue #5 item 2, fitting against the exact surface: the decoded surface of every face on
 /// a sphere, torus, cylinder, cone or plane stays within the tolerance of that surface
 /// (encoded as `encode_step` does, which also tries the analytic faces at a coarser chord).

@@ -75,8 +75,16 @@ fn entity_ref<T>(p: &PlaceHolder<T>) -> Option<u64> {
 /// Parses the text and converts every body's faces. Errors only when nothing can be read.
 pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result<Loaded> {
     let (text, pcurve, empty) = text::prepass(raw);
-    let records = text::scan(&text);
+    let mut records = text::scan(&text);
     let mut notes = Vec::new();
+    let (text, parabolas) = text::parabolas_to_bsplines(&text, &records);
+    if parabolas > 0 {
+        records = text::scan(&text);
+        notes.push(format!(
+            "rewrote {parabolas} PARABOLA curves as the quadratic B-splines they are over \
+             their edges (truck's conversion of faces bounded by a parabola does not finish)"
+        ));
+    }
     if pcurve > 0 {
         notes.push(format!(
             "rewrote {pcurve} SURFACE_CURVE master flags .PCURVE_S1./.PCURVE_S2. to .CURVE_3D. \

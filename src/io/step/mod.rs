@@ -9,7 +9,9 @@
 //! instead of re-deriving them from triangles.
 //!
 //! What truck does not do is done here (crates.md, "STEP"):
-//! * **Text pre-passes** ([`text::prepass`]): `.PCURVE_S1.` master flags and empty lists.
+//! * **Text pre-passes** ([`text::prepass`]): `.PCURVE_S1.` master flags and empty lists;
+//!   PARABOLA curves, on which truck's face conversion hangs, rewritten as the quadratic
+//!   B-splines they are over their edges ([`text::parabolas_to_bsplines`]).
 //! * **Ids**: truck forgets STEP ids once it builds a shell, so the walk from shells to faces,
 //!   edges and vertices is our own (mirroring `Table::to_compressed_shell`), and every face
 //!   keeps its `ADVANCED_FACE #id`.
@@ -29,7 +31,9 @@
 //!   vertices, refined to the chordal tolerance), so neighbouring faces use the same
 //!   vertices along their edge and the model is watertight. A face it cannot do falls back
 //!   to truck's tessellation snapped to the polylines; if that does not follow the face's
-//!   edges either, the face is skipped and named rather than cracking the model.
+//!   edges either, the face is skipped and named rather than cracking the model. Where two
+//!   faces meet at a knife edge and both close the same ear triangle on it, the ear is split
+//!   in one of them so every edge keeps two faces.
 //! * **Exact elementary surfaces** (`analytic`): planes, cylinders, cones, spheres and tori
 //!   are evaluated and inverted in closed form from their STEP records (placement, radii,
 //!   semi-angle in the file's plane-angle unit), not through truck's conversion, which

@@ -619,6 +619,17 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
     if mesh.face_count() == 0 {
         return Err(no_face_error(path, &skipped));
     }
+    let closed: Vec<bool> = faces_out
+        .iter()
+        .map(|f| matches!(patch_kind(f), PatchKind::Closed))
+        .collect();
+    let split = split_doubled_ears(&mut mesh, &mut pool.positions, &closed);
+    if split > 0 {
+        notes.push(format!(
+            "{split} triangles that two faces both closed on their shared edge (a knife \
+             edge) split in one of them"
+        ));
+    }
     // Compact the pool to the vertices the faces use, in order of first use.
     let mut new_id = vec![u32::MAX; pool.positions.len()];
     let mut positions = Vec::new();
@@ -717,6 +728,109 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
         millimetres_per_unit: parsed.millimetres_per_unit,
         notes,
     })
+}
+
+/// Two faces meeting at a knife edge (the solid's angle along their B-rep edge near zero)
+/// can each close an ear on the same two edge segments: one triangle in both faces, so the
+/// edge joining the ear's other two corners is an interior edge of both (four triangles on
+/// one edge, which no control mesh can hold). In one of the two faces (a closed patch's if
+/// there is one: a boundary patch should keep no interior vertex), the ear and its
+/// neighbour across that edge are split at the edge's midpoint: the triangles cover what
+/// they covered, and each edge has two faces again. `closed` is indexed by group. Returns
+/// how many ears were split.
+fn split_doubled_ears(
+    mesh: &mut ControlMesh,
+    positions: &mut Vec<DVec3>,
+    closed: &[bool],
+) -> usize {
+    let tris: Vec<[u32; 3]> = (0..mesh.face_count())
+        .map(|f| {
+            let v = mesh.face(f);
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    let groups = mesh.face_groups.clone();
+    let sorted = |t: [u32; 3]| {
+        let mut s = t;
+        s.sort_unstable();
+        s
+    };
+    let mut by_set: BTreeMap<[u32; 3], Vec<usize>> = BTreeMap::new();
+    for (f, &t) in tris.iter().enumerate() {
+        by_set.entry(sorted(t)).or_default().push(f);
+    }
+    let mut by_edge: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
+    for (f, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            by_edge
+                .entry(crate::mesh::edge_key(t[k], t[(k + 1) % 3]))
+                .or_default()
+                .push(f);
+        }
+    }
+    // Face -> the triangles replacing it.
+    let mut replaced: BTreeMap<usize, Vec<[u32; 3]>> = BTreeMap::new();
+    for faces in by_set.values() {
+        let &[f1, f2] = faces.as_slice() else {
+            continue;
+        };
+        if groups[f1] == groups[f2] || replaced.contains_key(&f1) || replaced.contains_key(&f2) {
+            continue;
+        }
+        let s = if closed.get(groups[f1] as usize) == Some(&true) {
+            f1
+        } else {
+            f2
+        };
+        let t = tris[s];
+        // The ear's edge inside its face: the one edge with another triangle of that face.
+        let inner: Vec<(usize, usize)> = (0..3)
+            .filter_map(|k| {
+                let e = crate::mesh::edge_key(t[k], t[(k + 1) % 3]);
+                let others: Vec<usize> = by_edge[&e]
+                    .iter()
+                    .copied()
+                    .filter(|&h| h != s && groups[h] == groups[s])
+                    .collect();
+                (others.len() == 1).then(|| (k, others[0]))
+            })
+            .collect();
+        let &[(k, n)] = inner.as_slice() else {
+            continue;
+        };
+        if replaced.contains_key(&n) {
+            continue;
+        }
+        let (a, b, tip) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+        let tn = tris[n];
+        let Some(j) = (0..3).find(|&j| tn[j] == b && tn[(j + 1) % 3] == a) else {
+            continue; // the neighbour is not oriented like the ear
+        };
+        let c = tn[(j + 2) % 3];
+        let m = positions.len() as u32;
+        positions.push(0.5 * (positions[a as usize] + positions[b as usize]));
+        replaced.insert(s, vec![[a, m, tip], [m, b, tip]]);
+        replaced.insert(n, vec![[b, m, c], [m, a, c]]);
+    }
+    if replaced.is_empty() {
+        return 0;
+    }
+    mesh.face_offsets.clear();
+    mesh.face_vertices.clear();
+    mesh.face_groups.clear();
+    for (f, t) in tris.iter().enumerate() {
+        match replaced.get(&f) {
+            Some(new) => {
+                for t in new {
+                    mesh.push_face(t, groups[f]);
+                }
+            }
+            None => {
+                mesh.push_face(t, groups[f]);
+            }
+        }
+    }
+    replaced.len() / 2
 }
 
 fn scale_surface(f: &mut FaceSurface, s: f64) {
@@ -958,4 +1072,71 @@ fn no_face_error(path: &Path, skipped: &[SkippedFace]) -> Error {
             reasons.join("; ")
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two faces closing the same ear on their shared edge `a - tip - b`: face 0's
+    /// triangles are split at the midpoint of `a - b`, face 1's are left alone, and every
+    /// edge ends with at most two faces, one in each direction.
+    #[test]
+    fn doubled_ear_is_split_in_the_closed_face() {
+        let mut positions = vec![
+            DVec3::new(0.0, 0.0, 0.0),  // a
+            DVec3::new(1.0, 0.1, 0.0),  // tip
+            DVec3::new(2.0, 0.0, 0.0),  // b
+            DVec3::new(1.0, -1.0, 0.0), // c, face 0
+            DVec3::new(1.0, -1.0, 0.5), // c', face 1
+        ];
+        let mut mesh = ControlMesh::new();
+        let closed = mesh.push_group("closed", PatchKind::Closed);
+        let plane = mesh.push_group("plane", PatchKind::Boundary(BoundarySurface::Plane));
+        mesh.push_face(&[0, 2, 1], closed);
+        mesh.push_face(&[2, 0, 3], closed);
+        mesh.push_face(&[0, 1, 2], plane);
+        mesh.push_face(&[0, 2, 4], plane);
+        let area = |m: &ControlMesh, p: &[DVec3], g: u32| -> f64 {
+            (0..m.face_count())
+                .filter(|&f| m.face_groups[f] == g)
+                .map(|f| {
+                    let v = m.face(f);
+                    let q = [0, 1, 2].map(|k| p[v[k] as usize]);
+                    0.5 * (q[1] - q[0]).cross(q[2] - q[0]).length()
+                })
+                .sum()
+        };
+        let before = [area(&mesh, &positions, 0), area(&mesh, &positions, 1)];
+        assert_eq!(
+            split_doubled_ears(&mut mesh, &mut positions, &[true, false]),
+            1
+        );
+        assert_eq!(positions.len(), 6);
+        assert_eq!(positions[5], DVec3::new(1.0, 0.0, 0.0));
+        assert_eq!(mesh.face_count(), 6);
+        assert_eq!(mesh.face_groups, vec![0, 0, 0, 0, 1, 1]);
+        for g in 0..2 {
+            assert!((area(&mesh, &positions, g) - before[g as usize]).abs() < 1e-12);
+        }
+        let mut directed = BTreeSet::new();
+        let mut uses: BTreeMap<(u32, u32), usize> = BTreeMap::new();
+        for f in 0..mesh.face_count() {
+            let v = mesh.face(f);
+            for k in 0..3 {
+                assert!(directed.insert((v[k], v[(k + 1) % 3])), "face {f}");
+                *uses
+                    .entry(crate::mesh::edge_key(v[k], v[(k + 1) % 3]))
+                    .or_default() += 1;
+            }
+        }
+        assert!(uses.values().all(|&n| n <= 2));
+        // The plane face still holds a - b; the closed face no longer does.
+        assert_eq!(uses[&(0, 2)], 2);
+        // Nothing doubled: a second pass changes nothing.
+        assert_eq!(
+            split_doubled_ears(&mut mesh, &mut positions, &[true, false]),
+            0
+        );
+    }
 }

@@ -4,7 +4,8 @@
 //! know nothing of ids once a shell is converted. This scanner keeps, for every instance of
 //! the DATA section, its id, entity name(s) and the ids it references: enough to name an
 //! unsupported entity in a message, to find solids, shells and faces, and to read the length
-//! unit. It also applies the two text pre-passes truck needs (see crates.md, "STEP").
+//! unit. It also applies the text pre-passes truck needs (see crates.md, "STEP") and
+//! rewrites parabolas, which truck's conversion hangs on, as B-splines.
 
 use std::collections::BTreeMap;
 
@@ -453,6 +454,184 @@ pub fn prepass(text: &str) -> (String, usize, usize) {
     (out, pcurve, empty)
 }
 
+/// Rewrites every PARABOLA that bounds edges as the B_SPLINE_CURVE_WITH_KNOTS it is over
+/// the edges' span: truck's conversion of a face with a parabola edge does not finish
+/// (trj6: every face bounded by one of its four parabolas hung, a thread spinning for the
+/// rest of the process). ISO 10303-42 puts the parabola at `C + a (u^2 x + 2 u y)` (`C`,
+/// `x`, `y` from its placement, `a` its focal distance); between `u0` and `u1` that is
+/// exactly the quadratic Bezier curve with control points `P(u0)`, `P(u0) + (u1 - u0) / 2
+/// P'(u0)`, `P(u1)`, written with knots `(u0, u1)` so the parametrisation (and the edges'
+/// `same_sense`) is unchanged. `[u0, u1]` covers the vertices of every EDGE_CURVE on the
+/// parabola (directly or through a SURFACE_CURVE / SEAM_CURVE). The new control points
+/// take ids above the file's largest. A parabola whose edges or placement cannot be read
+/// is left as it is. Returns the new text and the number of parabolas rewritten.
+pub fn parabolas_to_bsplines(text: &str, records: &Records) -> (String, usize) {
+    let parabolas: Vec<u64> = records.ids_named("PARABOLA").collect();
+    if parabolas.is_empty() {
+        return (text.to_string(), 0);
+    }
+    // Curve id -> vertex ids of the edges on it.
+    let mut vertices: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
+    for edge in records.ids_named("EDGE_CURVE") {
+        let Some(r) = records.get(edge) else { continue };
+        let [start, end, geometry] = [0, 1, 2].map(|k| r.refs.get(k).copied());
+        let (Some(start), Some(end), Some(mut curve)) = (start, end, geometry) else {
+            continue;
+        };
+        if let Some(c) = records.get(curve) {
+            if c.is("SURFACE_CURVE") || c.is("SEAM_CURVE") {
+                match c.refs.first() {
+                    Some(&inner) => curve = inner,
+                    None => continue,
+                }
+            }
+        }
+        vertices.entry(curve).or_default().extend([start, end]);
+    }
+    let point_of_vertex = |v: u64| -> Option<DVec3> {
+        let r = records.get(v)?;
+        if !r.is("VERTEX_POINT") {
+            return None;
+        }
+        records.triple(*r.refs.first()?)
+    };
+    let mut next_id = records.by_id.keys().next_back().copied().unwrap_or(0) + 1;
+    // Statement id -> its replacement text.
+    let mut replace: BTreeMap<u64, String> = BTreeMap::new();
+    for id in parabolas {
+        let Some(a) = records.args(id) else { continue };
+        let (Some(frame), Some(focal)) = (
+            a.get(1)
+                .and_then(|x| records.reference(x))
+                .and_then(|p| records.placement(p)),
+            a.get(2).and_then(|x| x.trim().parse::<f64>().ok()),
+        ) else {
+            continue;
+        };
+        let (x, y, c) = (
+            frame.x_axis.truncate(),
+            frame.y_axis.truncate(),
+            frame.w_axis.truncate(),
+        );
+        if !(focal.is_finite() && focal.abs() > 0.0) {
+            continue;
+        }
+        let us: Option<Vec<f64>> = vertices
+            .get(&id)
+            .map(|vs| {
+                vs.iter()
+                    .map(|&v| point_of_vertex(v).map(|p| (p - c).dot(y) / (2.0 * focal)))
+                    .collect()
+            })
+            .unwrap_or(None);
+        let Some(us) = us.filter(|u| !u.is_empty()) else {
+            continue;
+        };
+        let u0 = us.iter().copied().fold(f64::INFINITY, f64::min);
+        let u1 = us.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !(u1 > u0 && u0.is_finite() && u1.is_finite()) {
+            continue;
+        }
+        let at = |u: f64| c + focal * (u * u * x + 2.0 * u * y);
+        let tangent = |u: f64| 2.0 * focal * (u * x + y);
+        let points = [at(u0), at(u0) + 0.5 * (u1 - u0) * tangent(u0), at(u1)];
+        let real = |v: f64| format!("{v:.17E}");
+        let ids = [next_id, next_id + 1, next_id + 2];
+        next_id += 3;
+        let mut t = format!(
+            "#{id}=B_SPLINE_CURVE_WITH_KNOTS('',2,(#{},#{},#{}),.UNSPECIFIED.,.F.,.F.,(3,3),\
+             ({},{}),.UNSPECIFIED.);",
+            ids[0],
+            ids[1],
+            ids[2],
+            real(u0),
+            real(u1)
+        );
+        for (pid, p) in ids.iter().zip(points) {
+            t.push_str(&format!(
+                "\n#{pid}=CARTESIAN_POINT('',({},{},{}));",
+                real(p.x),
+                real(p.y),
+                real(p.z)
+            ));
+        }
+        replace.insert(id, t);
+    }
+    if replace.is_empty() {
+        return (text.to_string(), 0);
+    }
+    // Find each statement `#id = ...;` (a definition: `#id` at a statement start followed
+    // by `=`; strings and comments skipped) and put its replacement there.
+    let bytes = text.as_bytes();
+    let mut out = String::with_capacity(text.len() + 256 * replace.len());
+    let mut copied = 0;
+    let mut done = 0;
+    let mut i = 0;
+    let mut at_statement_start = false;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'\'' => {
+                let mut j = i + 1;
+                while j < bytes.len() {
+                    if bytes[j] == b'\'' {
+                        if bytes.get(j + 1) == Some(&b'\'') {
+                            j += 2;
+                            continue;
+                        }
+                        break;
+                    }
+                    j += 1;
+                }
+                i = j + 1;
+                at_statement_start = false;
+            }
+            b'/' if bytes.get(i + 1) == Some(&b'*') => {
+                i = text[i + 2..]
+                    .find("*/")
+                    .map_or(bytes.len(), |k| i + 2 + k + 2);
+            }
+            b';' => {
+                i += 1;
+                at_statement_start = true;
+            }
+            b'#' if at_statement_start => {
+                let mut j = i + 1;
+                while j < bytes.len() && bytes[j].is_ascii_digit() {
+                    j += 1;
+                }
+                let id: Option<u64> = text[i + 1..j].parse().ok();
+                at_statement_start = false;
+                if let Some(new) = id.and_then(|id| replace.get(&id)) {
+                    // The statement ends at the first `;` outside strings.
+                    let mut k = j;
+                    let mut in_string = false;
+                    while k < bytes.len() && (in_string || bytes[k] != b';') {
+                        if bytes[k] == b'\'' {
+                            in_string = !in_string;
+                        }
+                        k += 1;
+                    }
+                    out.push_str(&text[copied..i]);
+                    out.push_str(new);
+                    copied = (k + 1).min(bytes.len());
+                    done += 1;
+                    i = copied;
+                    at_statement_start = true;
+                } else {
+                    i = j;
+                }
+            }
+            c if c.is_ascii_whitespace() => i += 1,
+            _ => {
+                at_statement_start = false;
+                i += 1;
+            }
+        }
+    }
+    out.push_str(&text[copied..]);
+    (out, done)
+}
+
 /// Scans the DATA section(s). Malformed statements are skipped (ruststep will report them
 /// when it parses the same text); the scan itself never fails.
 pub fn scan(text: &str) -> Records {
@@ -661,5 +840,55 @@ ENDSEC;\nEND-ISO-10303-21;\n";
         assert_eq!(e, 0);
         assert!(same.contains("PLANE_ANGLE_UNIT()"));
         assert!(same.contains("',()'"));
+    }
+
+    /// A parabola bounding one edge becomes a quadratic B-spline with the same ends and the
+    /// same midpoint (the parabola at the middle parameter), its new points numbered above
+    /// the file's ids; the rest of the text is unchanged.
+    #[test]
+    fn parabola_becomes_its_quadratic_b_spline() {
+        // C = (1, 2, 3), x = (0, 1, 0), y = (0, 0, 1) (axis (1, 0, 0)), focal distance 0.5:
+        // P(u) = C + 0.5 (u^2 x + 2 u y); the edge runs from u = 1 to u = 3.
+        let at = |u: f64| DVec3::new(1.0, 2.0, 3.0) + 0.5 * (u * u * DVec3::Y + 2.0 * u * DVec3::Z);
+        let (p1, p3) = (at(1.0), at(3.0));
+        let text = format!(
+            "ISO-10303-21;\nHEADER;\nFILE_NAME('x;','',(''),(''),'','','');\nENDSEC;\nDATA;\n\
+             #1=CARTESIAN_POINT('',(1.,2.,3.));\n#2=DIRECTION('',(1.,0.,0.));\n\
+             #3=DIRECTION('',(0.,1.,0.));\n#4=AXIS2_PLACEMENT_3D('',#1,#2,#3);\n\
+             #5 = PARABOLA('p;',#4,0.5);\n#6=CARTESIAN_POINT('',({},{},{}));\n\
+             #7=CARTESIAN_POINT('',({},{},{}));\n#8=VERTEX_POINT('',#6);\n\
+             #9=VERTEX_POINT('',#7);\n#10=EDGE_CURVE('',#9,#8,#5,.F.);\nENDSEC;\n\
+             END-ISO-10303-21;\n",
+            p1.x, p1.y, p1.z, p3.x, p3.y, p3.z
+        );
+        let records = scan(&text);
+        let (out, n) = parabolas_to_bsplines(&text, &records);
+        assert_eq!(n, 1);
+        let after = scan(&out);
+        assert_eq!(after.by_id.len(), records.by_id.len() + 3);
+        let curve = after.get(5).unwrap();
+        assert!(curve.is("B_SPLINE_CURVE_WITH_KNOTS"), "{out}");
+        assert_eq!(curve.refs, vec![11, 12, 13]);
+        for id in [1, 4, 10] {
+            assert_eq!(after.get(id), records.get(id));
+        }
+        let b: Vec<DVec3> = [11, 12, 13].map(|i| after.triple(i).unwrap()).to_vec();
+        let close = |a: DVec3, b: DVec3| a.distance(b) < 1e-12;
+        assert!(close(b[0], p1) && close(b[2], p3), "{b:?}");
+        // The quadratic Bezier at s = 1/2 is the parabola at u = 2.
+        assert!(
+            close(0.25 * b[0] + 0.5 * b[1] + 0.25 * b[2], at(2.0)),
+            "{b:?}"
+        );
+        let args = after.args(5).unwrap();
+        assert_eq!(args[1], "2");
+        let knots: Vec<f64> = args[7]
+            .trim_matches(|c| c == '(' || c == ')')
+            .split(',')
+            .map(|k| k.parse().unwrap())
+            .collect();
+        assert_eq!(knots, vec![1.0, 3.0]);
+        // A file without parabolas is returned as it is.
+        assert_eq!(parabolas_to_bsplines(&out, &after), (out.clone(), 0));
     }
 }
