@@ -139,7 +139,7 @@ pub const STEP_COARSE_CHORD_FRACTION: f64 = 0.45;
 /// millimetres (the model's output unit) or, with `relative`, a fraction of the
 /// bounding-box diagonal; `None` is 1e-3 of the diagonal.
 ///
-/// Which tessellation fits best varies by model (and not smoothly), so three are fitted
+/// Which tessellation fits best varies by model (and not smoothly), so five are fitted
 /// and the best file is kept, all held to the same standard:
 /// 1. every face at [`STEP_CHORD_FRACTION`] of the tolerance;
 /// 2. faces on planes, cylinders, cones, spheres and tori (and the edges only they share)
@@ -147,7 +147,11 @@ pub const STEP_COARSE_CHORD_FRACTION: f64 = 0.45;
 ///    so their facets' chord error is no allowance the fit may spend;
 /// 3. every face at [`STEP_COARSE_CHORD_FRACTION`], measured against tessellation 1 (which
 ///    has the same faces) rather than against itself, so B-spline faces too are held to
-///    the fine facets ([`FitOptions::reference`]).
+///    the fine facets ([`FitOptions::reference`]);
+/// 4. and 5. as 1 and 2, but each face triangulated in its raw parameter plane instead of
+///    the plane stretched to the surface's lengths
+///    ([`crate::io::step::StepOptions::stretch_parameter_plane`]): on some models the
+///    stretched triangles fit into more bytes (session 11: linkrods, block_fillet3).
 ///
 /// The file is parsed and its faces converted once ([`crate::io::step::read_step_tessellations`]).
 /// Best is: fewer skipped faces, then the tolerance met, then fewer bytes. A tessellation
@@ -164,30 +168,50 @@ pub fn encode_step(
 ) -> Result<(crate::io::step::StepModel, Vec<u8>, FitReport)> {
     use crate::io::step::{read_step_tessellations, StepModel};
     let coarse = STEP_COARSE_CHORD_FRACTION / STEP_CHORD_FRACTION;
-    let variants: [(&str, f64, f64, bool); 3] = [
-        ("every face at the chordal tolerance", 1.0, 1.0, false),
+    // (what, chord factor, analytic faces' chord factor, measured against tessellation 1,
+    // parameter plane stretched). The fitted bytes depend on the input triangles in ways no
+    // rule predicts well, so a few tessellations are fitted and the smallest file is kept.
+    let variants: [(&str, f64, f64, bool, bool); 5] = [
+        ("every face at the chordal tolerance", 1.0, 1.0, false, true),
         (
             "analytic faces at a coarser chord, measured against their exact surfaces",
             1.0,
             coarse,
             false,
+            true,
         ),
         (
             "every face at a coarser chord, measured against the finer tessellation",
             coarse,
             1.0,
             true,
+            true,
+        ),
+        (
+            "every face at the chordal tolerance, triangulated in its raw parameter plane",
+            1.0,
+            1.0,
+            false,
+            false,
+        ),
+        (
+            "analytic faces at a coarser chord, triangulated in their raw parameter planes",
+            1.0,
+            coarse,
+            false,
+            false,
         ),
     ];
     let step_opts: Vec<_> = variants
         .iter()
-        .map(|&(_, chord_factor, analytic_factor, _)| {
+        .map(|&(_, chord_factor, analytic_factor, _, stretch)| {
             let mut o = step_options_for(tolerance, relative);
             if let Some(c) = &mut o.chordal_tolerance {
                 *c *= chord_factor;
             }
             o.relative_chordal_tolerance *= chord_factor;
             o.analytic_chordal_factor = analytic_factor;
+            o.stretch_parameter_plane = stretch;
             o
         })
         .collect();
@@ -199,7 +223,7 @@ pub fn encode_step(
     let mut fitted_meshes: Vec<ControlMesh> = Vec::new();
     // Tessellation 1's mesh, the reference of 3.
     let mut fine: Option<ControlMesh> = None;
-    for ((what, _, _, against_fine), mut model) in variants.into_iter().zip(models) {
+    for ((what, _, _, against_fine, _), mut model) in variants.into_iter().zip(models) {
         if fitted_meshes.contains(&model.mesh) {
             continue;
         }

@@ -29,7 +29,11 @@
 //!   conforming tessellator (`conform`: spade CDT in the surface's parameters with the
 //!   edge polylines as constraints, periodic faces cut along a seam whose copies share
 //!   vertices, refined to the chordal tolerance), so neighbouring faces use the same
-//!   vertices along their edge and the model is watertight. A face it cannot do falls back
+//!   vertices along their edge and the model is watertight; the CDT runs in a parameter
+//!   plane stretched to the surface's lengths (a 500 mm cone's angle against its height:
+//!   [`StepOptions::stretch_parameter_plane`]), and a face bounded by nothing but a
+//!   VERTEX_LOOP (a whole sphere) is its surface's full parameter grid. Edge curves are
+//!   trimmed to the vertices' nearest points on their polylines. A face it cannot do falls back
 //!   to truck's tessellation snapped to the polylines; if that does not follow the face's
 //!   edges either, the face is skipped and named rather than cracking the model. Where two
 //!   faces meet at a knife edge and both close the same ear triangle on it, the ear is split
@@ -80,6 +84,12 @@ pub struct StepOptions {
     /// their facets need not be as fine as the others', which are measured against their
     /// facets alone; [`crate::pipeline::encode_step`] tries it besides 1.
     pub analytic_chordal_factor: f64,
+    /// Triangulate each face in its parameter plane stretched to the surface's lengths
+    /// (default true), so that its Delaunay triangles and chord refinement see the surface's
+    /// shapes where its parameters are in different units (a cone's angle in radians against
+    /// its height in millimetres); false triangulates in the raw parameters, as before
+    /// session 11. [`crate::pipeline::encode_step`] tries both.
+    pub stretch_parameter_plane: bool,
     /// Convert to millimetres using the file's LENGTH_UNIT (default true). When false, or when
     /// the file names no length unit, positions stay in file units.
     pub to_millimetres: bool,
@@ -100,6 +110,7 @@ impl Default for StepOptions {
             chordal_tolerance: None,
             relative_chordal_tolerance: 2.5e-4,
             analytic_chordal_factor: 1.0,
+            stretch_parameter_plane: true,
             to_millimetres: true,
             timeout: Duration::from_secs(60),
             face_timeout: Duration::from_secs(10),

@@ -305,31 +305,38 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                         }
                     }
                     // truck sometimes trims an edge's curve to the wrong range (the curve
-                    // runs past a vertex or stops short of it): keep the stretch between
-                    // the points nearest to the two vertices, and refuse an edge whose
-                    // curve misses a vertex.
+                    // runs past a vertex or stops short of it, or is the whole B-spline of
+                    // which the edge uses a part): keep the stretch between the vertices'
+                    // nearest points on the polyline, and refuse an edge whose curve misses a
+                    // vertex. Nearest points on its segments, not its points: a nearly
+                    // straight curve has few points, and a vertex in the middle of a long
+                    // segment is on the curve (corpus trj6: 48 faces skipped before).
                     if va != vb && pts.len() > 2 {
-                        let nearest_to = |q: DVec3| {
-                            let mut best = (0usize, f64::INFINITY);
-                            for (i, p) in pts.iter().enumerate() {
-                                let d = dv(p).distance(q);
-                                if d < best.1 {
-                                    best = (i, d);
-                                }
-                            }
-                            best
-                        };
-                        let (ia, da) = nearest_to(dv(&body.vertices[va]));
-                        let (ib, db) = nearest_to(dv(&body.vertices[vb]));
+                        let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
+                        let (sa, da) = nearest_on_polyline(&pts, a);
+                        let (sb, db) = nearest_on_polyline(&pts, b);
                         if da.max(db) > 10.0 * chord + 1e-6 * diag {
                             bad_edges.insert((bi, ge));
-                        } else if (ia, ib) != (0, pts.len() - 1) {
+                        } else if sa > 0.0 || sb < (pts.len() - 1) as f64 {
                             trimmed_edges += 1;
-                            pts = if ia <= ib {
-                                pts[ia..=ib].to_vec()
-                            } else {
-                                pts[ib..=ia].iter().rev().copied().collect()
+                            // The vertices stand for the ends (only the points between
+                            // them are used below).
+                            let between = |k: usize| {
+                                let k = k as f64;
+                                k > sa.min(sb) && k < sa.max(sb)
                             };
+                            let mut inner: Vec<Point3> = (0..pts.len())
+                                .filter(|&k| between(k))
+                                .map(|k| pts[k])
+                                .collect();
+                            if sa > sb {
+                                inner.reverse();
+                            }
+                            let point = |p: DVec3| Point3::new(p.x, p.y, p.z);
+                            pts = std::iter::once(point(a))
+                                .chain(inner)
+                                .chain(std::iter::once(point(b)))
+                                .collect();
                         }
                     }
                     let ends = [va, vb].map(|v| {
@@ -439,19 +446,19 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
             let surface = pf.face.surface.clone();
             let (exact, same_sense) = (pf.exact, pf.same_sense);
             let face_chord = chord * analytic_factor;
+            let stretch = opts.stretch_parameter_plane;
             let watched =
                 run_with_timeout("scode-step-face", opts.face_timeout, move || match exact {
-                    Some(a) => {
-                        conform::conforming_tessellation(&a, &loops, face_chord).map(|mut cm| {
+                    Some(a) => conform::conforming_tessellation(&a, &loops, face_chord, stretch)
+                        .map(|mut cm| {
                             if !same_sense {
                                 for t in &mut cm.triangles {
                                     t.swap(1, 2);
                                 }
                             }
                             cm
-                        })
-                    }
-                    None => conform::conforming_tessellation(&surface, &loops, chord),
+                        }),
+                    None => conform::conforming_tessellation(&surface, &loops, chord, stretch),
                 });
             let mut face_tris: Vec<[u32; 3]> = Vec::new();
             let why_not = match watched {
@@ -897,6 +904,28 @@ pub(super) fn follows_edges(
     segments
         .iter()
         .all(|&(a, b)| uses.contains_key(&key(FaceVertex::Pool(a), FaceVertex::Pool(b))))
+}
+
+/// Nearest point to `q` on the polyline `pts`, as a position along it (segment index plus
+/// the parameter on that segment, so `0` is the first point and `len - 1` the last), and its
+/// distance. The first of equally near points.
+fn nearest_on_polyline(pts: &[Point3], q: DVec3) -> (f64, f64) {
+    let mut best = (0.0, f64::INFINITY);
+    for (i, w) in pts.windows(2).enumerate() {
+        let (a, b) = (dv(&w[0]), dv(&w[1]));
+        let ab = b - a;
+        let l2 = ab.length_squared();
+        let t = if l2 > 0.0 {
+            ((q - a).dot(ab) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (a + t * ab).distance(q);
+        if d < best.1 {
+            best = (i as f64 + t, d);
+        }
+    }
+    best
 }
 
 /// Index of the candidate nearest to `p` within `tol`, with its distance. `candidates` is
