@@ -419,11 +419,7 @@ fn faces_bounded_by_parabolas_are_read() {
     }
     let exact = scode::pipeline::step_exact_surfaces(&model);
     for id in [459, 697, 1157, 1395, 1936, 2418, 4123, 4641] {
-        let g = model
-            .faces
-            .iter()
-            .position(|f| f.face_id == id)
-            .unwrap_or_else(|| panic!("face #{id} is read"));
+        let g = group_of_face(&model, id);
         let surface = exact[g].as_ref().expect("a cone or a plane");
         let mut uses = 0;
         for f in 0..model.mesh.face_count() {
@@ -437,6 +433,23 @@ fn faces_bounded_by_parabolas_are_read() {
         }
         assert!(uses > 0, "face #{id} has triangles");
     }
+}
+
+/// The group of the B-rep face `#id` (panics when the face was not read).
+fn group_of_face(model: &StepModel, id: u64) -> usize {
+    model
+        .faces
+        .iter()
+        .position(|f| f.face_id == id)
+        .unwrap_or_else(|| panic!("face #{id} is read"))
+}
+
+/// The corpus STEP file read with the default options, checked to have no skipped face.
+fn read_every_face(corpus: &Path, file: &str) -> StepModel {
+    let model = read_step(&corpus.join("step").join(file), &StepOptions::default()).unwrap();
+    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
+    assert!(skipped.is_empty(), "{file}: {skipped:#?}");
+    model
 }
 
 /// Largest distance of a face's facets (not only its vertices) from its exact surface: each
@@ -478,21 +491,11 @@ fn facet_deviation(
 #[test]
 fn every_face_of_trj6_is_read_and_its_cone_strips_meet_the_chord() {
     let Some(corpus) = corpus_dir() else { return };
-    let model = read_step(
-        &corpus.join("step/trj6_b1-ec-214.stp"),
-        &StepOptions::default(),
-    )
-    .unwrap();
-    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
-    assert!(skipped.is_empty(), "{skipped:#?}");
+    let model = read_every_face(&corpus, "trj6_b1-ec-214.stp");
     assert!(is_closed(&model));
     let exact = scode::pipeline::step_exact_surfaces(&model);
     for id in [1936, 4123] {
-        let g = model
-            .faces
-            .iter()
-            .position(|f| f.face_id == id)
-            .unwrap_or_else(|| panic!("face #{id} is read"));
+        let g = group_of_face(&model, id);
         let surface = exact[g].as_ref().expect("a cone");
         let d = facet_deviation(&model, g, surface);
         assert!(
@@ -510,13 +513,7 @@ fn every_face_of_trj6_is_read_and_its_cone_strips_meet_the_chord() {
 #[test]
 fn faces_bounded_by_a_vertex_loop_are_whole_spheres() {
     let Some(corpus) = corpus_dir() else { return };
-    let model = read_step(
-        &corpus.join("step/trj4_pm2-ec-214.stp"),
-        &StepOptions::default(),
-    )
-    .unwrap();
-    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
-    assert!(skipped.is_empty(), "{skipped:#?}");
+    let model = read_every_face(&corpus, "trj4_pm2-ec-214.stp");
     let exact = scode::pipeline::step_exact_surfaces(&model);
     let balls: Vec<usize> = (0..model.faces.len())
         .filter(|&g| model.faces[g].face_id == 1364)

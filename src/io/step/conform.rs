@@ -237,15 +237,12 @@ fn metric_scale<S: UvSurface>(surface: &S, loops: &[Vec<UvPoint>]) -> [f64; 2] {
         if !(h.is_finite() && h > 0.0) {
             continue;
         }
+        // Middle of cell `x` of the box along parameter `m`.
+        let mid = |x: usize, m: usize| lo[m] + (hi[m] - lo[m]) * (x as f64 + 0.5) / N as f64;
         let (mut sum, mut n) = (0.0, 0usize);
         for i in 0..N {
             for j in 0..N {
-                let at = |a: usize, b: usize| {
-                    let t =
-                        |x: usize, k: usize| lo[k] + (hi[k] - lo[k]) * (x as f64 + 0.5) / N as f64;
-                    [t(a, 0), t(b, 1)]
-                };
-                let c = at(i, j);
+                let c = [mid(i, 0), mid(j, 1)];
                 let (mut a, mut b) = (c, c);
                 a[k] -= h;
                 b[k] += h;
@@ -678,21 +675,18 @@ fn whole_surface<S: UvSurface>(surface: &S, tol: f64) -> Result<ConformingMesh, 
     let u = |i: usize| pu * (i % nu) as f64 / nu as f64;
     let v = |j: usize| v0 + (v1 - v0) * j as f64 / nv as f64;
     let mut out = ConformingMesh::default();
-    // Rows of the grid: all rows of a torus (the last wraps to the first), the rows strictly
-    // between the poles of a sphere.
-    let rows: Vec<usize> = if poles {
-        (1..nv).collect()
-    } else {
-        (0..nv).collect()
-    };
-    let mut id = BTreeMap::new();
-    for &j in &rows {
+    // Rows of the grid, row by row: all rows of a torus (the last wraps to the first), the
+    // rows strictly between the poles of a sphere.
+    let first_row = usize::from(poles);
+    for j in first_row..nv {
         for i in 0..nu {
-            id.insert((i, j), FaceVertex::New(out.new_points.len() as u32));
             out.new_points.push(surface.point(u(i), v(j)));
         }
     }
-    let at = |i: usize, j: usize| id[&(i % nu, if poles { j } else { j % nv })];
+    let at = |i: usize, j: usize| {
+        let row = if poles { j } else { j % nv } - first_row;
+        FaceVertex::New((row * nu + i % nu) as u32)
+    };
     let quads = if poles { 1..nv - 1 } else { 0..nv };
     for j in quads {
         for i in 0..nu {
@@ -1371,6 +1365,31 @@ mod tests {
         assert!((area(&mesh, &xyz) - 15.0).abs() < 1e-9);
     }
 
+    /// Largest `off` over a barycentric grid (`n` steps a side) of every triangle.
+    fn worst_facet_point(
+        mesh: &ConformingMesh,
+        xyz: &BTreeMap<u32, DVec3>,
+        n: usize,
+        off: impl Fn(DVec3) -> f64,
+    ) -> f64 {
+        let p = |v: FaceVertex| match v {
+            FaceVertex::Pool(i) => xyz[&i],
+            FaceVertex::New(k) => mesh.new_points[k as usize],
+        };
+        let mut worst = 0.0f64;
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(p);
+            for i in 0..=n {
+                for j in 0..=n - i {
+                    let k = n - i - j;
+                    let q = (a * i as f64 + b * j as f64 + c * k as f64) / n as f64;
+                    worst = worst.max(off(q));
+                }
+            }
+        }
+        worst
+    }
+
     /// A strip of a 500 mm cylinder, 15 degrees wide and 12 mm tall, bounded by two helical
     /// curves as truck polylines them (corpus trj6 has such strips on a 500 mm cone, bounded
     /// by parabolas): the angle is in radians and the height in millimetres, so the plain
@@ -1404,21 +1423,7 @@ mod tests {
             &segments(&loops)
         ));
         let xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
-        let p = |v: FaceVertex| match v {
-            FaceVertex::Pool(i) => xyz[&i],
-            FaceVertex::New(k) => mesh.new_points[k as usize],
-        };
-        let mut worst = 0.0f64;
-        for t in &mesh.triangles {
-            let [a, b, c] = t.map(p);
-            for i in 0..=8 {
-                for j in 0..=8 - i {
-                    let k = 8 - i - j;
-                    let q = (a * i as f64 + b * j as f64 + c * k as f64) / 8.0;
-                    worst = worst.max((q.truncate().length() - r).abs());
-                }
-            }
-        }
+        let worst = worst_facet_point(&mesh, &xyz, 8, |q| (q.truncate().length() - r).abs());
         assert!(
             worst <= 1.05 * tol,
             "a facet is {worst:.3} mm off the cylinder ({} triangles)",
@@ -1455,23 +1460,16 @@ mod tests {
                 let uv = UvSurface::project(&s, q, None).unwrap();
                 s.point(uv[0], uv[1]).distance(q)
             };
-            let p = |v: FaceVertex| match v {
-                FaceVertex::New(k) => mesh.new_points[k as usize],
-                FaceVertex::Pool(_) => panic!("no pool vertex without a boundary"),
-            };
-            let mut worst = 0.0f64;
             for t in &mesh.triangles {
-                let [a, b, c] = t.map(p);
-                for q in [a, b, c] {
-                    assert!(off(q) < 1e-9, "#{id}: a vertex off the surface");
-                }
-                for i in 0..=6 {
-                    for j in 0..=6 - i {
-                        let k = 6 - i - j;
-                        worst = worst.max(off((a * i as f64 + b * j as f64 + c * k as f64) / 6.0));
-                    }
-                }
+                assert!(
+                    t.iter().all(|v| matches!(v, FaceVertex::New(_))),
+                    "no pool vertex without a boundary"
+                );
             }
+            for &q in &mesh.new_points {
+                assert!(off(q) < 1e-9, "#{id}: a vertex off the surface");
+            }
+            let worst = worst_facet_point(&mesh, &BTreeMap::new(), 6, off);
             assert!(
                 worst <= 1.05 * tol,
                 "#{id}: a facet is {worst} off the surface"
