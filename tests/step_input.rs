@@ -493,16 +493,45 @@ fn every_face_of_trj6_is_read_and_its_cone_strips_meet_the_chord() {
     let Some(corpus) = corpus_dir() else { return };
     let model = read_every_face(&corpus, "trj6_b1-ec-214.stp");
     assert!(is_closed(&model));
-    let exact = scode::pipeline::step_exact_surfaces(&model);
     for id in [1936, 4123] {
-        let g = group_of_face(&model, id);
-        let surface = exact[g].as_ref().expect("a cone");
-        let d = facet_deviation(&model, g, surface);
-        assert!(
-            d <= 1.05 * model.chordal_tolerance,
-            "face #{id}: facets {d:.3} from the cone, chord {:.3}",
-            model.chordal_tolerance
-        );
+        assert_facets_within_chord(&model, group_of_face(&model, id));
+    }
+}
+
+/// Asserts that group `g`'s facets lie within 1.05 chord of its exact surface.
+fn assert_facets_within_chord(model: &StepModel, g: usize) {
+    let exact = scode::pipeline::step_exact_surfaces(model);
+    let surface = exact[g].as_ref().expect("an exact surface");
+    let d = facet_deviation(model, g, surface);
+    assert!(
+        d <= 1.05 * model.chordal_tolerance,
+        "face #{} ({:?}): facets {d:.3} from the surface, chord {:.3}",
+        model.faces[g].face_id,
+        model.faces[g].surface,
+        model.chordal_tolerance
+    );
+}
+
+/// trj3, session 12: edges #2183 and #2287 are both parts of one closed B-spline (the
+/// whole intersection circle of an r=30 and an r=125 cylinder), and #2287 ends at the
+/// curve's closing point. That end was taken as the curve's start, so the edge became the
+/// complementary arc, and the two cylinder faces it bounds (#2179, #2450, in bodies 10
+/// and 11) were skipped ("an open boundary loop", "the boundary loops cross"). Now every
+/// face is read, the model is closed, and both faces lie on their cylinders within the
+/// chord.
+#[test]
+fn an_edge_ending_at_a_closed_curves_closing_point_is_the_right_arc() {
+    let Some(corpus) = corpus_dir() else { return };
+    let model = read_every_face(&corpus, "trj3_s1-ec-214.stp");
+    assert!(is_closed(&model));
+    for id in [2179, 2450] {
+        let groups: Vec<usize> = (0..model.faces.len())
+            .filter(|&g| model.faces[g].face_id == id)
+            .collect();
+        assert_eq!(groups.len(), 2, "face #{id}: one per body");
+        for g in groups {
+            assert_facets_within_chord(&model, g);
+        }
     }
 }
 

@@ -313,25 +313,53 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                     // segment is on the curve (corpus trj6: 48 faces skipped before).
                     if va != vb && pts.len() > 2 {
                         let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
-                        let (sa, da) = nearest_on_polyline(&pts, a);
-                        let (sb, db) = nearest_on_polyline(&pts, b);
+                        let (mut sa, da) = nearest_on_polyline(&pts, a);
+                        let (mut sb, db) = nearest_on_polyline(&pts, b);
+                        let last = (pts.len() - 1) as f64;
+                        // A closed curve (a whole B-spline circle of which the edge is a
+                        // part) runs the edge's way (truck turns it round for `same_sense`
+                        // false), and its closing point is both ends: there the edge
+                        // starts at the first point and ends at the last, and an edge
+                        // whose end comes before its start runs through the closing point
+                        // (corpus trj3: the edge ending at the closing point was the
+                        // complementary arc, and two cylinder faces were skipped).
+                        let closing = dv(&pts[0]);
+                        let closed = closing.distance(dv(&pts[pts.len() - 1])) <= 1e-6 * diag;
+                        if closed {
+                            if closing.distance(a) <= da + 1e-6 * diag {
+                                sa = 0.0;
+                            }
+                            if closing.distance(b) <= db + 1e-6 * diag {
+                                sb = last;
+                            }
+                        }
                         if da.max(db) > 10.0 * chord + 1e-6 * diag {
                             bad_edges.insert((bi, ge));
-                        } else if sa > 0.0 || sb < (pts.len() - 1) as f64 {
+                        } else if sa > 0.0 || sb < last {
                             trimmed_edges += 1;
                             // The vertices stand for the ends (only the points between
                             // them are used below).
-                            let between = |k: usize| {
-                                let k = k as f64;
-                                k > sa.min(sb) && k < sa.max(sb)
+                            let inner: Vec<Point3> = if closed && sa > sb {
+                                // Through the closing point (the last point is the first).
+                                (0..pts.len())
+                                    .filter(|&k| k as f64 > sa)
+                                    .chain((1..pts.len()).filter(|&k| (k as f64) < sb))
+                                    .map(|k| pts[k])
+                                    .collect()
+                            } else {
+                                let between = |k: usize| {
+                                    let k = k as f64;
+                                    k > sa.min(sb) && k < sa.max(sb)
+                                };
+                                let mut inner: Vec<Point3> = (0..pts.len())
+                                    .filter(|&k| between(k))
+                                    .map(|k| pts[k])
+                                    .collect();
+                                if sa > sb {
+                                    inner.reverse();
+                                }
+                                inner
                             };
-                            let mut inner: Vec<Point3> = (0..pts.len())
-                                .filter(|&k| between(k))
-                                .map(|k| pts[k])
-                                .collect();
-                            if sa > sb {
-                                inner.reverse();
-                            }
                             let point = |p: DVec3| Point3::new(p.x, p.y, p.z);
                             pts = std::iter::once(point(a))
                                 .chain(inner)
