@@ -216,7 +216,7 @@ pub fn encode_step(
         })
         .collect();
     // One parse and one conversion of the faces (truck's conversion timeouts are waited
-    // for once), three tessellations.
+    // for once), five tessellations.
     let models = read_step_tessellations(path, &step_opts)?;
     let mut best: Option<(StepModel, Vec<u8>, FitReport)> = None;
     let mut first_error = None;

@@ -130,3 +130,22 @@ fn errors_name_the_file_and_cause() {
     assert!(!ok);
     assert!(text.contains("two different outputs"), "{text}");
 }
+
+/// `scode info | head` closes stdout early: the command ends quietly instead of panicking
+/// on the failed write (std's `println!` panics on a closed pipe).
+#[test]
+fn a_closed_stdout_is_no_panic() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/cad_part.scode");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_scode"))
+        .args(["info", "--groups", file.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Close the read end before the child writes anything.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{:?}: {stderr}", out.status);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

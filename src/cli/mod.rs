@@ -1,7 +1,29 @@
 //! Argument parsing and command dispatch for the `scode` binary.
 
+/// `println!` for the subcommands, which does not panic when stdout is a closed pipe
+/// (`scode info --groups big.scode | head`): the rest of the output is dropped and the
+/// command finishes its work (an encode still writes its file). Defined before the modules
+/// so that it shadows std's macro in them.
+macro_rules! println {
+    ($($arg:tt)*) => {
+        $crate::cli::print_line(format_args!($($arg)*))
+    };
+}
+
 mod commands;
 mod view;
+
+/// Writes one line to stdout; a closed pipe is not an error (see `println!` above), any
+/// other write error panics as std's `println!` does.
+pub(crate) fn print_line(args: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(args).and_then(|()| out.write_all(b"\n")) {
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            panic!("failed printing to stdout: {e}");
+        }
+    }
+}
 
 use std::path::{Path, PathBuf};
 
@@ -35,8 +57,9 @@ pub enum Command {
     /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex
     /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the
     /// tolerance, its surface type decides the patch kind, and faces on planes, cylinders,
-    /// cones, spheres and tori are held to the tolerance of their exact surfaces. Three
-    /// tessellations are fitted and the best file kept (--verbose says which). Faces the
+    /// cones, spheres and tori are fitted onto their exact surfaces and held to the
+    /// tolerance of them. Five tessellations are fitted and the smallest file kept
+    /// (--verbose says which). Faces the
     /// reader cannot handle are named and skipped; `scode info part.step` shows the plan.
     ///
     /// With --raw the input mesh itself is stored as the control mesh (no fitting): a

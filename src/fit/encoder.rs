@@ -17,7 +17,9 @@
 //! 5. **Geometry.** Control points are fitted so the *limit* surface computed by
 //!    [`crate::subdiv`] (the decoder's own rules) matches the input: first the Cartesian
 //!    crease curves against their chain polylines, then the interiors of closed patches
-//!    against their faces, by linearised least squares with re-projected targets. Curves on
+//!    against their faces, by linearised least squares with re-projected targets (moved on
+//!    to the faces' exact surfaces where the input knows them: a STEP face's facets and
+//!    edge polylines sag from the CAD surface, which the error is measured against). Curves on
 //!    cylinders and cones keep their on-surface positions: the decoder's cylindrical rule
 //!    keeps them exactly on the surface.
 //! 6. **Error control.** The caller's `reconstruct` callback quantises the control mesh the
@@ -34,6 +36,7 @@ use super::allowance::{add_analytic_surface_allowance, OwnFaces};
 use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
 use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole};
 use super::domain::PlaneDomain;
+use super::exact::onto_all;
 pub use super::exact::ExactSurface;
 use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
 use super::segment::{segment, SegmentOptions};
@@ -93,7 +96,8 @@ pub struct FitOptions {
     /// By input group: the face's exact surface where the input knows it (a STEP face's
     /// plane, cylinder, cone, sphere or torus), else `None`; empty for none at all. The
     /// decoded surface of a group is then held within the tolerance of that surface too,
-    /// not only of its facets (see [`ExactSurface`]).
+    /// not only of its facets (see [`ExactSurface`]), and a closed patch is fitted onto it
+    /// (as are creases whose faces all have one).
     pub exact_surfaces: Vec<Option<ExactSurface>>,
     /// A finer tessellation of the same faces (the same groups, by name, in the same order)
     /// to measure the decoded surface against instead of the input; the fit still starts
@@ -955,6 +959,7 @@ fn fit_geometry(
     net: &CurveNetwork,
     plans: &[GroupPlan],
     group_surfaces: &[Option<TriangleSurface>],
+    exact: &[Option<ExactSurface>],
 ) -> Result<()> {
     const LEVEL: u32 = 2;
     let control = &mut built.control;
@@ -1002,6 +1007,19 @@ fn fit_geometry(
         on_sharp[b as usize] = true;
     }
     let chain_frame_of = |c: usize| chain_frame(&net.chains[c].groups, plans);
+    // Per chain: the exact surfaces of its faces, when every one of them has one.
+    let chain_exact: Vec<Option<Vec<ExactSurface>>> = net
+        .chains
+        .iter()
+        .map(|c| {
+            let mut groups = c.groups.clone();
+            groups.dedup();
+            groups
+                .iter()
+                .map(|&g| exact.get(g as usize).copied().flatten())
+                .collect()
+        })
+        .collect();
     // Stage 1: Cartesian chains. Stage 2: closed interiors.
     for stage in 0..2 {
         let mut col = vec![usize::MAX; nc];
@@ -1056,7 +1074,14 @@ fn fit_geometry(
                 let target = if stage == 0 {
                     match sample_chain[s] {
                         Some(c) if !multi_chain[s] && chain_frame_of(c).is_none() => {
-                            closest_on_polyline(limit[s], &chain_points[&c])
+                            // On the edge's polyline, then onto the exact surfaces of
+                            // its faces where the input knows them all: the polyline
+                            // sags from the CAD edge by up to its chord.
+                            let on_line = closest_on_polyline(limit[s], &chain_points[&c]);
+                            chain_exact[c]
+                                .as_deref()
+                                .and_then(|surfaces| onto_all(surfaces, on_line))
+                                .unwrap_or(on_line)
                         }
                         _ => continue,
                     }
@@ -1067,7 +1092,15 @@ fn fit_geometry(
                                 Some(surface)
                                     if matches!(plans[g as usize].kind, PatchKind::Closed) =>
                                 {
-                                    surface.closest_point(limit[s]).point
+                                    // On the face's facets, then onto its exact surface
+                                    // where the input knows it: the facets sag from the
+                                    // CAD surface by up to their chord, and the error is
+                                    // measured against the CAD surface too.
+                                    let on_facets = surface.closest_point(limit[s]).point;
+                                    match exact.get(g as usize).copied().flatten() {
+                                        Some(e) => e.project(on_facets),
+                                        None => on_facets,
+                                    }
                                 }
                                 _ => continue,
                             }
@@ -1842,6 +1875,9 @@ pub fn fit_model(
             mesh.groups.len()
         ));
     }
+    // A segmented input's groups are not the input's: no exact surfaces then.
+    let exact_surfaces: &[Option<ExactSurface>] =
+        if segmented { &[] } else { &opts.exact_surfaces };
     let meter = ErrorMeter {
         mesh: m_mesh,
         input_samples: sample_surface(
@@ -1857,8 +1893,7 @@ pub fn fit_model(
             surfaces: m_group_surfaces,
             triangles: m_group_tris,
             max_allowance: &group_max_chord,
-            // A segmented input's groups are not the input's: no exact surfaces then.
-            exact: if segmented { &[] } else { &opts.exact_surfaces },
+            exact: exact_surfaces,
         },
         error_samples: opts.error_samples,
         tol,
@@ -1888,8 +1923,15 @@ pub fn fit_model(
         );
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
-        fit_geometry(&mut built, &mesh, &net, &plans, &group_surfaces)
-            .map_err(|e| with_faces_involved(e, &built.control))?;
+        fit_geometry(
+            &mut built,
+            &mesh,
+            &net,
+            &plans,
+            &group_surfaces,
+            exact_surfaces,
+        )
+        .map_err(|e| with_faces_involved(e, &built.control))?;
         let t_fit = t.elapsed().as_secs_f64();
         // 6. Error of the decoded surface.
         t = Instant::now();

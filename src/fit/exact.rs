@@ -74,8 +74,9 @@ impl ExactSurface {
         Some(ExactSurface(s))
     }
 
-    /// Distance from `p` to the surface (a cone's nearer nappe).
-    pub fn distance(&self, p: DVec3) -> f64 {
+    /// The surface itself, and for a cone its other nappe (a STEP cone face may lie on
+    /// either side of the apex).
+    fn nappes(&self) -> (Primitive, Option<Primitive>) {
         match self.0 {
             Primitive::Cone { axis, half_angle } => {
                 let other = Primitive::Cone {
@@ -85,11 +86,57 @@ impl ExactSurface {
                     },
                     half_angle,
                 };
-                self.0.distance(p).min(other.distance(p))
+                (self.0, Some(other))
             }
-            s => s.distance(p),
+            s => (s, None),
         }
     }
+
+    /// Distance from `p` to the surface (a cone's nearer nappe).
+    pub fn distance(&self, p: DVec3) -> f64 {
+        match self.nappes() {
+            (s, Some(other)) => s.distance(p).min(other.distance(p)),
+            (s, None) => s.distance(p),
+        }
+    }
+
+    /// The point of the surface nearest to `p` (a cone's nearer nappe): where the fit pulls
+    /// a closed patch's limit points, so the patch lies on the CAD surface and not on its
+    /// facets, which sag from it by up to their chord.
+    pub fn project(&self, p: DVec3) -> DVec3 {
+        match self.nappes() {
+            (s, Some(other)) => {
+                let (a, b) = (s.project(p), other.project(p));
+                if b.distance(p) < a.distance(p) {
+                    b
+                } else {
+                    a
+                }
+            }
+            (s, None) => s.project(p),
+        }
+    }
+}
+
+/// A point on every surface of `surfaces` near `p` (where faces meet along a B-rep edge),
+/// by alternating projections: `None` when they do not converge to a common point within
+/// `1e-9` of `p`'s scale, or when the point found is more than four times as far from `p`
+/// as `p` is from the farthest surface (nearly tangent surfaces let the iterates drift
+/// along the edge instead of across it).
+pub fn onto_all(surfaces: &[ExactSurface], p: DVec3) -> Option<DVec3> {
+    let gap = |q: DVec3| surfaces.iter().map(|s| s.distance(q)).fold(0.0, f64::max);
+    let start_gap = gap(p);
+    let scale = p.abs().max_element().max(1.0);
+    let mut q = p;
+    for _ in 0..64 {
+        for s in surfaces {
+            q = s.project(q);
+        }
+        if gap(q) <= 1e-9 * scale {
+            return (q.distance(p) <= 4.0 * start_gap + 1e-9 * scale).then_some(q);
+        }
+    }
+    None
 }
 
 #[cfg(test)]
@@ -166,6 +213,87 @@ mod tests {
                 s.distance(p)
             );
         }
+    }
+
+    #[test]
+    fn projections_lie_on_the_surface_at_the_measured_distance() {
+        let a = tilted();
+        let (n, x) = (a.direction, across());
+        let y = n.cross(x);
+        let surfaces = [
+            Primitive::Plane {
+                point: a.origin,
+                normal: n,
+            },
+            Primitive::Cylinder {
+                axis: a,
+                radius: 2.0,
+            },
+            Primitive::Cone {
+                axis: a,
+                half_angle: 0.4,
+            },
+            Primitive::Sphere {
+                center: a.origin,
+                radius: 2.0,
+            },
+            Primitive::Torus {
+                axis: a,
+                major_radius: 3.0,
+                minor_radius: 1.0,
+            },
+            Primitive::Torus {
+                axis: a,
+                major_radius: 1.0,
+                minor_radius: 3.0,
+            },
+        ];
+        for s in surfaces {
+            let e = ExactSurface::new(s).unwrap();
+            for i in 0..50 {
+                let t = f64::from(i);
+                let p = a.origin
+                    + (2.0 * (0.37 * t).sin() + 0.3) * n
+                    + (3.0 * (0.71 * t).cos()) * x
+                    + (2.5 * (1.13 * t).sin()) * y;
+                let q = e.project(p);
+                assert!(e.distance(q) < 1e-9, "{s:?}: {p} -> {q} is off the surface");
+                assert!(
+                    (q.distance(p) - e.distance(p)).abs() < 1e-9,
+                    "{s:?}: {p} -> {q} at {} but the surface is {} away",
+                    q.distance(p),
+                    e.distance(p)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_point_near_a_circle_where_a_plane_cuts_a_sphere_goes_onto_it() {
+        let a = tilted();
+        let (n, x) = (a.direction, across());
+        let plane = ExactSurface::new(Primitive::Plane {
+            point: a.origin + n,
+            normal: n,
+        })
+        .unwrap();
+        let sphere = ExactSurface::new(Primitive::Sphere {
+            center: a.origin,
+            radius: 2.0,
+        })
+        .unwrap();
+        // The circle: height 1, radius sqrt 3.
+        let on = a.origin + n + 3f64.sqrt() * x;
+        let p = on + 0.01 * n - 0.02 * x;
+        let q = onto_all(&[plane, sphere], p).unwrap();
+        assert!(q.distance(on) < 1e-6, "{q} is not {on}");
+        // A plane and a sphere that do not meet: no common point.
+        let far = ExactSurface::new(Primitive::Plane {
+            point: a.origin + 3.0 * n,
+            normal: n,
+        })
+        .unwrap();
+        assert_eq!(onto_all(&[far, sphere], p), None);
     }
 
     #[test]

@@ -144,6 +144,47 @@ impl Primitive {
         }
     }
 
+    /// The point of the surface nearest to `p` (cones: on the nappe that opens along the
+    /// axis, the apex when `p` is behind it; a point on an axis or at a centre goes to any
+    /// of its nearest points).
+    pub fn project(&self, p: DVec3) -> DVec3 {
+        match *self {
+            Primitive::Plane { point, normal } => p - (p - point).dot(normal) * normal,
+            Primitive::Sphere { center, radius } => {
+                center + radius * (p - center).try_normalize().unwrap_or(DVec3::Z)
+            }
+            Primitive::Cylinder { axis, radius } => {
+                let (h, _, r) = axial(&axis, p);
+                axis.origin + h * axis.direction + radius * r
+            }
+            Primitive::Cone { axis, half_angle } => {
+                let (h, rho, r) = axial(&axis, p);
+                let (s, c) = half_angle.sin_cos();
+                let t = (h * c + rho * s).max(0.0);
+                axis.origin + t * (c * axis.direction + s * r)
+            }
+            Primitive::Torus {
+                axis,
+                major_radius,
+                minor_radius,
+            } => {
+                // As in `distance`: the nearer of the two circles of p's axial section.
+                let (_, _, r) = axial(&axis, p);
+                let on_circle = |spine: DVec3| {
+                    let foot = spine + minor_radius * (p - spine).try_normalize().unwrap_or(r);
+                    (foot.distance(p), foot)
+                };
+                let near = on_circle(axis.origin + major_radius * r);
+                let far = on_circle(axis.origin - major_radius * r);
+                if far.0 < near.0 {
+                    far.1
+                } else {
+                    near.1
+                }
+            }
+        }
+    }
+
     /// Unit surface normal at the foot point of `p` (orientation not meaningful).
     pub fn normal_at(&self, p: DVec3) -> DVec3 {
         match *self {
