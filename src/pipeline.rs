@@ -427,23 +427,24 @@ fn encode_fitted_once(
     };
     // The codec numbers groups in its own traversal order; the fit attributes errors to
     // groups by the input's numbering, so give the decoded mesh the input's group order.
-    let mut reconstruct = |control: &ControlMesh, level: u8, coarser: u8| -> Result<ControlMesh> {
-        let (bytes, map) = codec::encode_with_map(control, &encode_opts(level, coarser))?;
-        let mut mesh = codec::decode(&bytes, &Limits::default())?.mesh;
-        let mut old_of_new = vec![0u32; mesh.groups.len()];
-        for (old, &new) in map.group.iter().enumerate() {
-            old_of_new[new as usize] = old as u32;
-        }
-        for g in &mut mesh.face_groups {
-            *g = old_of_new[*g as usize];
-        }
-        let mut groups = mesh.groups.clone();
-        for (old, &new) in map.group.iter().enumerate() {
-            groups[old] = mesh.groups[new as usize].clone();
-        }
-        mesh.groups = groups;
-        Ok(mesh)
-    };
+    let mut reconstruct =
+        |control: &ControlMesh, level: u8, coarser: u8| -> Result<(ControlMesh, usize)> {
+            let (bytes, map) = codec::encode_with_map(control, &encode_opts(level, coarser))?;
+            let mut mesh = codec::decode(&bytes, &Limits::default())?.mesh;
+            let mut old_of_new = vec![0u32; mesh.groups.len()];
+            for (old, &new) in map.group.iter().enumerate() {
+                old_of_new[new as usize] = old as u32;
+            }
+            for g in &mut mesh.face_groups {
+                *g = old_of_new[*g as usize];
+            }
+            let mut groups = mesh.groups.clone();
+            for (old, &new) in map.group.iter().enumerate() {
+                groups[old] = mesh.groups[new as usize].clone();
+            }
+            mesh.groups = groups;
+            Ok((mesh, bytes.len()))
+        };
     let outcome = fit_model(input, hints, &fit_opts, &mut reconstruct)?;
     let final_opts = encode_opts(outcome.default_level, outcome.coarser_bits);
     let mut bytes = codec::encode(&outcome.control, &final_opts)

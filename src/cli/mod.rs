@@ -51,8 +51,9 @@ pub enum Command {
     /// By default the model is fitted: every CAD face (OBJ group, PLY face id, glTF
     /// primitive; an ungrouped mesh is segmented first) becomes a subdivision patch, and the
     /// coarse control mesh is stored. The encoder measures the decoded surface against the
-    /// input and adds control points until --tolerance holds. A `<name>.faces.json` sidecar
-    /// next to the input (as in the corpus) supplies each face's surface type.
+    /// input and adds control points until --tolerance holds, then tries taking some back
+    /// from faces that ended far within it (the smaller file wins). A `<name>.faces.json`
+    /// sidecar next to the input (as in the corpus) supplies each face's surface type.
     ///
     /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex
     /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the
