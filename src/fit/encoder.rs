@@ -2008,8 +2008,7 @@ pub fn fit_model(
     // Per input vertex, a factor on its closed patch's decimation threshold, lowered round by
     // round where the patch's decoded surface is off (see `lower_cost_near`).
     let mut vertex_cost = vec![1.0f64; mesh.vertex_count()];
-    // The best converged model, and
-    // the relaxed one when relaxing it stayed within tolerance.
+    // The best converged model, and the relaxed one when relaxing it stayed within tolerance.
     let mut best: Option<Candidate> = None;
     let mut relaxed_best: Option<Candidate> = None;
     let mut levels_tried = opts.default_level;
@@ -2277,6 +2276,7 @@ pub fn fit_model(
     let level = converged.level;
     let mut candidates = vec![converged];
     candidates.extend(relaxed_best);
+    let compared = candidates.len() > 1;
     // The quantisation step was chosen for a quarter of the tolerance; the limit surface
     // averages control points, so coarser steps often still fit. Keep the coarsest that does,
     // for each candidate, then the candidate whose file is smaller.
@@ -2296,9 +2296,12 @@ pub fn fit_model(
             for g in &mut control.groups {
                 g.name.clear();
             }
-            bytes = reconstruct(&control, level, 0)
-                .map_err(|e| with_faces_involved(e, &control))?
-                .1;
+            if compared {
+                // The sizes decide between the candidates: measure them without the names.
+                bytes = reconstruct(&control, level, 0)
+                    .map_err(|e| with_faces_involved(e, &control))?
+                    .1;
+            }
         }
         let mut coarser_bits = 0;
         if err.max_beyond_chord <= tol {
