@@ -2273,7 +2273,6 @@ pub fn fit_model(
     let Some(converged) = best else {
         return Err(Error::Mesh("fitting produced no control mesh".into()));
     };
-    let level = converged.level;
     let mut candidates = vec![converged];
     candidates.extend(relaxed_best);
     let compared = candidates.len() > 1;
@@ -2281,7 +2280,8 @@ pub fn fit_model(
     // averages control points, so coarser steps often still fit. Keep the coarsest that does,
     // for each candidate, then the candidate whose file is smaller.
     t = Instant::now();
-    let mut chosen: Option<(FitError, ControlMesh, u8, usize)> = None;
+    // (error, control mesh, decode level, coarser bits, bytes) of the smallest file so far.
+    let mut chosen: Option<(FitError, ControlMesh, u8, u8, usize)> = None;
     let mut sizes = Vec::new();
     for Candidate {
         mut err,
@@ -2332,14 +2332,14 @@ pub fn fit_model(
             }
         }
         sizes.push((control.vertex_count(), coarser_bits, bytes));
-        if chosen.as_ref().is_none_or(|c| bytes < c.3) {
-            chosen = Some((err, control, coarser_bits, bytes));
+        if chosen.as_ref().is_none_or(|c| bytes < c.4) {
+            chosen = Some((err, control, level, coarser_bits, bytes));
         }
     }
     report
         .timings
         .push(("quantisation", t.elapsed().as_secs_f64()));
-    let Some((err, control, coarser_bits, _)) = chosen else {
+    let Some((err, control, level, coarser_bits, _)) = chosen else {
         return Err(Error::Mesh("fitting produced no control mesh".into()));
     };
     if let [(cv, cb, cbytes), (rv, rb, rbytes)] = sizes[..] {
