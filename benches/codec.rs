@@ -54,6 +54,7 @@ fn bench_codec(c: &mut Criterion) {
             quantization_bits: 10,
             content: Content::RawMesh,
             store_group_names: true,
+            ..Default::default()
         };
 
         let mut g = c.benchmark_group("encode");

@@ -19,6 +19,7 @@ fn vectors() -> Vec<(&'static str, ControlMesh, EncodeOptions)> {
             default_level: level,
         },
         store_group_names: true,
+        ..Default::default()
     };
     vec![
         ("tetrahedron", samples::tetrahedron(), raw.clone()),

@@ -15,6 +15,15 @@ use crate::mesh::ControlMesh;
 /// Fitted control meshes are never quantised coarser than this.
 const MIN_FITTED_BITS: u8 = 6;
 
+/// `2^(k/4)` for k = 0..4, the grid step factors of a quarter bit coarser (literals, not
+/// `powf`, so the stored box is the same on every platform's libm).
+const QUARTER_BIT_SCALES: [f64; 4] = [
+    1.0,
+    1.189_207_115_002_721,
+    std::f64::consts::SQRT_2,
+    1.681_792_830_507_429,
+];
+
 /// Options of [`encode_fitted`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModelEncodeOptions {
@@ -418,12 +427,17 @@ fn encode_fitted_once(
         // The caller chose the precision: keep it.
         fit_opts.max_coarser_bits = 0;
     }
+    // `coarser` counts quarter bits: `coarser / 4` whole bits fewer, and the step times
+    // `2^((coarser % 4) / 4)` (`EncodeOptions::step_scale`).
     let encode_opts = |level: u8, coarser: u8| EncodeOptions {
-        quantization_bits: bits.saturating_sub(coarser).max(MIN_FITTED_BITS.min(bits)),
+        quantization_bits: bits
+            .saturating_sub(coarser / 4)
+            .max(MIN_FITTED_BITS.min(bits)),
         content: Content::ControlMesh {
             default_level: level,
         },
         store_group_names: opts.store_group_names,
+        step_scale: QUARTER_BIT_SCALES[usize::from(coarser % 4)],
     };
     // The codec numbers groups in its own traversal order; the fit attributes errors to
     // groups by the input's numbering, so give the decoded mesh the input's group order.
@@ -446,7 +460,7 @@ fn encode_fitted_once(
             Ok((mesh, bytes.len()))
         };
     let outcome = fit_model(input, hints, &fit_opts, &mut reconstruct)?;
-    let final_opts = encode_opts(outcome.default_level, outcome.coarser_bits);
+    let final_opts = encode_opts(outcome.default_level, outcome.coarser_quarter_bits);
     let mut bytes = codec::encode(&outcome.control, &final_opts)
         .map_err(|e| crate::fit::encoder::with_faces_involved(e, &outcome.control))?;
     let mut report = outcome.report;

@@ -165,6 +165,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
             quantization_bits: args.bits.unwrap_or(10),
             content: Content::RawMesh,
             store_group_names: !args.no_names,
+            ..Default::default()
         };
         codec::encode(&mesh, &opts)
             .with_context(|| format!("cannot encode {}", args.input.display()))?

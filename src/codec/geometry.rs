@@ -23,8 +23,9 @@ pub struct Quantizer {
 }
 
 impl Quantizer {
-    /// Chooses the box for `positions`: f32 storage when that loses (almost) nothing.
-    pub fn for_positions(positions: &[DVec3], bits: u8) -> Self {
+    /// Chooses the box for `positions`: f32 storage when that loses (almost) nothing. The
+    /// box's extent is the positions' extent times `step_scale` (>= 1), which scales the step.
+    pub fn for_positions(positions: &[DVec3], bits: u8, step_scale: f64) -> Self {
         let Some(first) = positions.first() else {
             return Quantizer {
                 min: [0.0; 3],
@@ -36,10 +37,10 @@ impl Quantizer {
         let (lo, hi) = positions
             .iter()
             .fold((*first, *first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-        let extent64 = (hi - lo).max_element();
+        let extent64 = (hi - lo).max_element() * step_scale.max(1.0);
         // f32 candidate: min rounded down, extent rounded up so the box still covers everything.
         let min32: [f64; 3] = [0, 1, 2].map(|i| f32_round_down(lo[i]));
-        let need = (0..3).map(|i| hi[i] - min32[i]).fold(0.0f64, f64::max);
+        let need = (0..3).map(|i| hi[i] - min32[i]).fold(0.0f64, f64::max) * step_scale.max(1.0);
         let extent32 = f32_round_up(need);
         let ok32 = min32.iter().all(|v| v.is_finite())
             && extent32.is_finite()
@@ -905,7 +906,7 @@ mod tests {
             DVec3::new(0.1, 0.2, 0.3),
         ];
         for bits in [4u8, 10, 16, 24] {
-            let q = Quantizer::for_positions(&pts, bits);
+            let q = Quantizer::for_positions(&pts, bits, 1.0);
             for &p in &pts {
                 let r = q.dequantize(q.quantize(p));
                 assert!((r - p).abs().max_element() <= q.step() / 2.0 * (1.0 + 1e-9) + 1e-12);

@@ -55,6 +55,12 @@ pub struct EncodeOptions {
     pub content: Content,
     /// Store group names (OBJ `g` names) in the optional `names` section (default true).
     pub store_group_names: bool,
+    /// Grid step as a multiple of the smallest one that covers the positions with
+    /// `quantization_bits` bits (default 1, at most 2^24): the stored box extent is the
+    /// positions' extent times this, so a step between two whole bit counts (e.g. `sqrt 2`
+    /// for half a bit coarser) needs no format support. Positions use grid values
+    /// `0..=(2^bits - 1) / step_scale` only.
+    pub step_scale: f64,
 }
 
 impl Default for EncodeOptions {
@@ -63,6 +69,7 @@ impl Default for EncodeOptions {
             quantization_bits: 10,
             content: Content::RawMesh,
             store_group_names: true,
+            step_scale: 1.0,
         }
     }
 }
@@ -773,6 +780,12 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             "quantization bits must be in 4..=24, got {bits}"
         )));
     }
+    if !(1.0..=f64::from(1u32 << 24)).contains(&opts.step_scale) {
+        return Err(Error::Parameter(format!(
+            "the grid step scale must be in 1..=2^24, got {}",
+            opts.step_scale
+        )));
+    }
     mesh.validate()?;
     if mesh.face_count() > 0 && mesh.groups.is_empty() {
         return Err(Error::Mesh("faces but no groups".into()));
@@ -914,7 +927,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     }
 
     // Patches section.
-    let quant = Quantizer::for_positions(&mesh.positions, bits);
+    let quant = Quantizer::for_positions(&mesh.positions, bits, opts.step_scale);
     let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
 
     // Creases section.

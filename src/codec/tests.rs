@@ -109,9 +109,47 @@ fn small_meshes_round_trip() {
                 quantization_bits: 16,
                 content: Content::ControlMesh { default_level: 3 },
                 store_group_names: false,
+                ..opts()
             },
         );
         assert!(c.len() > b.len() / 2);
+    }
+}
+
+/// A step scale coarsens the grid without changing the bit count: every position is within
+/// half the (scaled) step, the file is smaller, and a scale below 1 is refused.
+#[test]
+fn a_scaled_step_round_trips_and_shrinks_the_file() {
+    let m = torus(9, 7);
+    let plain = check_round_trip(&m, &opts());
+    let scaled_opts = EncodeOptions {
+        step_scale: std::f64::consts::SQRT_2,
+        ..opts()
+    };
+    let scaled = check_round_trip(&m, &scaled_opts);
+    assert!(
+        scaled.len() < plain.len(),
+        "{} vs {}",
+        scaled.len(),
+        plain.len()
+    );
+    let h = decode(&scaled, &Limits::default()).unwrap().header;
+    let h0 = decode(&plain, &Limits::default()).unwrap().header;
+    assert_eq!(h.quantization_bits, h0.quantization_bits);
+    let ratio = h.quantization_step() / h0.quantization_step();
+    assert!(
+        (ratio - std::f64::consts::SQRT_2).abs() < 1e-3,
+        "step ratio {ratio}"
+    );
+    for bad in [0.5, f64::NAN, f64::INFINITY] {
+        let e = encode(
+            &m,
+            &EncodeOptions {
+                step_scale: bad,
+                ..opts()
+            },
+        );
+        assert!(matches!(e, Err(Error::Parameter(_))), "{bad}: {e:?}");
     }
 }
 
@@ -139,6 +177,7 @@ fn content_and_header_fields() {
             quantization_bits: 12,
             content: Content::ControlMesh { default_level: 4 },
             store_group_names: true,
+            ..opts()
         },
     )
     .unwrap();

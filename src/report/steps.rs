@@ -95,6 +95,7 @@ pub fn run_scode_job(job: &ScodeJob) -> Result<ScodeJobResult> {
                     quantization_bits: bits,
                     content: Content::RawMesh,
                     store_group_names: true,
+                    ..Default::default()
                 },
             )?,
             Setting::Fitted { tolerance } => {
