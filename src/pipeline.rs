@@ -146,7 +146,8 @@ pub const STEP_COARSE_CHORD_FRACTION: f64 = 0.45;
 /// Reads a STEP file with its tessellation tied to the encode tolerance, fits it with the
 /// B-rep's surface types and its faces' exact surfaces, and encodes it. `tolerance` is in
 /// millimetres (the model's output unit) or, with `relative`, a fraction of the
-/// bounding-box diagonal; `None` is 1e-3 of the diagonal.
+/// bounding-box diagonal; `None` is 1e-3 of the diagonal. `opts.fit.mean_tolerance` is in
+/// the same units (scaled with `relative` too).
 ///
 /// Which tessellation fits best varies by model (and not smoothly), so five are fitted
 /// and the best file is kept, all held to the same standard:
@@ -242,13 +243,15 @@ pub fn encode_step(
             (true, _) => continue,
         };
         let mut opts = opts.clone();
-        opts.fit.tolerance = tolerance.map(|t| {
+        let scale = |t: f64| {
             if relative {
                 t * model.mesh.diagonal()
             } else {
                 t
             }
-        });
+        };
+        opts.fit.tolerance = tolerance.map(scale);
+        opts.fit.mean_tolerance = opts.fit.mean_tolerance.map(scale);
         opts.fit.exact_surfaces = step_exact_surfaces(&model);
         opts.fit.reference = reference;
         let fitted = encode_fitted(&model.mesh, &step_hints(&model), &opts);

@@ -84,6 +84,45 @@ fn encode_info_decode_roundtrip() {
 }
 
 #[test]
+fn the_mean_tolerance_is_reported() {
+    let out = tmp("boss_mean.scode");
+    let out = out.to_str().unwrap();
+    let (ok, text) = scode(&[
+        "encode",
+        &example(),
+        out,
+        "--mean-tolerance",
+        "0.5",
+        "--relative",
+    ]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("mean tolerance") && text.contains(" met"),
+        "{text}"
+    );
+    let (ok, text) = scode(&[
+        "encode",
+        &example(),
+        out,
+        "--mean-tolerance",
+        "1e-9",
+        "--relative",
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("NOT met: the mean is"), "{text}");
+    let (ok, text) = scode(&[
+        "encode",
+        "--raw",
+        &example(),
+        out,
+        "--mean-tolerance",
+        "0.1",
+    ]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("--mean-tolerance"), "{text}");
+}
+
+#[test]
 fn subdivide_a_hand_made_control_mesh() {
     let control = tmp("tetra.obj");
     std::fs::write(

@@ -133,11 +133,13 @@ fn print_step_summary(path: &Path, model: &step::StepModel, verbose: bool) {
 pub fn encode(args: &EncodeArgs) -> Result<()> {
     let output = args.output.path()?;
     let t0 = Instant::now();
-    let model_opts = ModelEncodeOptions {
+    let mut model_opts = ModelEncodeOptions {
         quantization_bits: args.bits,
         store_group_names: !args.no_names,
         ..Default::default()
     };
+    // As given: `encode_step` and the mesh path below scale it with --relative.
+    model_opts.fit.mean_tolerance = args.mean_tolerance;
     let is_step = step::is_step_path(&args.input);
     // A STEP file is read and fitted in one call (it tries two tessellations).
     let (mesh, step_fit) = if is_step && !args.raw {
@@ -158,8 +160,11 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     let t_read = t0.elapsed();
     let t1 = Instant::now();
     let bytes = if args.raw {
-        if args.tolerance.is_some() {
-            bail!("--tolerance applies to fitting; with --raw use --bits to set the precision");
+        if args.tolerance.is_some() || args.mean_tolerance.is_some() {
+            bail!(
+                "--tolerance and --mean-tolerance apply to fitting; with --raw use --bits to \
+                 set the precision"
+            );
         }
         let opts = EncodeOptions {
             quantization_bits: args.bits.unwrap_or(10),
@@ -181,13 +186,15 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
                     _ => Vec::new(),
                 };
                 let mut opts = model_opts.clone();
-                opts.fit.tolerance = args.tolerance.map(|t| {
+                let scale = |t: f64| {
                     if args.relative {
                         t * mesh.diagonal()
                     } else {
                         t
                     }
-                });
+                };
+                opts.fit.tolerance = args.tolerance.map(scale);
+                opts.fit.mean_tolerance = args.mean_tolerance.map(scale);
                 let bar = spinner(&format!("fitting {}", args.input.display()));
                 let result = encode_fitted(&mesh, &hints, &opts);
                 bar.finish_and_clear();
@@ -221,7 +228,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
             fit.error.rms,
             fit.error.mean,
             fit.tolerance,
-            if fit.within_tolerance {
+            if fit.error.max_beyond_chord <= fit.tolerance {
                 "met (beyond the input's own chord error)".to_string()
             } else {
                 format!(
@@ -231,6 +238,19 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
                 )
             }
         );
+        if let Some(mt) = fit.mean_tolerance {
+            println!(
+                "mean tolerance {mt:.4e} {}",
+                if fit.error.mean <= mt {
+                    "met".to_string()
+                } else {
+                    format!(
+                        "NOT met: the mean is {:.2}x it (lower --tolerance)",
+                        fit.error.mean / mt
+                    )
+                }
+            );
+        }
         if args.verbose {
             for note in &fit.notes {
                 println!("  {note}");

@@ -173,7 +173,13 @@ pub struct EncodeArgs {
     /// fraction of the bounding-box diagonal with --relative). Default: 1e-3 of the diagonal.
     #[arg(long, value_name = "DIST")]
     pub tolerance: Option<f64>,
-    /// Read --tolerance as a fraction of the bounding-box diagonal.
+    /// Largest allowed mean distance between input and decoded surface (same units as
+    /// --tolerance). Without it only the max is bounded, and the encoder may coarsen the
+    /// quantisation until the mean grows; with it, e.g. `--tolerance 0.008 --mean-tolerance
+    /// 0.001 --relative`, both hold (the seed coders' operating point).
+    #[arg(long, value_name = "DIST")]
+    pub mean_tolerance: Option<f64>,
+    /// Read --tolerance and --mean-tolerance as fractions of the bounding-box diagonal.
     #[arg(long)]
     pub relative: bool,
     /// Ignore the `.faces.json` sidecar next to the input.
