@@ -39,6 +39,10 @@ fn encode_info_decode_roundtrip() {
         "{text}"
     );
     assert!(text.contains("symmetric: max"), "{text}");
+    assert!(
+        text.contains("grid box min") && text.contains(", step "),
+        "{text}"
+    );
     let out = tmp("boss_decoded.obj");
     let (ok, text) = scode(&[
         "decode",

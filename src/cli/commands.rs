@@ -461,8 +461,15 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         h.vertex_count, h.face_count, h.group_count, info.sharp_edge_count, info.corner_count
     );
     println!(
-        "  quantisation: {} bits, bounding box min ({:.6}, {:.6}, {:.6}), extent {:.6}",
-        h.quantization_bits, h.bbox_min[0], h.bbox_min[1], h.bbox_min[2], h.bbox_extent
+        // The grid's box, not the model's: a fitted file may use a larger box for a step
+        // between whole bit counts (spec §8.1).
+        "  quantisation: {} bits, grid box min ({:.6}, {:.6}, {:.6}), extent {:.6}, step {:.6e}",
+        h.quantization_bits,
+        h.bbox_min[0],
+        h.bbox_min[1],
+        h.bbox_min[2],
+        h.bbox_extent,
+        h.quantization_step()
     );
     let nv = (h.vertex_count as f64).max(1.0);
     println!(
