@@ -2343,7 +2343,8 @@ pub fn fit_model(
             let (mut lo, mut hi) = (0u8, opts.max_coarser_bits);
             // The quarter bit to try beyond `lo` whole bits once the search has settled (2,
             // then 1 or 3; 0 when done).
-            let mut quarter = 2u8;
+            // None when the caller fixed the precision (`max_coarser_bits` 0).
+            let mut quarter = if opts.max_coarser_bits > 0 { 2u8 } else { 0 };
             loop {
                 let coarser = if lo < hi {
                     4 * (lo + hi).div_ceil(2)
