@@ -177,6 +177,32 @@ fn errors_name_the_file_and_cause() {
     assert!(text.contains("two different outputs"), "{text}");
 }
 
+#[test]
+fn every_effort_meets_the_tolerance_and_an_unknown_one_is_refused() {
+    let mut sizes = Vec::new();
+    for effort in ["fast", "default", "max"] {
+        let out = tmp(&format!("boss-{effort}.scode"));
+        let (ok, text) = scode(&[
+            "encode",
+            "--effort",
+            effort,
+            &example(),
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{effort}: {text}");
+        assert!(
+            text.contains("met") && !text.contains("NOT met"),
+            "{effort}: {text}"
+        );
+        sizes.push(std::fs::metadata(&out).unwrap().len());
+    }
+    // `max` keeps the smallest of several fits, the default's among them.
+    assert!(sizes[2] <= sizes[1], "{sizes:?}");
+    let (ok, text) = scode(&["encode", "--effort", "most", &example(), "x.scode"]);
+    assert!(!ok);
+    assert!(text.contains("unknown effort 'most'"), "{text}");
+}
+
 /// `scode info | head` closes stdout early: the command ends quietly instead of panicking
 /// on the failed write (std's `println!` panics on a closed pipe).
 #[test]

@@ -8,7 +8,7 @@ use std::path::Path;
 use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::fit::encoder::{FitReport, SurfaceHint};
 use scode::metrics::{hausdorff, DistanceOptions, SampleCount};
-use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
+use scode::pipeline::{encode_fitted, sidecar_hints, Effort, ModelEncodeOptions};
 use scode::subdiv::{subdivide, SubdivOptions};
 
 /// Every edge of the decoded triangle mesh has exactly two faces (the inputs are closed).
@@ -243,67 +243,116 @@ fn fitted(
 }
 
 #[test]
-fn default_fit_is_no_larger_than_either_plane_treatment_alone() {
-    // `ModelEncodeOptions::try_plain_planes`: plane patches kept on their faces win on most
-    // models, decimated freely on some (the plate); by default small inputs get the better.
+fn max_effort_is_no_larger_than_either_plane_treatment_alone() {
+    // `Effort::Max`: plane patches kept on their faces make smaller files on most models,
+    // decimated freely on some (the plate); at the highest effort small inputs get the better.
     let Some(model) = corpus_model("tess/bug3883_xr2-ct-214_plate_fine.obj") else {
         return;
     };
-    let size = |keep: bool, try_plain: bool| {
+    let size = |keep: bool, effort: Effort| {
         let mut opts = ModelEncodeOptions {
-            try_plain_planes: try_plain,
+            effort,
             ..Default::default()
         };
         opts.fit.keep_planes_on_faces = keep;
         fitted(&model, &opts).0
     };
-    let (kept, plain, default) = (size(true, false), size(false, false), size(true, true));
-    println!(
-        "plate: planes kept on faces {kept} B, decimated freely {plain} B, default {default} B"
+    let (kept, plain, max) = (
+        size(true, Effort::Default),
+        size(false, Effort::Default),
+        size(true, Effort::Max),
     );
-    assert_eq!(default, kept.min(plain));
+    println!("plate: planes kept on faces {kept} B, decimated freely {plain} B, max {max} B");
+    assert_eq!(max, kept.min(plain));
 }
 
 #[test]
-fn default_fit_is_no_larger_than_either_closed_patch_refinement_alone() {
-    // `ModelEncodeOptions::try_local_refinement`: the screw's torus patches fail in early
-    // rounds; refining them only where they fail wins there (and loses elsewhere), so small
-    // inputs are fitted both ways and the smaller file is kept.
+fn max_effort_is_no_larger_than_either_closed_patch_refinement_alone() {
+    // `Effort::Max`: the screw's torus patches fail in early rounds; refining them only where
+    // they fail makes a smaller file on some models and a larger one on others, so the highest
+    // effort fits small inputs both ways and keeps the smaller file.
     let Some(model) = corpus_model("tess/screw_fine.obj") else {
         return;
     };
-    let size = |local: bool, try_local: bool| {
+    let size = |local: bool, effort: Effort| {
         let mut opts = ModelEncodeOptions {
-            try_local_refinement: try_local,
+            effort,
             ..Default::default()
         };
         opts.fit.local_refinement = local;
+        opts.fit.keep_planes_on_faces = true;
         let (bytes, report) = fitted(&model, &opts);
         (bytes, report.closed_refinements)
     };
-    let ((everywhere, refinements), (local, _), (default, _)) =
-        (size(false, false), size(true, false), size(false, true));
+    let ((everywhere, refinements), (local, _)) =
+        (size(false, Effort::Default), size(true, Effort::Default));
+    let mut opts = ModelEncodeOptions {
+        effort: Effort::Max,
+        ..Default::default()
+    };
+    opts.fit.keep_planes_on_faces = true;
+    let max = fitted(&model, &opts).0;
+    // Max also tries plane patches decimated freely, so it may be smaller still.
     println!(
         "screw: closed patches refined everywhere {everywhere} B ({refinements} refinements), \
-         near failures {local} B, default {default} B"
+         near failures {local} B, max {max} B"
     );
     assert!(
         refinements > 0,
         "the screw's closed patches no longer fail: pick another model"
     );
-    assert_eq!(default, everywhere.min(local));
+    assert!(max <= everywhere.min(local), "max {max} B");
+}
+
+#[test]
+fn fast_effort_meets_the_tolerance_with_fewer_searches() {
+    // `Effort::Fast` skips the relaxation round, the quarter-bit steps and the traversal
+    // starts: the same tolerance, measured the same way, with fewer measurements and encodes.
+    let Some(model) = corpus_model("tess/screw_fine.obj") else {
+        return;
+    };
+    let run = |effort: Effort| {
+        fitted(
+            &model,
+            &ModelEncodeOptions {
+                effort,
+                ..Default::default()
+            },
+        )
+    };
+    let ((fast, fast_report), (default, default_report)) =
+        (run(Effort::Fast), run(Effort::Default));
+    println!(
+        "screw: fast {fast} B in {} rounds, default {default} B in {} rounds",
+        fast_report.rounds, default_report.rounds
+    );
+    assert!(fast_report.rounds <= default_report.rounds);
+    for note in &fast_report.notes {
+        assert!(
+            !note.contains("traversal started") && !note.contains("relax"),
+            "{note}"
+        );
+        if let Some(rest) = note.strip_prefix("quantisation: ") {
+            let bits: f64 = rest.split(' ').next().unwrap().parse().unwrap();
+            assert_eq!(bits.fract(), 0.0, "{note}");
+        }
+    }
 }
 
 #[test]
 fn relaxing_refined_closed_patches_makes_a_smaller_file_within_tolerance() {
     // `FitOptions::relax`: the screw's torus patches fail in early rounds and end far within
     // the tolerance after their last refinement; coarsening them again by half a step keeps
-    // the model within tolerance in fewer bytes.
+    // the model within tolerance in fewer bytes. At `Effort::Max` the fit kept is the one
+    // whose closed patches are refined only where they fail, which is where that happens.
     let Some(model) = corpus_model("tess/screw_fine.obj") else {
         return;
     };
     let fit = |relax: bool| {
-        let mut opts = ModelEncodeOptions::default();
+        let mut opts = ModelEncodeOptions {
+            effort: Effort::Max,
+            ..Default::default()
+        };
         opts.fit.relax = relax;
         fitted(&model, &opts)
     };

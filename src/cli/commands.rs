@@ -136,12 +136,13 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     let mut model_opts = ModelEncodeOptions {
         quantization_bits: args.bits,
         store_group_names: !args.no_names,
+        effort: args.effort,
         ..Default::default()
     };
     // As given: `encode_step` and the mesh path below scale it with --relative.
     model_opts.fit.mean_tolerance = args.mean_tolerance;
     let is_step = step::is_step_path(&args.input);
-    // A STEP file is read and fitted in one call (it tries two tessellations).
+    // A STEP file is read and fitted in one call (at `--effort max`, several tessellations).
     let (mesh, step_fit) = if is_step && !args.raw {
         let bar = spinner(&format!("reading and fitting {}", args.input.display()));
         let result = encode_step(&args.input, args.tolerance, args.relative, &model_opts);

@@ -71,10 +71,8 @@ pub struct FitOptions {
     /// Largest allowed mean distance (the larger of the two directions' means), model units;
     /// `None`: unbounded. The fit's rounds are driven by `tolerance`; this bound keeps the
     /// quantisation search from trading mean error for bytes (at a loose `tolerance` a
-    /// coarser grid step can keep the max within it while the mean grows: fandisk at 8e-3
-    /// of the diagonal, 0.75 bit coarser, 322 bytes at mean 1.11e-3 of it; with a mean
-    /// tolerance of 1e-3 of it, 0.25 bit coarser, 332 bytes at mean 0.89e-3).
-    /// A fit whose mean is over it even at the default step is reported out of tolerance.
+    /// coarser grid step can keep the max within it while the mean grows). A fit whose mean
+    /// is over it even at the default step is reported out of tolerance.
     pub mean_tolerance: Option<f64>,
     /// Decode level the tolerance is checked at; default: 4, raised to 5 when that is what
     /// it takes.
@@ -86,32 +84,33 @@ pub struct FitOptions {
     /// Surface samples per direction for the error measurement.
     pub error_samples: usize,
     /// After the fit, try up to this many bits coarser quantisation than the default, and keep
-    /// the coarsest that still meets the tolerance (0: keep the default); then up to 3/4 bit
-    /// more in quarter bits, each kept only if it also makes the file smaller and keeps the
-    /// RMS error within a quarter of the tolerance (without that, trj2's STEP path went to
-    /// 0.29 tol RMS from its fine tessellation, over the 0.25 its test holds).
+    /// the coarsest that still meets the tolerance (0: keep the default); then (with
+    /// `quarter_bit_steps`) up to 3/4 bit more in quarter bits, each kept only if it also
+    /// makes the file smaller and keeps the RMS error within a quarter of the tolerance (a
+    /// fractional step trades RMS error for bytes, and the RMS bound keeps the surface as
+    /// close to the reference on average as the whole-bit steps do).
     pub max_coarser_bits: u8,
+    /// Whether the quantisation search goes on in quarter bits after whole bits (see
+    /// `max_coarser_bits`): two more measurements for a few percent on most models.
+    pub quarter_bit_steps: bool,
     /// Refine a failing closed patch only near where it fails (its decimation threshold
     /// lowered within two control edges of the samples out of tolerance) instead of
     /// everywhere. That is all it changes: a fit without failing closed patches is the same
-    /// either way. Off by default: it wins on some models and loses on others (mesh path:
-    /// trj3 -3%, bug27693 -1%, Ventilator +7%, bug33398 +2%; STEP path: block_fillet3
-    /// -16%, screw +16%), see `ModelEncodeOptions::try_local_refinement`.
+    /// either way. Off by default: it makes smaller files on some models and larger ones on
+    /// others; `Effort::Max` tries both.
     pub local_refinement: bool,
     /// Plane patches keep the control points their faces need: the decimation refuses a
     /// collapse that would make an interior edge leave the face (across a hole or a concave
     /// notch; a plane's interior edges decode straight), and a failing group refines only the
-    /// boundary chains near where it fails, not all of them (nist 4,086 -> 3,575 bytes,
-    /// bug27693 2,443 -> 2,021, bm2 735 -> 640; plate 448 -> 498). On by default, for face
-    /// groups from the input (a segmented mesh is fitted as before: at the seed coder's
-    /// operating point fandisk's mean error went over 1e-3 of the diagonal); see
-    /// `ModelEncodeOptions::try_plain_planes`.
+    /// boundary chains near where it fails, not all of them: fewer control points on plates
+    /// with many holes. On by default, for face groups from the input; a segmented mesh's
+    /// planes are decimated freely (its regions' outlines are the segmenter's guesses, and
+    /// keeping them costs control points for no gain in accuracy). `Effort::Max` tries both.
     pub keep_planes_on_faces: bool,
     /// Once the model is within tolerance, coarsen the refined closed patches that ended far
     /// within it by half a refinement step, restore those that then fail, and keep whichever
     /// model (converged or relaxed, each at its coarsest quantisation) makes the smaller file
-    /// (see `Relaxation`; mesh path: Ventilator 8,848 -> 8,442 bytes, linkrods 3,448 ->
-    /// 3,298). Costs one or two more rounds.
+    /// (see `Relaxation`). Costs one or two more rounds.
     pub relax: bool,
     /// By input group: the face's exact surface where the input knows it (a STEP face's
     /// plane, cylinder, cone, sphere or torus), else `None`; empty for none at all. The
@@ -140,6 +139,7 @@ impl Default for FitOptions {
             max_rounds: 8,
             error_samples: 60_000,
             max_coarser_bits: 3,
+            quarter_bit_steps: true,
             local_refinement: false,
             keep_planes_on_faces: true,
             relax: true,
@@ -2342,9 +2342,13 @@ pub fn fit_model(
             let max_cap = tol.max(err.max);
             let (mut lo, mut hi) = (0u8, opts.max_coarser_bits);
             // The quarter bit to try beyond `lo` whole bits once the search has settled (2,
-            // then 1 or 3; 0 when done).
-            // None when the caller fixed the precision (`max_coarser_bits` 0).
-            let mut quarter = if opts.max_coarser_bits > 0 { 2u8 } else { 0 };
+            // then 1 or 3; 0 when done, or when the caller fixed the precision
+            // (`max_coarser_bits` 0) or asked for whole bits only).
+            let mut quarter = if opts.max_coarser_bits > 0 && opts.quarter_bit_steps {
+                2u8
+            } else {
+                0
+            };
             loop {
                 let coarser = if lo < hi {
                     4 * (lo + hi).div_ceil(2)
