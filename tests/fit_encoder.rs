@@ -134,8 +134,8 @@ fn the_mean_tolerance_is_checked_and_reported() {
 #[test]
 fn a_precision_the_caller_chose_is_kept() {
     // `ModelEncodeOptions::quantization_bits`: neither fewer bits nor a fraction of a bit
-    // coarser (a larger grid box) than asked for. The screw at 14 bits took 0.75 bit
-    // coarser (531 bytes) before the quarter-bit search honoured this.
+    // coarser (a larger grid box) than asked for. Without that rule the quarter-bit search
+    // takes the screw at 14 bits 0.75 bit coarser.
     let Some(dir) = corpus_dir() else {
         eprintln!("skipped: ../shared/corpus not found");
         return;
@@ -183,7 +183,7 @@ fn corpus_models_within_tolerance() {
 fn fandisk_at_the_seed_coders_operating_point() {
     // Issue #4: fandisk (no groups: segmented first) with mean error <= 1e-3 and max error
     // <= 1e-2 of the bounding-box diagonal must take under 1,000 bytes (the seed coder
-    // reached 292 B at mean 0.887e-3, max 10.18e-3). Measured as `scode info --against` does.
+    // takes 292 B at mean 0.887e-3, max 10.18e-3). Measured as `scode info --against` does.
     // The mean is bounded too (`FitOptions::mean_tolerance`): at this loose max tolerance the
     // quantisation search would otherwise coarsen the grid until the mean passes 1e-3.
     let Some(dir) = corpus_dir() else {
@@ -299,7 +299,7 @@ fn max_effort_is_no_larger_than_either_closed_patch_refinement_alone() {
     );
     assert!(
         refinements > 0,
-        "the screw's closed patches no longer fail: pick another model"
+        "no closed patch of the screw fails, so the option changes nothing: pick another model"
     );
     assert!(max <= everywhere.min(local), "max {max} B");
 }
@@ -373,7 +373,7 @@ fn relaxing_refined_closed_patches_makes_a_smaller_file_within_tolerance() {
 /// hemisphere faces, with the sphere given as their exact surface (as a STEP file gives it):
 /// the closed patches are fitted onto the sphere itself, not onto the sagging facets, so the
 /// decoded surface is not biased inwards. Fitted to the facets, its vertices' mean radial
-/// deviation was -0.129 mm; onto the sphere it is -0.040 mm.
+/// deviation is about -0.13 mm; onto the sphere, about -0.04 mm.
 #[test]
 fn closed_patches_are_fitted_onto_their_exact_surfaces() {
     use scode::fit::encoder::ExactSurface;

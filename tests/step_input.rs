@@ -132,11 +132,11 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
     // 18-solid assembly of planes and cylinders; a spindle torus (minor radius larger
     // than the major one) and cones, which need the exact surfaces from the STEP
     // records (truck's conversion misses the edges); planes, cylinders and a cone; rational
-    // B-spline strips and tori, where the projection from the previous edge point stopped
-    // off the surface (the loop crossed itself) until it learnt to restart between
-    // neighbours. (bug27693 was fixed the same way and encodes all 110 faces, but its fine
+    // B-spline strips and tori, where the projection from the previous edge point can stop
+    // off the surface (the loop would cross itself) unless it restarts between
+    // neighbours. (bug27693 needs the same restart and encodes all 110 faces, but its fine
     // tessellation's vertices are 0.34 tol rms from the decoded surface: in the sweep.)
-    // Files whose fit does not meet the tolerance yet (an encoder limit, also on their
+    // Files whose fit does not meet the tolerance (an encoder limit, also on their
     // mesh twins) are in the ignored sweep.
     for file in [
         "four_cone.step",
@@ -157,17 +157,16 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
 #[test]
 fn step_path_no_larger_than_mesh_path() {
     let Some(corpus) = corpus_dir() else { return };
-    // block_fillet3, screw and bm2 were larger until session 9 (490/460, 457/446, 636/619 B):
-    // the corpus tessellation's sphere facets sag up to 0.45 tol and the mesh path is not
-    // charged for its input's chord error, while ours were at 0.25 tol. The STEP path now
-    // measures its analytic faces against their exact surfaces and also tries them
-    // tessellated at 0.45 tol (`encode_step`): 442/460, 419/446, 617/619 B. occwl (110
-    // B-spline faces) was 3,735/3,436 B: all faces at 0.45 tol, measured against the 0.25 tol
-    // tessellation, gives 3,320 B. trj3 was 7,101/6,970 B until session 20; its STEP path
-    // now keeps a 1.5 bit coarser step: 6,689 B. trj4 is not here: 15,934/14,311 B, but
-    // its mesh path is held to the corpus facets, over 1.4 mm off the exact surfaces in
-    // places, and ends 1.34 mm (4.3 tol) from them where the STEP path keeps 0.40 mm
-    // (BENCHMARKS.md, sessions 19-20).
+    // The corpus tessellation's sphere facets sag up to 0.45 tol and the mesh path is not
+    // charged for its input's chord error, so a STEP path tessellated at 0.25 tol alone is
+    // larger on block_fillet3, screw and bm2. The STEP path therefore measures its analytic
+    // faces against their exact surfaces and also tries them tessellated at 0.45 tol
+    // (`encode_step`). occwl (110 B-spline faces) is smaller with all its faces at 0.45 tol,
+    // measured against the 0.25 tol tessellation; trj3 with the quarter-bit quantisation
+    // steps (its STEP path keeps a 1.5 bit coarser step). trj4 is not here: its STEP file is
+    // larger, but its mesh path is held to the corpus facets, over 1.4 mm off the exact
+    // surfaces in places, and ends 1.34 mm (4.3 tol) from them where the STEP path keeps
+    // 0.40 mm.
     for file in [
         "trj3_s1-ec-214.stp",
         "tr8_bv1_ec.stp",
@@ -363,12 +362,12 @@ fn analytic_faces_take_their_own_chord_and_the_model_stays_closed() {
     assert!(is_closed(&uniform) && is_closed(&coarse));
 }
 
-/// Two faces of bug33398 meeting at a knife edge each closed an ear on the same two edge
-/// segments when its analytic faces were tessellated at `encode_step`'s coarser chord: one
-/// triangle in both faces, four triangles on one edge, and the fit failed. The reader splits
-/// the ear in one of the two faces; the model is closed and oriented, and it fits. (The ears
-/// appear in the raw parameter plane, which `encode_step` still tries as its tessellation 5;
-/// the stretched plane of session 11 does not make them on this file.)
+/// Two faces of bug33398 meeting at a knife edge each close an ear on the same two edge
+/// segments when its analytic faces are tessellated at `encode_step`'s coarser chord: one
+/// triangle in both faces, four triangles on one edge, on which the fit fails. The reader
+/// splits the ear in one of the two faces; the model is closed and oriented, and it fits. (The
+/// ears appear in the raw parameter plane, which `encode_step` tries as its tessellation 5;
+/// the stretched plane does not make them on this file.)
 #[test]
 fn faces_meeting_at_a_knife_edge_keep_the_model_manifold() {
     let Some(corpus) = corpus_dir() else { return };
@@ -401,9 +400,9 @@ fn faces_meeting_at_a_knife_edge_keep_the_model_manifold() {
     assert!(report.within_tolerance, "{:?}", report.error);
 }
 
-/// trj6's faces bounded by a PARABOLA hung in truck's conversion (each was abandoned after
-/// its timeout, its thread spinning on; which other faces then missed their own timeout
-/// depended on the machine's load). The reader rewrites parabolas as the quadratic
+/// trj6's faces bounded by a PARABOLA hang in truck's conversion (each would be abandoned
+/// after its timeout, its thread spinning on; which other faces then miss their own timeout
+/// depends on the machine's load). The reader rewrites parabolas as the quadratic
 /// B-splines they are: no face times out, the eight faces are read, and their tessellations
 /// lie on their cones and planes.
 #[test]
@@ -494,13 +493,13 @@ fn facet_deviation(
     worst
 }
 
-/// trj6, session 11: (1) 48 faces were skipped because an edge "does not pass through its
-/// vertices": each edge is a part of a longer, nearly straight B-spline whose polyline has
-/// few points, and the vertices were compared with the polyline's points instead of its
-/// segments; (2) the two 500 mm cone strips (faces #1936, #4123) were triangulated in the
-/// raw (angle, height) plane, 500 times squashed along the strip, and their facets sagged
-/// 4 mm from the cone against a 0.08 mm chord, which no fit could undo. Now every face is
-/// read, the model is closed, and the strips' facets are within their chord.
+/// trj6: (1) 48 faces have an edge that is a part of a longer, nearly straight B-spline
+/// whose polyline has few points, so its vertices are on the polyline's segments but not
+/// at its points (compared with the points, the edge "does not pass through its vertices"
+/// and the faces are skipped); (2) the two 500 mm cone strips (faces #1936, #4123), in the
+/// raw (angle, height) plane 500 times squashed along the strip, would get facets 4 mm
+/// from the cone against a 0.08 mm chord, which no fit can undo. Every face is read,
+/// the model is closed, and the strips' facets are within their chord.
 #[test]
 fn every_face_of_trj6_is_read_and_its_cone_strips_meet_the_chord() {
     let Some(corpus) = corpus_dir() else { return };
@@ -525,13 +524,12 @@ fn assert_facets_within_chord(model: &StepModel, g: usize) {
     );
 }
 
-/// trj3, session 12: edges #2183 and #2287 are both parts of one closed B-spline (the
-/// whole intersection circle of an r=30 and an r=125 cylinder), and #2287 ends at the
-/// curve's closing point. That end was taken as the curve's start, so the edge became the
-/// complementary arc, and the two cylinder faces it bounds (#2179, #2450, in bodies 10
-/// and 11) were skipped ("an open boundary loop", "the boundary loops cross"). Now every
-/// face is read, the model is closed, and both faces lie on their cylinders within the
-/// chord.
+/// trj3: edges #2183 and #2287 are both parts of one closed B-spline (the whole
+/// intersection circle of an r=30 and an r=125 cylinder), and #2287 ends at the curve's
+/// closing point. Taking that end as the curve's start would make the edge the
+/// complementary arc and skip the two cylinder faces it bounds (#2179, #2450, in bodies 10
+/// and 11: "an open boundary loop", "the boundary loops cross"). Every face is read, the
+/// model is closed, and both faces lie on their cylinders within the chord.
 #[test]
 fn an_edge_ending_at_a_closed_curves_closing_point_is_the_right_arc() {
     let Some(corpus) = corpus_dir() else { return };
@@ -546,10 +544,9 @@ fn an_edge_ending_at_a_closed_curves_closing_point_is_the_right_arc() {
     }
 }
 
-/// trj4, session 11: each of the 18 balls of a bearing is one SPHERICAL_SURFACE face bound
-/// only by a VERTEX_LOOP (the vertex at its pole), and all 18 were skipped ("the
-/// boundary's parameter range is not finite"). Now each is the whole sphere: a closed
-/// surface of its own, on the sphere within the chord.
+/// trj4: each of the 18 balls of a bearing is one SPHERICAL_SURFACE face bound only by a
+/// VERTEX_LOOP (the vertex at its pole), whose parameter range is not finite. Each is read
+/// as the whole sphere: a closed surface of its own, on the sphere within the chord.
 #[test]
 fn faces_bounded_by_a_vertex_loop_are_whole_spheres() {
     let Some(corpus) = corpus_dir() else { return };
@@ -579,9 +576,9 @@ fn faces_bounded_by_a_vertex_loop_are_whole_spheres() {
 /// (encoded as `encode_step` does, which also tries the analytic faces at a coarser chord).
 /// Checked on the decoded vertices away from the faces' boundaries (a vertex there may be
 /// nearer the neighbouring face, which is what the tolerance asks). What fails without the
-/// exact surfaces is the other direction, on bm2: the fine tessellation's vertices were 2.1
+/// exact surfaces is the other direction, on bm2: the fine tessellation's vertices end 2.1
 /// tol from the decoded surface (`corpus_subset_encodes_within_tolerance_of_fine_tessellation`
-/// catches it; session 9).
+/// catches it).
 #[test]
 fn decoded_analytic_faces_stay_on_their_exact_surfaces() {
     let Some(corpus) = corpus_dir() else { return };

@@ -192,7 +192,7 @@ pub fn put_section(
 /// A zlib stream of `payload` made only of deflate's fixed-Huffman blocks. miniz_oxide (behind
 /// flate2) always writes dynamic blocks, whose code tables cost 30-40 bytes: on a section of a
 /// few hundred bytes (group names: `face_1, face_2, ...` and their order) fixed codes are
-/// smaller, as zlib itself would choose (bm2's names: 77 -> 49 bytes).
+/// smaller by most of that table, and zlib itself would choose them.
 fn zlib_static_blocks(payload: &[u8]) -> Option<Vec<u8>> {
     use miniz_oxide::deflate::core::{
         compress, create_comp_flags_from_zip_params, CompressionStrategy, CompressorOxide,

@@ -1,8 +1,8 @@
 //! Edge and face adjacency of a polygon mesh, built by sorting (no hashing), so every
 //! traversal order is deterministic.
 //!
-//! Private to `fit`; the lead may replace it with the shared topology module
-//! (`mesh::topology`) at merge time.
+//! Private to `fit`: its input may have edges with more than two faces, which this table
+//! lists where `mesh::topology`'s half-edge structure needs an oriented 2-manifold.
 
 use crate::mesh::{edge_key, ControlMesh};
 

@@ -2,18 +2,18 @@
 //! tolerance does not charge the codec for), and against which input triangles a decoded
 //! point's excess over that allowance is measured.
 //!
-//! Two ways the encoder used to overcharge coarse tessellations of curved faces (corpus
-//! trj4: cylinder bands with 50-degree facets, sagittas of 1-2 mm against a 0.3 mm
-//! tolerance):
+//! Two simple measures overcharge coarse tessellations of curved faces (corpus trj4:
+//! cylinder bands with 50-degree facets, sagittas of 1-2 mm against a 0.3 mm tolerance):
 //! * the allowance estimated from the angle between vertex normals misses the sagitta of a
 //!   facet that is slanted across the surface (a long chord on one side, a vertex on the
 //!   arc on the other: the area-weighted normals at the chord's ends are nearly parallel).
 //!   For cylinder and cone groups the surface is known, so the deviation of each facet from
 //!   it is computed instead ([`add_analytic_surface_allowance`]);
-//! * a decoded point was charged against the *nearest* input triangle only. In the
-//!   sagitta's shadow of a coarse curved face there are often other triangles (a plane
-//!   meeting it at a concave edge, a touching part of an assembly) that are nearer than the
-//!   face's own facets but have no allowance ([`OwnFaces`]).
+//! * charging a decoded point against the *nearest* input triangle only: in the sagitta's
+//!   shadow of a coarse curved face there are often other triangles (a plane meeting it at
+//!   a concave edge, a touching part of an assembly) that are nearer than the face's own
+//!   facets but have no allowance. The point is also measured against its own face's
+//!   triangles ([`OwnFaces`]).
 
 use glam::DVec3;
 

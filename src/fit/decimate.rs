@@ -376,8 +376,8 @@ impl<'a> State<'a> {
     /// degrees, so `w` is no corner of the patch). Such a triangle has no interior control
     /// point and its two boundary edges are one smooth crease: its subdivision surface sags
     /// from the chain towards the opposite edge (trj6_fine: a cone strip whose side chain
-    /// vertex slid onto a corner fanned it to three consecutive vertices of the bottom chain,
-    /// 3x over the tolerance however many control points were added elsewhere).
+    /// vertex slides onto a corner fans out to three consecutive vertices of the bottom chain
+    /// and stays 3x over the tolerance however many control points are added elsewhere).
     fn leaves_ear(&self, u: u32, v: u32, t: [u32; 3], f: u32) -> bool {
         let g = self.input.face_groups[f as usize];
         let rule = &self.input.rules[g as usize];

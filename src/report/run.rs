@@ -44,8 +44,8 @@ pub struct ReportOptions {
 }
 
 impl ReportOptions {
-    /// The full comparison of the issue: four tolerances, raw 10 bit, Draco -qp 6..14 at
-    /// -cl 10 and 7, three timing runs.
+    /// The full comparison (what `scode report` runs without `--quick`): four tolerances,
+    /// raw 10 bit, Draco -qp 6..14 at -cl 10 and 7, three timing runs.
     pub fn full() -> ReportOptions {
         ReportOptions {
             tolerances: vec![4e-3, 2e-3, 1e-3, 5e-4],

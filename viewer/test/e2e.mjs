@@ -7,7 +7,7 @@
 // subdivision levels chosen from screen size. Saves a screenshot per model and zoom. Then times
 // decode + refinement to at least 1 million triangles (+ extraction of the WebGL arrays) in the
 // page, and prints it with the gzipped size of the WebAssembly module. Timings are printed,
-// not asserted (performance goals live in BENCHMARKS.md).
+// not asserted: they depend on the machine and its load.
 //
 // Usage: node viewer/test/e2e.mjs [--docs]
 //   SCODE_BIN   scode binary (default: target/release/scode, else target/debug/scode)

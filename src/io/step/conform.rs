@@ -146,13 +146,12 @@ impl UvSurface for Analytic {
 /// good as the plane's distances, and parameters are often in incomparable units (a cone's
 /// angle in radians against its height in millimetres). On a 500 mm cone strip 15 degrees
 /// wide and 12 mm tall (corpus trj6) the raw plane is 500 times squashed along the angle:
-/// the triangulation joined boundary points 130 mm apart across the strip, facets sagged
-/// 4 mm from the cone against a 0.08 mm chordal tolerance, and every refinement point was
+/// there the triangulation joins boundary points 130 mm apart across the strip, facets sag
+/// 4 mm from the cone against a 0.08 mm chordal tolerance, and every refinement point is
 /// refused as "next to the boundary". Scaled by the surface's mean speed along each
 /// parameter, plane distances are close to surface distances. The fitted bytes follow the
-/// input triangles chaotically, so the encoder also tries the raw plane (session 11, corpus
-/// STEP files: stretched, Ventilator 9,675 -> 8,576 B and bug33398 6,866 -> 5,920, but
-/// linkrods 3,236 -> 3,621 and block_fillet3 442 -> 502).
+/// input triangles chaotically (the stretched plane makes some corpus files smaller by
+/// 10-15% and others larger by as much), so the encoder also tries the raw plane.
 struct Stretched<'a, S: UvSurface> {
     inner: &'a S,
     scale: [f64; 2],
@@ -318,7 +317,7 @@ const REPROJECT_OFF: f64 = 0.1;
 /// parameters when they are nearer; then unwraps periodic parameters along the loop again.
 /// The search from the previous point's parameters can stop in a local minimum a few
 /// tolerances off the surface (linkrods: a rational B-spline strip, three points in a row
-/// up to 16 tolerances off, put next to the strip's far edge, so the loop crossed itself),
+/// up to 16 tolerances off, put next to the strip's far edge, so the loop crosses itself),
 /// while a start between the neighbours on either side finds the point.
 fn reproject_between_neighbours<S: UvSurface>(
     surface: &S,
@@ -1394,8 +1393,8 @@ mod tests {
     /// curves as truck polylines them (corpus trj6 has such strips on a 500 mm cone, bounded
     /// by parabolas): the angle is in radians and the height in millimetres, so the plain
     /// parameter plane is 500 times squashed along the strip. Every facet must still be
-    /// within the chordal tolerance of the cylinder (before the plane was stretched to the
-    /// surface's lengths they sagged by up to 4 mm against 0.08 mm).
+    /// within the chordal tolerance of the cylinder (in the plain parameter plane they sag
+    /// by up to 4 mm against 0.08 mm).
     #[test]
     fn thin_strip_across_incomparable_parameters_meets_the_tolerance() {
         let r = 500.0;

@@ -87,8 +87,8 @@ pub struct StepOptions {
     /// Triangulate each face in its parameter plane stretched to the surface's lengths
     /// (default true), so that its Delaunay triangles and chord refinement see the surface's
     /// shapes where its parameters are in different units (a cone's angle in radians against
-    /// its height in millimetres); false triangulates in the raw parameters, as before
-    /// session 11. [`crate::pipeline::encode_step`] tries both.
+    /// its height in millimetres); false triangulates in the raw parameters, which makes the
+    /// smaller file on some models. [`crate::pipeline::encode_step`] tries both.
     pub stretch_parameter_plane: bool,
     /// Convert to millimetres using the file's LENGTH_UNIT (default true). When false, or when
     /// the file names no length unit, positions stay in file units.

@@ -310,7 +310,7 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                     // nearest points on the polyline, and refuse an edge whose curve misses a
                     // vertex. Nearest points on its segments, not its points: a nearly
                     // straight curve has few points, and a vertex in the middle of a long
-                    // segment is on the curve (corpus trj6: 48 faces skipped before).
+                    // segment is on the curve (corpus trj6 has 48 faces with such edges).
                     if va != vb && pts.len() > 2 {
                         let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
                         let (mut sa, da) = nearest_on_polyline(&pts, a);
@@ -321,8 +321,8 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
                         // false), and its closing point is both ends: there the edge
                         // starts at the first point and ends at the last, and an edge
                         // whose end comes before its start runs through the closing point
-                        // (corpus trj3: the edge ending at the closing point was the
-                        // complementary arc, and two cylinder faces were skipped).
+                        // (corpus trj3: taken as the start, the edge ending at the closing
+                        // point would be the complementary arc, and two faces would fail).
                         let closing = dv(&pts[0]);
                         let closed = closing.distance(dv(&pts[pts.len() - 1])) <= 1e-6 * diag;
                         if closed {

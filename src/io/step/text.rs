@@ -456,7 +456,7 @@ pub fn prepass(text: &str) -> (String, usize, usize) {
 
 /// Rewrites every PARABOLA that bounds edges as the B_SPLINE_CURVE_WITH_KNOTS it is over
 /// the edges' span: truck's conversion of a face with a parabola edge does not finish
-/// (trj6: every face bounded by one of its four parabolas hung, a thread spinning for the
+/// (trj6: every face bounded by one of its four parabolas hangs, a thread spinning for the
 /// rest of the process). ISO 10303-42 puts the parabola at `C + a (u^2 x + 2 u y)` (`C`,
 /// `x`, `y` from its placement, `a` its focal distance); between `u0` and `u1` that is
 /// exactly the quadratic Bezier curve with control points `P(u0)`, `P(u0) + (u1 - u0) / 2
