@@ -125,8 +125,9 @@ pub struct FitOptions {
 }
 
 /// When a round's worst excess stays above this fraction of the previous round's, adding
-/// control points has stopped paying and the fit moves to decode level 5 (once). 0.8 moved
-/// bug33398 to level 5 at round 5 for the same result as level 4 at twice the measuring time.
+/// control points has stopped paying and the fit moves to decode level 5 (once). A lower
+/// ratio moves models to level 5 that level 4 fits as well, at four times the triangles to
+/// measure.
 const STALL_RATIO: f64 = 0.85;
 
 impl Default for FitOptions {
@@ -672,8 +673,8 @@ fn add_curved_edge_allowance(
 /// tolerance (its groups failed about four times) and which already keeps every vertex
 /// cannot be refined any further: its interior control points become corners, so the
 /// decoded crease is the chain polyline itself. A smooth crease through few control points
-/// cannot follow a chain that turns by tens of degrees at a vertex (trj4: three-vertex
-/// chains between a blade and the hub, 49 degrees at the middle vertex); least squares then
+/// cannot follow a chain that turns by tens of degrees at a vertex (e.g. a three-vertex
+/// chain between a blade and a hub, 49 degrees at the middle vertex); least squares then
 /// cuts the turn and the blade's patch sags behind its facets near that vertex.
 const STUCK_CHAIN_TOL: f64 = 0.125;
 
@@ -695,8 +696,8 @@ const RELAX_STEP: f64 = 1.690_308_509_457_033; // 1 / sqrt(CLOSED_COST_STEP)
 /// The state a relaxation round starts from, to restore the groups it breaks.
 ///
 /// Refinement only ever adds control points, in steps sized for convergence, so a patch
-/// a little over the tolerance in one round often ends far within it (trj3's spheres: 1.1-1.5
-/// tol in round 2, about 390 control faces each after it, 145 in the mesh path). Once the
+/// a little over the tolerance in one round often ends far within it (a sphere patch 1.1-1.5
+/// tol off can end with more than twice the control faces it needs). Once the
 /// model is within tolerance, one round coarsens such patches again; where that fails, the
 /// converged thresholds come back and the model is measured again; the smaller model within
 /// tolerance is kept.
@@ -785,8 +786,8 @@ fn mean_group_edge(control: &ControlMesh, g: u32) -> f64 {
 /// Multiplies by `step` the decimation factor of group `g`'s input vertices within `radius`
 /// of a point where its decoded surface was out of tolerance; returns how many. Refining a
 /// closed patch only there, not everywhere, keeps the rest as coarse as it was fine
-/// (block_fillet3's sphere fails at its three corners: refined everywhere it went from 86 to
-/// 252 control vertices in one round).
+/// (a sphere corner patch that fails only at its three corners would otherwise triple its
+/// control vertices in one round).
 fn lower_cost_near(
     mesh: &ControlMesh,
     tris: &[[u32; 3]],
@@ -878,7 +879,7 @@ fn chains_near_failures(
         let closed = matches!(plans[g].kind, PatchKind::Closed);
         let pts = thin_points(&bad_points[g], 2.0 * tol);
         if pts.is_empty() {
-            // No located failure: refine them all, as before.
+            // No located failure: refine them all.
             for &c in &group_chains[g] {
                 refine[c] = true;
             }
@@ -1440,8 +1441,8 @@ impl ErrorMeter<'_> {
             }
         }
         // Subdivision output lists the descendants of each face together: one leaf per
-        // run of up to 16 triangles (8 before the measure kept its results between rounds:
-        // 16 builds faster and allocates less for the same answers).
+        // run of up to 16 triangles (the same answers as smaller leaves, a tree that builds
+        // faster and allocates less).
         let block = 16;
         let s_surface =
             TriangleSurface::with_blocks(surface_mesh.positions.clone(), s_tris.clone(), block)?;
@@ -1700,7 +1701,7 @@ pub(crate) fn with_faces_involved(e: Error, control: &ControlMesh) -> Error {
 /// A closest-point structure per group over the group's own triangles (`None` for a group
 /// without any). Each holds the group's own vertices only (in first-use order): the same
 /// triangles in the same order, so the same closest points, without a copy of every
-/// position per group (bug33398: 422 groups x 53k vertices).
+/// position per group (hundreds of groups times tens of thousands of vertices).
 fn group_surfaces_of(
     mesh: &ControlMesh,
     tris: &[[u32; 3]],
@@ -2196,10 +2197,10 @@ pub fn fit_model(
         }
         prev_worst = Some(worst);
         // Chains are refined only near where their groups fail (a plane with a hundred
-        // holes failing at one of them: nist 1152 -> 879 control vertices); the last rounds,
-        // and every round once the worst excess is within 1.5 tol, refine every chain of a
-        // failing group: convergence first (trj6: 7 rounds and 14.4 s on one thread without
-        // the latter, 6 and 10.6 s with it).
+        // holes failing at one of them keeps the other holes coarse); the last rounds, and
+        // every round once the worst excess is within 1.5 tol, refine every chain of a
+        // failing group: convergence first (near the tolerance, refining only near the
+        // failures takes more rounds than it saves control points).
         let chain_refine =
             if round + 4 >= opts.max_rounds || !keep_planes_on_faces || worst < 1.5 * tol {
                 let mut all = vec![false; net.chains.len()];
@@ -2277,8 +2278,8 @@ pub fn fit_model(
         // plane cuts a cone in a hyperbola, not in a curve affine in (theta, h, r)). A group
         // that failed as a boundary patch may fail because of such creases, and making it
         // closed does not change them: make the frame's owner closed too, so the crease
-        // becomes Cartesian and is fitted to its polyline (bug33398: the hexagon's sides
-        // next to its chamfer cones).
+        // becomes Cartesian and is fitted to its polyline (e.g. a hexagon's sides next to
+        // its chamfer cones).
         for g in refitted_closed {
             for &c in &group_chains[g] {
                 let Some(h) = chain_frame_owner(&net.chains[c].groups, &plans) else {
@@ -2316,7 +2317,8 @@ pub fn fit_model(
     {
         if segmented {
             // The segmenter's region names ("face_i") are made up here, not the input's: do
-            // not spend bytes on them (fandisk: 72 of 460 bytes). Groups and patch kinds stay.
+            // not spend bytes on them (they can be a sixth of a small file). Groups and patch
+            // kinds stay.
             for g in &mut control.groups {
                 g.name.clear();
             }
