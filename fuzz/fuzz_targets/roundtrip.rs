@@ -95,6 +95,7 @@ fuzz_target!(|inp: Input| {
         store_group_names: true,
         // Steps between whole bit counts (the fitting encoder's half bits among them).
         step_scale: 1.0 + f64::from(inp.bits / 21) * 0.125,
+        grid_covers: None,
     };
     // Non-manifold control meshes and non-orientable raw meshes are refused: fine.
     let Ok((bytes, map)) = encode_with_map(&m, &opts) else { return };

@@ -61,6 +61,11 @@ pub struct EncodeOptions {
     /// for half a bit coarser) needs no format support. Positions use grid values
     /// `0..=(2^bits - 1) / step_scale` only.
     pub step_scale: f64,
+    /// A box (min, max corners) the position grid covers besides the positions (default
+    /// none). An encoder that encodes variations of one model, such as the fit's rounds,
+    /// gives them one box so that one grid quantises them all: parts that did not change
+    /// quantise to the same points.
+    pub grid_covers: Option<[glam::DVec3; 2]>,
 }
 
 impl Default for EncodeOptions {
@@ -70,6 +75,7 @@ impl Default for EncodeOptions {
             content: Content::RawMesh,
             store_group_names: true,
             step_scale: 1.0,
+            grid_covers: None,
         }
     }
 }
@@ -786,6 +792,13 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             opts.step_scale
         )));
     }
+    if let Some([lo, hi]) = opts.grid_covers {
+        if !(lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()) {
+            return Err(Error::Parameter(format!(
+                "the grid's box must be finite with min <= max, got {lo} .. {hi}"
+            )));
+        }
+    }
     mesh.validate()?;
     if mesh.face_count() > 0 && mesh.groups.is_empty() {
         return Err(Error::Mesh("faces but no groups".into()));
@@ -927,7 +940,14 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     }
 
     // Patches section.
-    let quant = Quantizer::for_positions(&mesh.positions, bits, opts.step_scale);
+    let quant = match opts.grid_covers {
+        None => Quantizer::for_positions(&mesh.positions, bits, opts.step_scale),
+        Some(corners) => {
+            let mut covered = mesh.positions.clone();
+            covered.extend(corners);
+            Quantizer::for_positions(&covered, bits, opts.step_scale)
+        }
+    };
     let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
 
     // Creases section.

@@ -116,6 +116,46 @@ fn small_meshes_round_trip() {
     }
 }
 
+/// `EncodeOptions::grid_covers`: the grid covers the given box as well as the positions (so
+/// two meshes encoded with one box share one grid), positions round-trip within half a step,
+/// and a box that is not finite or not ordered is refused.
+#[test]
+fn a_given_box_is_covered_by_the_grid() {
+    let m = torus(9, 7);
+    let (lo, hi) = m.bounding_box().unwrap();
+    let corners = [lo - DVec3::splat(3.0), hi + DVec3::new(1.0, 2.0, 5.0)];
+    let covering = EncodeOptions {
+        grid_covers: Some(corners),
+        ..opts()
+    };
+    let bytes = check_round_trip(&m, &covering);
+    let h = decode(&bytes, &Limits::default()).unwrap().header;
+    for (i, &min) in h.bbox_min.iter().enumerate() {
+        assert!(min <= corners[0][i], "{h:?}");
+        assert!(min + h.bbox_extent >= corners[1][i], "{h:?}");
+    }
+    // A second mesh inside the box gets the same grid.
+    let mut moved = m.clone();
+    moved.positions[0] += DVec3::splat(0.5);
+    let bytes2 = encode(&moved, &covering).unwrap();
+    let h2 = decode(&bytes2, &Limits::default()).unwrap().header;
+    assert_eq!((h.bbox_min, h.bbox_extent), (h2.bbox_min, h2.bbox_extent));
+    for bad in [
+        [DVec3::ONE, DVec3::ZERO],
+        [DVec3::ZERO, DVec3::splat(f64::INFINITY)],
+        [DVec3::splat(f64::NAN), DVec3::ONE],
+    ] {
+        let e = encode(
+            &m,
+            &EncodeOptions {
+                grid_covers: Some(bad),
+                ..opts()
+            },
+        );
+        assert!(matches!(e, Err(Error::Parameter(_))), "{bad:?}: {e:?}");
+    }
+}
+
 /// A step scale coarsens the grid without changing the bit count: every position is within
 /// half the (scaled) step, the file is smaller, and a scale below 1 is refused.
 #[test]

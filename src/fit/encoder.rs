@@ -41,14 +41,13 @@ use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole
 use super::domain::PlaneDomain;
 use super::exact::onto_all;
 pub use super::exact::ExactSurface;
+use super::measure::ErrorMeter;
 use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
 use super::segment::{segment, SegmentOptions};
 use crate::error::{Error, Result};
 use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, PatchKind};
-use crate::metrics::{
-    closest_points_near, sample_surface, SampleCount, SurfaceSample, TriangleSurface,
-};
-use crate::subdiv::{subdivide, Refinement, SubdivOptions};
+use crate::metrics::TriangleSurface;
+use crate::subdiv::Refinement;
 
 /// What the input says a group's surface is (a STEP face type or a sidecar entry).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1242,394 +1241,6 @@ fn fit_geometry(
     Ok(())
 }
 
-/// Error of a decoded surface against the input, measured both ways.
-struct Measurement {
-    error: FitError,
-    /// Per input group: largest excess over the chord allowance, where, and which way.
-    group_excess: Vec<(f64, DVec3, &'static str)>,
-    /// Per input group: the sample points (both ways) whose excess is over the tolerance,
-    /// for refining closed patches where they fail.
-    bad_points: Vec<Vec<DVec3>>,
-}
-
-/// Hashing for the exact-geometry keys of [`MeasureCache`] (bit patterns of coordinates, no
-/// adversarial input): rustc-hash's Fx hasher instead of SipHash's cost. A hash only finds
-/// candidates; every hit is checked against the exact corners.
-type GeomBuild = rustc_hash::FxBuildHasher;
-
-fn point_key(p: DVec3) -> [u64; 3] {
-    [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
-}
-
-fn hash_words(words: &[u64]) -> u64 {
-    use std::hash::Hasher;
-    let mut h = rustc_hash::FxHasher::default();
-    for &w in words {
-        h.write_u64(w);
-    }
-    h.finish()
-}
-
-/// A triangle's corners; triangles with bit-identical corners, in the same order, give
-/// bit-identical closest points.
-type TriGeom = [DVec3; 3];
-
-fn same_geom(a: &TriGeom, b: &TriGeom) -> bool {
-    a.iter().zip(b).all(|(p, q)| point_key(*p) == point_key(*q))
-}
-
-/// A decoded surface's triangles by a hash of their exact geometry (a hash hit is checked
-/// against the stored corners, so collisions only cost a reuse, never exactness).
-struct TriIndex {
-    positions: Vec<DVec3>,
-    triangles: Vec<[u32; 3]>,
-    by_hash: std::collections::HashMap<u64, u32, GeomBuild>,
-}
-
-impl TriIndex {
-    fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> (Self, Vec<u64>) {
-        let vh: Vec<u64> = positions
-            .iter()
-            .map(|&p| hash_words(&point_key(p)))
-            .collect();
-        let th: Vec<u64> = triangles
-            .iter()
-            .map(|t| hash_words(&t.map(|v| vh[v as usize])))
-            .collect();
-        let mut by_hash =
-            std::collections::HashMap::with_capacity_and_hasher(th.len(), GeomBuild::default());
-        for (t, &h) in th.iter().enumerate() {
-            by_hash.entry(h).or_insert(t as u32);
-        }
-        let index = TriIndex {
-            positions,
-            triangles,
-            by_hash,
-        };
-        (index, th)
-    }
-
-    fn geom(&self, t: u32) -> TriGeom {
-        self.triangles[t as usize].map(|v| self.positions[v as usize])
-    }
-
-    fn contains(&self, hash: u64, g: &TriGeom) -> bool {
-        self.by_hash
-            .get(&hash)
-            .is_some_and(|&t| same_geom(&self.geom(t), g))
-    }
-}
-
-fn geom_hash(g: &TriGeom) -> u64 {
-    hash_words(&g.map(|p| hash_words(&point_key(p))))
-}
-
-/// What the previous full measurement found, keyed by exact geometry so the next one only
-/// queries what changed. A round re-decimates and refits only a few groups, and while the
-/// quantisation grid (the control mesh's box) stays put, the decoded surface away from
-/// them comes out bit-identical; but vertex and face numbers shift everywhere, so only
-/// coordinates identify what is unchanged. Every reuse is exact (the same distances as a
-/// full query), so the encoder's decisions and output do not depend on it.
-#[derive(Default)]
-struct MeasureCache {
-    /// Decoded->input: a decoded sample point -> its distance to the input and the input
-    /// triangle hit (the input surface never changes: a pure function of the point).
-    out_hits: std::collections::HashMap<[u64; 3], (f64, u32), GeomBuild>,
-    /// The previous decoded surface.
-    tris: Option<TriIndex>,
-    /// Input->decoded, per input sample: the previous distance and the triangle of the
-    /// previous surface that gave it. If that triangle is still there, the new distance is
-    /// the smaller of the old one and the distance to the triangles that are new.
-    in_hits: Vec<(f64, TriGeom)>,
-    /// Samples that were worst last time (input samples; decoded samples by index), probed
-    /// first by [`ErrorMeter::measure_unless_over`].
-    probe_in: Vec<usize>,
-    probe_out: Vec<usize>,
-}
-
-/// Measures decoded surfaces against one input: its samples, BVH and chord allowance are
-/// built once and reused by every round.
-struct ErrorMeter<'a> {
-    mesh: &'a ControlMesh,
-    input_samples: Vec<SurfaceSample>,
-    input_surface: &'a TriangleSurface,
-    chord: &'a [f64],
-    /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
-    own_faces: OwnFaces<'a>,
-    error_samples: usize,
-    tol: f64,
-    cache: std::cell::RefCell<MeasureCache>,
-}
-
-/// How many of the worst samples of each direction a probe tests.
-const PROBE_SAMPLES: usize = 2000;
-
-/// Indices of the (up to) `k` largest values, deterministic order.
-fn top_k(values: &[f64], k: usize) -> Vec<usize> {
-    let mut idx: Vec<usize> = (0..values.len()).collect();
-    if idx.len() > k {
-        idx.select_nth_unstable_by(k, |&a, &b| values[b].total_cmp(&values[a]).then(a.cmp(&b)));
-        idx.truncate(k);
-    }
-    idx.sort_unstable();
-    idx
-}
-
-impl ErrorMeter<'_> {
-    /// `decoded` is the control mesh as the decoder sees it, with the input's group order.
-    fn measure(&self, decoded: &ControlMesh, level: u8) -> Result<Measurement> {
-        Ok(self
-            .measure_unless_over(decoded, level, None)?
-            .expect("no probe without a bound"))
-    }
-
-    /// Like [`ErrorMeter::measure`], but with `over = Some(max_cap)` first measures the
-    /// samples that were worst last time and returns `None` as soon as one of them shows
-    /// the full measurement would exceed the tolerance beyond the chord allowance or
-    /// `max_cap` (exact: they are samples of the full measurement).
-    fn measure_unless_over(
-        &self,
-        decoded: &ControlMesh,
-        level: u8,
-        over: Option<f64>,
-    ) -> Result<Option<Measurement>> {
-        let (mut surface_mesh, _) = subdivide(
-            decoded,
-            u32::from(level),
-            &SubdivOptions {
-                limit: true,
-                normals: false,
-                ..Default::default()
-            },
-        )?;
-        let s_tris: Vec<[u32; 3]> = surface_mesh.faces().map(|f| [f[0], f[1], f[2]]).collect();
-        let s_samples = sample_surface(
-            &surface_mesh.positions,
-            &s_tris,
-            SampleCount::Total(self.error_samples),
-            true,
-            0x5C0D_E000_0000_0002,
-        );
-        // Most points of a fit worth measuring are within a few tolerances of the other
-        // surface: search that far first (same answers, a fraction of the tree visited).
-        let radius = 2.0 * self.tol;
-        let mut cache = self.cache.borrow_mut();
-        let fails = |d: f64, chord: f64, max_cap: f64| d - chord > self.tol || d > max_cap;
-        if let Some(max_cap) = over {
-            let idx: Vec<usize> = cache
-                .probe_out
-                .iter()
-                .copied()
-                .filter(|&i| i < s_samples.len())
-                .collect();
-            let pts: Vec<DVec3> = idx.iter().map(|&i| s_samples[i].point).collect();
-            let hits = closest_points_near(&pts, self.input_surface, radius);
-            // The same excess as the full measure below (own face included).
-            if idx.iter().zip(&hits).any(|(&i, h)| {
-                let s = &s_samples[i];
-                let g = surface_mesh.face_groups[s.triangle as usize] as usize;
-                let e = self.own_faces.excess(
-                    s.point,
-                    g,
-                    self.mesh.face_groups[h.triangle as usize] as usize,
-                    h.distance - self.chord[h.triangle as usize],
-                    self.chord,
-                );
-                e > self.tol || h.distance > max_cap
-            }) {
-                return Ok(None);
-            }
-        }
-        // Subdivision output lists the descendants of each face together: one leaf per
-        // run of up to 16 triangles (the same answers as smaller leaves, a tree that builds
-        // faster and allocates less).
-        let block = 16;
-        let s_surface =
-            TriangleSurface::with_blocks(surface_mesh.positions.clone(), s_tris.clone(), block)?;
-        if let Some(max_cap) = over {
-            let idx = &cache.probe_in;
-            let pts: Vec<DVec3> = idx.iter().map(|&i| self.input_samples[i].point).collect();
-            let hits = closest_points_near(&pts, &s_surface, radius);
-            if idx.iter().zip(&hits).any(|(&i, h)| {
-                fails(
-                    h.distance,
-                    self.chord[self.input_samples[i].triangle as usize],
-                    max_cap,
-                )
-            }) {
-                return Ok(None);
-            }
-        }
-        let n_tris = s_tris.len();
-        let (new_index, new_hash) =
-            TriIndex::new(std::mem::take(&mut surface_mesh.positions), s_tris);
-        let added: Vec<u32> = match &cache.tris {
-            None => (0..n_tris as u32).collect(),
-            Some(old) => (0..n_tris as u32)
-                .filter(|&t| !old.contains(new_hash[t as usize], &new_index.geom(t)))
-                .collect(),
-        };
-        let n_in = self.input_samples.len();
-        let reuse_in = cache.tris.is_some() && cache.in_hits.len() == n_in;
-        let mut d_in = vec![0.0f64; n_in];
-        let mut in_geom: Vec<TriGeom> = vec![[DVec3::ZERO; 3]; n_in];
-        // Samples whose previous triangle is gone: a full query.
-        let mut is_full = vec![true; n_in];
-        if reuse_in {
-            for (i, full) in is_full.iter_mut().enumerate() {
-                let g = &cache.in_hits[i].1;
-                *full = !new_index.contains(geom_hash(g), g);
-            }
-        }
-        let full: Vec<usize> = (0..n_in).filter(|&i| is_full[i]).collect();
-        let full_points: Vec<DVec3> = full.iter().map(|&i| self.input_samples[i].point).collect();
-        for (&i, h) in full
-            .iter()
-            .zip(closest_points_near(&full_points, &s_surface, radius))
-        {
-            d_in[i] = h.distance;
-            in_geom[i] = new_index.geom(h.triangle);
-        }
-        // Only samples that keep their old hit look at the new triangles: when every sample
-        // needs a full query (the whole surface moved), there is nothing to build.
-        let added_surface = if added.is_empty() || !reuse_in || full.len() == n_in {
-            None
-        } else {
-            // The added triangles' own vertices only (the same corners, so the same boxes and
-            // closest points), not a copy of every position.
-            let mut local = vec![u32::MAX; new_index.positions.len()];
-            let mut positions = Vec::new();
-            let triangles: Vec<[u32; 3]> = added
-                .iter()
-                .map(|&t| {
-                    new_index.triangles[t as usize].map(|v| {
-                        if local[v as usize] == u32::MAX {
-                            local[v as usize] = positions.len() as u32;
-                            positions.push(new_index.positions[v as usize]);
-                        }
-                        local[v as usize]
-                    })
-                })
-                .collect();
-            Some(TriangleSurface::with_blocks(positions, triangles, block)?)
-        };
-        for i in (0..n_in).filter(|&i| !is_full[i]) {
-            let (d_old, g_old) = cache.in_hits[i];
-            d_in[i] = d_old;
-            in_geom[i] = g_old;
-            if let Some(surf) = &added_surface {
-                // Only a new triangle can be nearer than the old hit, which is still there;
-                // the bound is padded for rounding, a tie keeps the old distance.
-                let p = self.input_samples[i].point;
-                if let Some(h) = surf.closest_point_within(p, d_old * (1.0 + 1e-9) + 1e-300) {
-                    if h.distance < d_old {
-                        d_in[i] = h.distance;
-                        in_geom[i] = new_index.geom(added[h.triangle as usize]);
-                    }
-                }
-            }
-        }
-        cache.in_hits = d_in.iter().copied().zip(in_geom).collect();
-        cache.tris = Some(new_index);
-        // Decoded->input: reuse the hits of points seen last time.
-        let n_out = s_samples.len();
-        let mut out_hits: Vec<(f64, u32)> = vec![(0.0, 0); n_out];
-        let mut miss = Vec::new();
-        for (i, s) in s_samples.iter().enumerate() {
-            match cache.out_hits.get(&point_key(s.point)) {
-                Some(&h) => out_hits[i] = h,
-                None => miss.push(i),
-            }
-        }
-        let miss_points: Vec<DVec3> = miss.iter().map(|&i| s_samples[i].point).collect();
-        for (&i, h) in miss.iter().zip(closest_points_near(
-            &miss_points,
-            self.input_surface,
-            radius,
-        )) {
-            out_hits[i] = (h.distance, h.triangle);
-        }
-        let mut out_map: std::collections::HashMap<[u64; 3], (f64, u32), GeomBuild> =
-            std::collections::HashMap::with_capacity_and_hasher(n_out, GeomBuild::default());
-        for (s, &h) in s_samples.iter().zip(&out_hits) {
-            out_map.insert(point_key(s.point), h);
-        }
-        cache.out_hits = out_map;
-        let stats = |d: &mut dyn Iterator<Item = f64>| -> (f64, f64, f64) {
-            let (mut max, mut sq, mut sum, mut n) = (0.0f64, 0.0, 0.0, 0usize);
-            for x in d {
-                max = max.max(x);
-                sq += x * x;
-                sum += x;
-                n += 1;
-            }
-            let n = n.max(1) as f64;
-            (max, (sq / n).sqrt(), sum / n)
-        };
-        let (max_in, rms_in, mean_in) = stats(&mut d_in.iter().copied());
-        let (max_out, rms_out, mean_out) = stats(&mut out_hits.iter().map(|h| h.0));
-        // Excess over the tolerance, after allowing for the input's own chord error, and
-        // where it is.
-        let mut group_excess = vec![(0.0f64, DVec3::ZERO, "in"); self.mesh.groups.len()];
-        let mut bad_points = vec![Vec::new(); self.mesh.groups.len()];
-        let mut worst = 0.0f64;
-        let mut excess_in = Vec::with_capacity(n_in);
-        for (s, &d) in self.input_samples.iter().zip(&d_in) {
-            let e = d - self.chord[s.triangle as usize];
-            excess_in.push(e);
-            worst = worst.max(e);
-            let g = self.mesh.face_groups[s.triangle as usize] as usize;
-            if e > group_excess[g].0 {
-                group_excess[g] = (e, s.point, "input->decoded");
-            }
-            if e > self.tol {
-                bad_points[g].push(s.point);
-            }
-        }
-        let mut excess_out = Vec::with_capacity(n_out);
-        for (s, h) in s_samples.iter().zip(&out_hits) {
-            let g = surface_mesh.face_groups[s.triangle as usize] as usize;
-            let e = self.own_faces.excess(
-                s.point,
-                g,
-                self.mesh.face_groups[h.1 as usize] as usize,
-                h.0 - self.chord[h.1 as usize],
-                self.chord,
-            );
-            excess_out.push(e);
-            worst = worst.max(e);
-            if g < group_excess.len() && e > group_excess[g].0 {
-                group_excess[g] = (e, s.point, "decoded->input");
-            }
-            if g < bad_points.len() && e > self.tol {
-                bad_points[g].push(s.point);
-            }
-        }
-        // The next probe: the worst samples by excess and by plain distance.
-        let mut probe_in = top_k(&excess_in, PROBE_SAMPLES);
-        probe_in.extend(top_k(&d_in, PROBE_SAMPLES / 4));
-        probe_in.sort_unstable();
-        probe_in.dedup();
-        let mut probe_out = top_k(&excess_out, PROBE_SAMPLES);
-        let d_out: Vec<f64> = out_hits.iter().map(|h| h.0).collect();
-        probe_out.extend(top_k(&d_out, PROBE_SAMPLES / 4));
-        probe_out.sort_unstable();
-        probe_out.dedup();
-        cache.probe_in = probe_in;
-        cache.probe_out = probe_out;
-        Ok(Some(Measurement {
-            error: FitError {
-                max: max_in.max(max_out),
-                rms: rms_in.max(rms_out),
-                mean: mean_in.max(mean_out),
-                max_beyond_chord: worst,
-            },
-            group_excess,
-            bad_points,
-        }))
-    }
-}
-
 /// Adds to a mesh error the CAD faces (groups) whose control faces break the control mesh's
 /// topology (a side used twice in one direction, or by more than two faces; else the faces
 /// around a vertex with more than two open sides, where holes touch), so a failing
@@ -2009,27 +1620,20 @@ pub fn fit_model(
     // A segmented input's groups are not the input's: no exact surfaces then.
     let exact_surfaces: &[Option<ExactSurface>] =
         if segmented { &[] } else { &opts.exact_surfaces };
-    let meter = ErrorMeter {
-        mesh: m_mesh,
-        input_samples: sample_surface(
-            &m_mesh.positions,
-            m_tris,
-            SampleCount::Total(opts.error_samples),
-            true,
-            0x5C0D_E000_0000_0001,
-        ),
-        input_surface: m_surface,
-        chord: m_chord,
-        own_faces: OwnFaces {
+    let meter = ErrorMeter::new(
+        m_mesh,
+        m_tris,
+        m_surface,
+        m_chord,
+        OwnFaces {
             surfaces: m_group_surfaces,
             triangles: m_group_tris,
             max_allowance: &group_max_chord,
             exact: exact_surfaces,
         },
-        error_samples: opts.error_samples,
+        opts.error_samples,
         tol,
-        cache: Default::default(),
-    };
+    );
     // Per input vertex, a factor on its closed patch's decimation threshold, lowered round by
     // round where the patch's decoded surface is off (see `lower_cost_near`).
     let mut vertex_cost = vec![1.0f64; mesh.vertex_count()];
@@ -2082,13 +1686,15 @@ pub fn fit_model(
         report.timings.push(("fit", t_fit));
         report.timings.push(("measure", t.elapsed().as_secs_f64()));
         report.notes.push(format!(
-            "round {}: {} control vertices, level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}",
+            "round {}: {} control vertices, level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}; {} of {} faces measured anew",
             round + 1,
             built.control.vertex_count(),
             err.max,
             err.max / tol,
             err.max_beyond_chord / tol,
-            err.rms
+            err.rms,
+            measured.changed_groups,
+            mesh.groups.len()
         ));
         let ok = err.max_beyond_chord <= tol;
         let better = best.as_ref().is_none_or(|b| {

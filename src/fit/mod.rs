@@ -12,6 +12,7 @@ pub mod domain;
 pub mod encoder;
 mod exact;
 mod linalg;
+mod measure;
 pub mod primitives;
 pub mod segment;
 

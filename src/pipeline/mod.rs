@@ -11,6 +11,7 @@ use crate::fit::encoder::{fit_model, ExactSurface, FitOptions, FitReport, Surfac
 use crate::fit::primitives::Primitive;
 use crate::io::faces_json::{self, SurfaceType};
 use crate::mesh::ControlMesh;
+use glam::DVec3;
 
 mod search;
 pub use search::{
@@ -31,6 +32,12 @@ const QUARTER_BIT_SCALES: [f64; 4] = [
     std::f64::consts::SQRT_2,
     1.681_792_830_507_429,
 ];
+
+/// The margin of the fitted models' quantisation grid around the input's box, as a fraction
+/// of the box's largest extent on each side: control points of convex closed patches lie
+/// outside the surface, and the grid covers them (a control point beyond the margin grows the
+/// box for its round alone).
+const GRID_MARGIN: f64 = 1.0 / 32.0;
 
 /// Options of [`encode_fitted`] and [`encode_step`].
 #[derive(Clone, Debug, PartialEq)]
@@ -196,6 +203,14 @@ pub(crate) fn encode_fitted_once(
         // The caller chose the precision: keep it.
         fit_opts.max_coarser_bits = 0;
     }
+    // One grid for every round and step of the fit: the input's box with a margin for
+    // control points outside it (those of a convex closed patch lie outside its surface).
+    // A round that changes a few faces then decodes the others bit-identically, and the
+    // measurement keeps their results (see `fit::measure`).
+    let grid_covers = input.bounding_box().map(|(lo, hi)| {
+        let margin = DVec3::splat(GRID_MARGIN * (hi - lo).max_element());
+        [lo - margin, hi + margin]
+    });
     // `coarser` counts quarter bits: `coarser / 4` whole bits fewer, and the step times
     // `2^((coarser % 4) / 4)` (`EncodeOptions::step_scale`).
     let encode_opts = |level: u8, coarser: u8| EncodeOptions {
@@ -207,6 +222,7 @@ pub(crate) fn encode_fitted_once(
         },
         store_group_names: opts.store_group_names,
         step_scale: QUARTER_BIT_SCALES[usize::from(coarser % 4)],
+        grid_covers,
     };
     // The codec numbers groups in its own traversal order; the fit attributes errors to
     // groups by the input's numbering, so give the decoded mesh the input's group order.

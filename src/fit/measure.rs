@@ -1,0 +1,631 @@
+//! The fit's error measurement: the decoded surface against the input (or a reference
+//! tessellation of the same faces), both ways, per CAD face.
+//!
+//! A refinement round changes a few faces and leaves the others' decoded triangles
+//! bit-identical, so the measurement is kept per face ([`GroupDecoded`]): a face whose decoded
+//! triangles did not change keeps its closest-point index, its samples and their distances to
+//! the input, and only changed faces are indexed, sampled and queried again. Every reuse is
+//! exact: the distances are those a full measurement gives, so the encoder's decisions do not
+//! depend on what was cached.
+
+use std::sync::Mutex;
+
+use glam::DVec3;
+
+use super::allowance::OwnFaces;
+use super::encoder::FitError;
+use crate::error::Result;
+use crate::mesh::ControlMesh;
+use crate::metrics::{
+    closest_points_near, sample_surface, SampleCount, SurfaceSample, TriangleSurface,
+};
+use crate::subdiv::{subdivide, SubdivOptions};
+
+/// Error of a decoded surface against the input, measured both ways.
+pub(crate) struct Measurement {
+    pub error: FitError,
+    /// Per input group: largest excess over the chord allowance, where, and which way.
+    pub group_excess: Vec<(f64, DVec3, &'static str)>,
+    /// Per input group: the sample points (both ways) whose excess is over the tolerance,
+    /// for refining closed patches where they fail.
+    pub bad_points: Vec<Vec<DVec3>>,
+    /// Faces whose decoded triangles changed since the previous measurement, which were
+    /// indexed, sampled and measured again (the others kept their results).
+    pub changed_groups: usize,
+}
+
+/// One face's decoded triangles and what was measured on them. Everything in it is a
+/// function of the triangles' corners alone (and of the input, which never changes), so it
+/// is reused while the face decodes to bit-identical corners.
+struct GroupDecoded {
+    /// Closest-point index over the face's decoded triangles, in output order (which is
+    /// what identifies them: see [`GroupDecoded::same_triangles`]); `None` for a face
+    /// without any.
+    surface: Option<TriangleSurface>,
+    /// Bounding box of the corners: a point farther from it than a distance already found
+    /// cannot find a nearer point on this face.
+    lo: DVec3,
+    hi: DVec3,
+    /// Per decoded sample (the face's vertices, then random points by area): its excess
+    /// over the input's chord allowance (see [`OwnFaces::excess`]) and its plain distance
+    /// to the input. Points are kept only where they are needed (below): a face at a fine
+    /// level has millions of samples.
+    samples: Vec<[f64; 2]>,
+    /// The sample of largest excess (its excess and point), if any.
+    worst: Option<(f64, DVec3)>,
+    /// The samples whose excess is over the tolerance (index, point), in sample order.
+    over_tolerance: Vec<(u32, DVec3)>,
+}
+
+/// Exact bits of a point, for identity (not equality of values: -0.0 and 0.0 differ).
+fn bits(p: DVec3) -> [u64; 3] {
+    p.to_array().map(f64::to_bits)
+}
+
+impl GroupDecoded {
+    /// Whether the face's triangles are `faces` of `mesh`, corner by corner, bit for bit.
+    fn same_triangles(&self, mesh: &ControlMesh, faces: &[u32]) -> bool {
+        let Some(s) = &self.surface else {
+            return faces.is_empty();
+        };
+        s.triangles().len() == faces.len()
+            && s.triangles().iter().zip(faces).all(|(t, &f)| {
+                let face = mesh.face(f as usize);
+                (0..3).all(|k| {
+                    bits(s.positions()[t[k] as usize]) == bits(mesh.positions[face[k] as usize])
+                })
+            })
+    }
+
+    /// Distance from `p` to the box (0 inside).
+    fn box_distance(&self, p: DVec3) -> f64 {
+        (self.lo - p).max(p - self.hi).max(DVec3::ZERO).length()
+    }
+}
+
+/// What the previous full measurement kept for the next one.
+#[derive(Default)]
+struct MeasureCache {
+    /// By group: its decoded triangles and their measurement.
+    groups: Vec<GroupDecoded>,
+    /// Input->decoded, per input sample: the distance and the group holding the nearest
+    /// decoded point. While that group is unchanged the distance is still reachable, so
+    /// only changed groups can bring it down.
+    in_hits: Vec<(f64, u32)>,
+    /// Input samples that were worst last time, and decoded samples (group, index), probed
+    /// first by [`ErrorMeter::measure_unless_over`].
+    probe_in: Vec<usize>,
+    probe_out: Vec<(u32, u32)>,
+}
+
+/// Measures decoded surfaces against one input: its samples, index and chord allowance are
+/// built once and reused by every round.
+pub(crate) struct ErrorMeter<'a> {
+    mesh: &'a ControlMesh,
+    input_samples: Vec<SurfaceSample>,
+    input_surface: &'a TriangleSurface,
+    chord: &'a [f64],
+    /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
+    own_faces: OwnFaces<'a>,
+    /// Random decoded samples per group (besides its vertices), by the input face's share of
+    /// the input's area: fixed, so an unchanged face keeps its samples.
+    group_samples: Vec<usize>,
+    tol: f64,
+    /// Behind a lock only so the meter can be shared by the parallel queries; one
+    /// measurement at a time holds it.
+    cache: Mutex<MeasureCache>,
+}
+
+/// How many of the worst samples of each direction a probe tests.
+const PROBE_SAMPLES: usize = 2000;
+
+/// Triangles of one leaf of a face's closest-point index (subdivision lists the
+/// descendants of each control face together, so runs of output triangles are compact).
+const LEAF_TRIANGLES: usize = 16;
+
+/// Indices of the (up to) `k` largest values, deterministic order.
+fn top_k(values: &[f64], k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..values.len()).collect();
+    if idx.len() > k {
+        idx.select_nth_unstable_by(k, |&a, &b| values[b].total_cmp(&values[a]).then(a.cmp(&b)));
+        idx.truncate(k);
+    }
+    idx.sort_unstable();
+    idx
+}
+
+/// Maps `f` over `items` (in parallel with the `parallel` feature), results in order.
+fn map_ordered<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync + Send) -> Vec<R> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter().map(f).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter().map(f).collect()
+    }
+}
+
+impl<'a> ErrorMeter<'a> {
+    /// A meter of `mesh` (triangulated: `triangles` are its faces) with `error_samples`
+    /// random samples each way, besides the vertices.
+    pub fn new(
+        mesh: &'a ControlMesh,
+        triangles: &[[u32; 3]],
+        input_surface: &'a TriangleSurface,
+        chord: &'a [f64],
+        own_faces: OwnFaces<'a>,
+        error_samples: usize,
+        tol: f64,
+    ) -> Self {
+        let input_samples = sample_surface(
+            &mesh.positions,
+            triangles,
+            SampleCount::Total(error_samples),
+            true,
+            0x5C0D_E000_0000_0001,
+        );
+        let mut area = vec![0.0f64; mesh.groups.len()];
+        for (t, g) in triangles.iter().zip(&mesh.face_groups) {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+            if let Some(x) = area.get_mut(*g as usize) {
+                *x += 0.5 * (b - a).cross(c - a).length();
+            }
+        }
+        let total: f64 = area.iter().sum();
+        let group_samples = area
+            .iter()
+            .map(|&a| {
+                if total > 0.0 && a.is_finite() {
+                    (error_samples as f64 * a / total).ceil() as usize
+                } else {
+                    0
+                }
+            })
+            .collect();
+        ErrorMeter {
+            mesh,
+            input_samples,
+            input_surface,
+            chord,
+            own_faces,
+            group_samples,
+            tol,
+            cache: Default::default(),
+        }
+    }
+
+    /// `decoded` is the control mesh as the decoder sees it, with the input's group order.
+    pub fn measure(&self, decoded: &ControlMesh, level: u8) -> Result<Measurement> {
+        Ok(self
+            .measure_unless_over(decoded, level, None)?
+            .expect("no probe without a bound"))
+    }
+
+    /// The excess of a decoded point of group `g` whose nearest input triangle is `hit`
+    /// at `distance`.
+    fn out_excess(&self, p: DVec3, g: usize, hit: u32, distance: f64) -> f64 {
+        self.own_faces.excess(
+            p,
+            g,
+            self.mesh.face_groups[hit as usize] as usize,
+            distance - self.chord[hit as usize],
+            self.chord,
+        )
+    }
+
+    /// Distance from input sample `p` (of input group `own`) to the decoded surface, and the
+    /// group holding the nearest point: among `candidates` (all groups when `None`), its own
+    /// group first, then every other group whose box is nearer than the best so far; `best`
+    /// is a distance already reached (infinite for none).
+    fn nearest_decoded(
+        p: DVec3,
+        own: usize,
+        groups: &[&GroupDecoded],
+        candidates: Option<&[usize]>,
+        mut best: (f64, u32),
+    ) -> (f64, u32) {
+        let try_group = |g: usize, best: &mut (f64, u32)| {
+            let gd = groups[g];
+            if gd.box_distance(p) > best.0 {
+                return;
+            }
+            let Some(s) = &gd.surface else { return };
+            let hit = if best.0.is_finite() {
+                s.closest_point_within(p, best.0 * (1.0 + 1e-9) + 1e-300)
+            } else {
+                Some(s.closest_point(p))
+            };
+            if let Some(h) = hit.filter(|h| h.distance < best.0) {
+                *best = (h.distance, g as u32);
+            }
+        };
+        match candidates {
+            Some(list) => {
+                if list.binary_search(&own).is_ok() {
+                    try_group(own, &mut best);
+                }
+                for &g in list.iter().filter(|&&g| g != own) {
+                    try_group(g, &mut best);
+                }
+            }
+            None => {
+                if own < groups.len() {
+                    try_group(own, &mut best);
+                }
+                for g in (0..groups.len()).filter(|&g| g != own) {
+                    try_group(g, &mut best);
+                }
+            }
+        }
+        best
+    }
+
+    /// Like [`ErrorMeter::measure`], but with `over = Some(max_cap)` first measures the
+    /// samples that were worst last time and returns `None` as soon as one of them shows
+    /// the full measurement would exceed the tolerance beyond the chord allowance or
+    /// `max_cap` (exact: they are samples of the full measurement). A measurement that
+    /// returns `None` leaves what the previous one kept as it was.
+    pub fn measure_unless_over(
+        &self,
+        decoded: &ControlMesh,
+        level: u8,
+        over: Option<f64>,
+    ) -> Result<Option<Measurement>> {
+        let (surface_mesh, _) = subdivide(
+            decoded,
+            u32::from(level),
+            &SubdivOptions {
+                limit: true,
+                normals: false,
+                ..Default::default()
+            },
+        )?;
+        let n_groups = self.mesh.groups.len().max(
+            surface_mesh
+                .face_groups
+                .iter()
+                .map(|&g| g as usize + 1)
+                .max()
+                .unwrap_or(0),
+        );
+        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n_groups];
+        for (f, &g) in surface_mesh.face_groups.iter().enumerate() {
+            faces_of[g as usize].push(f as u32);
+        }
+        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        let changed: Vec<usize> = (0..n_groups)
+            .filter(|&g| {
+                !cache
+                    .groups
+                    .get(g)
+                    .is_some_and(|c| c.same_triangles(&surface_mesh, &faces_of[g]))
+            })
+            .collect();
+        // Changed groups: indexed and sampled (in parallel); the others as cached.
+        let (mut fresh, points): (Vec<GroupDecoded>, Vec<Vec<DVec3>>) =
+            map_ordered(&changed, |&g| {
+                let gd = index_group(&surface_mesh, &faces_of[g])?;
+                let random = self.group_samples.get(g).copied().unwrap_or(0);
+                let points = group_sample_points(&gd, random, g);
+                Ok((gd, points))
+            })
+            .into_iter()
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .unzip();
+        drop(faces_of);
+        drop(surface_mesh);
+        let radius = 2.0 * self.tol;
+        let fails = |d: f64, chord: f64, max_cap: f64| d - chord > self.tol || d > max_cap;
+        if let Some(max_cap) = over {
+            // The worst decoded samples of last time: an unchanged group's as measured, a
+            // changed group's at the same index measured now.
+            let mut probe: Vec<(usize, DVec3)> = Vec::new();
+            for &(g, i) in &cache.probe_out {
+                let (g, i) = (g as usize, i as usize);
+                match changed.binary_search(&g) {
+                    Ok(k) => probe.extend(points[k].get(i).map(|&p| (g, p))),
+                    Err(_) => {
+                        if let Some(&[e, d]) = cache.groups.get(g).and_then(|c| c.samples.get(i)) {
+                            if e > self.tol || d > max_cap {
+                                return Ok(None);
+                            }
+                        }
+                    }
+                }
+            }
+            let pts: Vec<DVec3> = probe.iter().map(|x| x.1).collect();
+            let hits = closest_points_near(&pts, self.input_surface, radius);
+            if probe.iter().zip(&hits).any(|(&(g, p), h)| {
+                self.out_excess(p, g, h.triangle, h.distance) > self.tol || h.distance > max_cap
+            }) {
+                return Ok(None);
+            }
+        }
+        // The groups of this surface, by index.
+        let groups: Vec<&GroupDecoded> = (0..n_groups)
+            .map(|g| match changed.binary_search(&g) {
+                Ok(k) => &fresh[k],
+                Err(_) => &cache.groups[g],
+            })
+            .collect();
+        // Input->decoded. While the group holding a sample's old nearest point is unchanged,
+        // that distance is still reached and only changed groups can be nearer.
+        let n_in = self.input_samples.len();
+        let reuse = cache.in_hits.len() == n_in;
+        let in_hit = |i: usize| -> (f64, u32) {
+            let s = &self.input_samples[i];
+            let own = self.mesh.face_groups[s.triangle as usize] as usize;
+            match cache.in_hits.get(i) {
+                Some(&hit) if reuse && changed.binary_search(&(hit.1 as usize)).is_err() => {
+                    Self::nearest_decoded(s.point, own, &groups, Some(&changed), hit)
+                }
+                _ => Self::nearest_decoded(s.point, own, &groups, None, (f64::INFINITY, u32::MAX)),
+            }
+        };
+        if let Some(max_cap) = over {
+            if cache.probe_in.iter().any(|&i| {
+                fails(
+                    in_hit(i).0,
+                    self.chord[self.input_samples[i].triangle as usize],
+                    max_cap,
+                )
+            }) {
+                return Ok(None);
+            }
+        }
+        let indices: Vec<usize> = (0..n_in).collect();
+        let in_hits: Vec<(f64, u32)> = map_ordered(&indices, |&i| in_hit(i));
+        drop(groups);
+        // Decoded->input for the changed groups' samples.
+        let indices: Vec<usize> = (0..fresh.len()).collect();
+        let measured: Vec<Vec<[f64; 2]>> = map_ordered(&indices, |&k| {
+            let g = changed[k];
+            closest_points_near(&points[k], self.input_surface, radius)
+                .iter()
+                .zip(&points[k])
+                .map(|(h, &p)| [self.out_excess(p, g, h.triangle, h.distance), h.distance])
+                .collect()
+        });
+        for ((gd, samples), pts) in fresh.iter_mut().zip(measured).zip(points) {
+            for (i, (&[e, _], &p)) in samples.iter().zip(&pts).enumerate() {
+                if gd.worst.is_none_or(|w| e > w.0) {
+                    gd.worst = Some((e, p));
+                }
+                if e > self.tol {
+                    gd.over_tolerance.push((i as u32, p));
+                }
+            }
+            gd.samples = samples;
+        }
+        let old_groups = std::mem::take(&mut cache.groups);
+        let mut fresh_iter = fresh.into_iter();
+        let mut old_iter = old_groups.into_iter();
+        let mut groups: Vec<GroupDecoded> = Vec::with_capacity(n_groups);
+        for g in 0..n_groups {
+            let old = old_iter.next();
+            let gd = if changed.binary_search(&g).is_ok() {
+                fresh_iter.next()
+            } else {
+                old
+            };
+            groups.push(gd.expect("a group is fresh or cached"));
+        }
+        let mut measurement = self.summarise(&groups, &in_hits, &mut cache);
+        measurement.changed_groups = changed.len();
+        cache.groups = groups;
+        cache.in_hits = in_hits;
+        Ok(Some(measurement))
+    }
+
+    /// Statistics, per-group excesses and the next probes of one measurement.
+    fn summarise(
+        &self,
+        groups: &[GroupDecoded],
+        in_hits: &[(f64, u32)],
+        cache: &mut MeasureCache,
+    ) -> Measurement {
+        let stats = |d: &mut dyn Iterator<Item = f64>| -> (f64, f64, f64) {
+            let (mut max, mut sq, mut sum, mut n) = (0.0f64, 0.0, 0.0, 0usize);
+            for x in d {
+                max = max.max(x);
+                sq += x * x;
+                sum += x;
+                n += 1;
+            }
+            let n = n.max(1) as f64;
+            (max, (sq / n).sqrt(), sum / n)
+        };
+        let (max_in, rms_in, mean_in) = stats(&mut in_hits.iter().map(|h| h.0));
+        let (max_out, rms_out, mean_out) =
+            stats(&mut groups.iter().flat_map(|g| g.samples.iter().map(|s| s[1])));
+        // Excess over the tolerance, after allowing for the input's own chord error, and
+        // where it is.
+        let n_groups = self.mesh.groups.len();
+        let mut group_excess = vec![(0.0f64, DVec3::ZERO, "in"); n_groups];
+        let mut bad_points = vec![Vec::new(); n_groups];
+        let mut worst = 0.0f64;
+        let mut excess_in = Vec::with_capacity(in_hits.len());
+        for (s, &(d, _)) in self.input_samples.iter().zip(in_hits) {
+            let e = d - self.chord[s.triangle as usize];
+            excess_in.push(e);
+            worst = worst.max(e);
+            let g = self.mesh.face_groups[s.triangle as usize] as usize;
+            if e > group_excess[g].0 {
+                group_excess[g] = (e, s.point, "input->decoded");
+            }
+            if e > self.tol {
+                bad_points[g].push(s.point);
+            }
+        }
+        let mut out_ids: Vec<(u32, u32)> = Vec::new();
+        let mut excess_out = Vec::new();
+        let mut d_out = Vec::new();
+        for (g, gd) in groups.iter().enumerate() {
+            for (i, &[e, d]) in gd.samples.iter().enumerate() {
+                out_ids.push((g as u32, i as u32));
+                excess_out.push(e);
+                d_out.push(d);
+            }
+            let Some((e, p)) = gd.worst else { continue };
+            worst = worst.max(e);
+            if g < n_groups {
+                if e > group_excess[g].0 {
+                    group_excess[g] = (e, p, "decoded->input");
+                }
+                bad_points[g].extend(gd.over_tolerance.iter().map(|x| x.1));
+            }
+        }
+        // The next probe: the worst samples by excess and by plain distance.
+        let d_in: Vec<f64> = in_hits.iter().map(|h| h.0).collect();
+        let mut probe_in = top_k(&excess_in, PROBE_SAMPLES);
+        probe_in.extend(top_k(&d_in, PROBE_SAMPLES / 4));
+        probe_in.sort_unstable();
+        probe_in.dedup();
+        let mut probe_out = top_k(&excess_out, PROBE_SAMPLES);
+        probe_out.extend(top_k(&d_out, PROBE_SAMPLES / 4));
+        probe_out.sort_unstable();
+        probe_out.dedup();
+        cache.probe_in = probe_in;
+        cache.probe_out = probe_out.into_iter().map(|k| out_ids[k]).collect();
+        Measurement {
+            error: FitError {
+                max: max_in.max(max_out),
+                rms: rms_in.max(rms_out),
+                mean: mean_in.max(mean_out),
+                max_beyond_chord: worst,
+            },
+            group_excess,
+            bad_points,
+            changed_groups: groups.len(),
+        }
+    }
+}
+
+/// The closest-point index of a face's decoded triangles (`faces` of `mesh`, triangles),
+/// over its own vertices (shared corners merged, first use first); no samples yet.
+fn index_group(mesh: &ControlMesh, faces: &[u32]) -> Result<GroupDecoded> {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    let mut local: std::collections::HashMap<u32, u32, rustc_hash::FxBuildHasher> =
+        Default::default();
+    let mut positions = Vec::new();
+    let triangles: Vec<[u32; 3]> = faces
+        .iter()
+        .map(|&f| {
+            let face = mesh.face(f as usize);
+            let mut t = [0u32; 3];
+            for (k, &v) in face[..3].iter().enumerate() {
+                t[k] = *local.entry(v).or_insert_with(|| {
+                    let p = mesh.positions[v as usize];
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                    positions.push(p);
+                    (positions.len() - 1) as u32
+                });
+            }
+            t
+        })
+        .collect();
+    let surface = if triangles.is_empty() {
+        None
+    } else {
+        Some(TriangleSurface::with_blocks(
+            positions,
+            triangles,
+            LEAF_TRIANGLES,
+        )?)
+    };
+    Ok(GroupDecoded {
+        surface,
+        lo,
+        hi,
+        samples: Vec::new(),
+        worst: None,
+        over_tolerance: Vec::new(),
+    })
+}
+
+/// A face's decoded sample points: its vertices, then `random` points by area, seeded by
+/// the group so an unchanged face gets the same points.
+fn group_sample_points(gd: &GroupDecoded, random: usize, g: usize) -> Vec<DVec3> {
+    let Some(s) = &gd.surface else {
+        return Vec::new();
+    };
+    sample_surface(
+        s.positions(),
+        s.triangles(),
+        SampleCount::Total(random),
+        true,
+        0x5C0D_E000_0000_0002 ^ ((g as u64) << 20),
+    )
+    .into_iter()
+    .map(|s| s.point)
+    .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::test_support::grid_cube;
+
+    fn meter_parts(input: &ControlMesh) -> (Vec<[u32; 3]>, TriangleSurface, Vec<f64>) {
+        let tris: Vec<[u32; 3]> = input.faces().map(|f| [f[0], f[1], f[2]]).collect();
+        let surface = TriangleSurface::new(input.positions.clone(), tris.clone()).unwrap();
+        let chord = vec![0.0; tris.len()];
+        (tris, surface, chord)
+    }
+
+    fn no_own_faces() -> OwnFaces<'static> {
+        OwnFaces {
+            surfaces: &[],
+            triangles: &[],
+            max_allowance: &[],
+            exact: &[],
+        }
+    }
+
+    /// A measurement that reuses what the previous one kept gives exactly what a fresh
+    /// meter gives, whether one face changed or all of them.
+    #[test]
+    fn kept_results_give_the_same_measurement_as_a_fresh_meter() {
+        let input = grid_cube(6);
+        let (tris, surface, chord) = meter_parts(&input);
+        let meter = || ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
+        let first = grid_cube(2);
+        // One vertex inside face 1 (z = 1) moved outwards: only the faces around it change.
+        let mut one_face = first.clone();
+        let v = (0..one_face.vertex_count())
+            .find(|&v| (one_face.positions[v] - DVec3::new(0.5, 0.5, 1.0)).length() < 1e-9)
+            .unwrap();
+        one_face.positions[v].z += 0.05;
+        let mut all_faces = first.clone();
+        for p in &mut all_faces.positions {
+            *p = (*p - DVec3::splat(0.5)) * 1.01 + DVec3::splat(0.5);
+        }
+        let kept = meter();
+        let m0 = kept.measure(&first, 3).unwrap();
+        assert_eq!(m0.changed_groups, 6);
+        for next in [&one_face, &all_faces, &first] {
+            let reused = kept.measure(next, 3).unwrap();
+            let fresh = meter().measure(next, 3).unwrap();
+            assert_eq!(reused.error, fresh.error);
+            assert_eq!(reused.group_excess, fresh.group_excess);
+            assert_eq!(reused.bad_points, fresh.bad_points);
+        }
+        let again = kept.measure(&one_face, 3).unwrap();
+        assert!(
+            (1..6).contains(&again.changed_groups),
+            "{} faces measured anew",
+            again.changed_groups
+        );
+        // A probe that fails leaves the kept results as they were.
+        assert!(kept
+            .measure_unless_over(&all_faces, 3, Some(0.0))
+            .unwrap()
+            .is_none());
+        assert_eq!(kept.measure(&one_face, 3).unwrap().changed_groups, 0);
+    }
+}
