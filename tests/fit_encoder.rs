@@ -105,6 +105,28 @@ fn bundled_example_part() {
 }
 
 #[test]
+fn the_same_bytes_on_any_number_of_threads() {
+    // The measurement and the searches run in parallel; their results are combined in a
+    // fixed order, so the file does not depend on the thread count.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("corpus/boss_plate.obj");
+    let (input, _) = scode::io::read_mesh(&path).unwrap();
+    let encode_on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                encode_fitted(&input, &[], &ModelEncodeOptions::default())
+                    .unwrap()
+                    .0
+            })
+    };
+    let one = encode_on(1);
+    assert_eq!(one, encode_on(3));
+    assert_eq!(one, encode_on(2));
+}
+
+#[test]
 fn the_mean_tolerance_is_checked_and_reported() {
     // `FitOptions::mean_tolerance`: rejected when not positive; a bound the fit cannot meet
     // (one ten-thousandth of the mean it gets) is reported as not met, with a note. That a
