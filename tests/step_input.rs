@@ -2,8 +2,8 @@
 //! corpus' fine tessellations of the same files; unsupported entities and broken files are
 //! reported by name instead of panicking or hanging.
 //!
-//! `cargo test --test step_input -- --ignored --nocapture corpus_sweep` prints the table of
-//! every corpus STEP file (what encodes, sizes, errors, and the STEP-vs-mesh comparison).
+//! `cargo run --release --example step_sweep` prints the table of every corpus STEP file
+//! (what encodes, sizes, errors, and the STEP-vs-mesh comparison).
 #![cfg(feature = "step")]
 
 mod common;
@@ -137,7 +137,7 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
     // neighbours. (bug27693 was fixed the same way and encodes all 110 faces, but its fine
     // tessellation's vertices are 0.34 tol rms from the decoded surface: in the sweep.)
     // Files whose fit does not meet the tolerance yet (an encoder limit, also on their
-    // mesh twins) are in the ignored sweep.
+    // mesh twins) are in the `step_sweep` example's table only.
     for file in [
         "four_cone.step",
         "bug3883_xr2-ct-214_plate.stp",
@@ -710,117 +710,4 @@ fn slow_import_times_out_with_an_error() {
     };
     let e = read_step(&fixture("cube_offset_face.step"), &opts).unwrap_err();
     assert!(e.to_string().contains("did not finish"), "{e}");
-}
-
-/// Every corpus STEP file: encodes or fails with a named entity; sizes and errors, and the
-/// STEP path against the mesh path (`<name>_fine.obj` with its sidecar) at the same
-/// tolerance. Slow (many minutes): each file runs in its own process (this test binary,
-/// running [`sweep_one`]), because faces whose tessellation hangs leave threads behind that
-/// only the end of the process stops.
-#[test]
-#[ignore]
-fn corpus_sweep() {
-    let Some(corpus) = corpus_dir() else { return };
-    let mut files: Vec<PathBuf> = std::fs::read_dir(corpus.join("step"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    println!(
-        "| file | result | faces by type | skipped | bytes (STEP) | max / rms vs fine (vertices) | hausdorff / rms | bytes (fine.obj) | read+encode s |"
-    );
-    println!("|---|---|---|---|---:|---|---|---:|---:|");
-    for path in files {
-        let out = std::process::Command::new(std::env::current_exe().unwrap())
-            .args(["--ignored", "--exact", "sweep_one", "--nocapture"])
-            .env("SCODE_SWEEP_FILE", &path)
-            .output()
-            .unwrap();
-        let text = String::from_utf8_lossy(&out.stdout);
-        let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("| ")).collect();
-        if rows.is_empty() {
-            println!(
-                "| {} | crashed: {} | | | | | | | |",
-                path.display(),
-                out.status
-            );
-        }
-        for r in rows {
-            println!("{r}");
-        }
-    }
-}
-
-/// One row of [`corpus_sweep`], for the file in `SCODE_SWEEP_FILE` (does nothing without).
-#[test]
-#[ignore]
-fn sweep_one() {
-    let Some(corpus) = corpus_dir() else { return };
-    let Ok(file) = std::env::var("SCODE_SWEEP_FILE") else {
-        return;
-    };
-    let path = PathBuf::from(file);
-    let name = path.file_name().unwrap().to_string_lossy().to_string();
-    let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-    let fine = fine_tessellation(&corpus, &stem).map(|p| {
-        let (m, _) = scode::io::read_mesh(&p).unwrap();
-        (p, m)
-    });
-    let tol = fine.as_ref().map(|(_, m)| 1e-3 * m.diagonal());
-    let t0 = Instant::now();
-    let result = encode_step(&path, tol, false, &ModelEncodeOptions::default());
-    let secs = t0.elapsed().as_secs_f64();
-    let (model, bytes, report) = match result {
-        Ok(r) => r,
-        Err(e) => {
-            println!("| {name} | fails: {e} | | | | | | | {secs:.1} |");
-            return;
-        }
-    };
-    let hist: Vec<String> = model
-        .surface_histogram()
-        .iter()
-        .map(|(k, n)| format!("{n} {k}"))
-        .collect();
-    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
-    let (cmp, hausdorff, mesh_bytes) = match &fine {
-        Some((fine_path, fine_mesh)) => {
-            let c = compare(&decoded_surface(&bytes), fine_mesh);
-            let hints = sidecar_hints(fine_path, fine_mesh)
-                .unwrap()
-                .map(|(_, h)| h)
-                .unwrap_or_default();
-            let mut opts = ModelEncodeOptions::default();
-            opts.fit.tolerance = tol;
-            let mb = encode_fitted(fine_mesh, &hints, &opts)
-                .map(|(b, _)| b.len().to_string())
-                .unwrap_or_else(|e| format!("fails: {e}"));
-            (
-                format!(
-                    "{:.2e} / {:.2e} (tol {:.2e})",
-                    c.max_vertices,
-                    c.rms_vertices,
-                    tol.unwrap_or(0.0)
-                ),
-                format!("{:.2e} / {:.2e}", c.hausdorff, c.rms),
-                mb,
-            )
-        }
-        None => ("no fine tessellation".into(), String::new(), String::new()),
-    };
-    println!(
-        "| {name} | encodes{} | {} | {} | {} | {cmp} | {hausdorff} | {mesh_bytes} | {secs:.1} |",
-        if report.within_tolerance {
-            ""
-        } else {
-            " (fit tolerance NOT met)"
-        },
-        hist.join(", "),
-        if skipped.is_empty() {
-            "0".to_string()
-        } else {
-            skipped.join("; ")
-        },
-        bytes.len(),
-    );
 }
