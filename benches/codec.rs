@@ -33,16 +33,11 @@ const MODELS: [(&str, &str); 2] = [
 ];
 
 fn bench_codec(c: &mut Criterion) {
-    let Some(corpus) = corpus_dir() else {
-        eprintln!("corpus not found; skipping the codec benchmarks");
-        return;
-    };
+    let Some(corpus) = corpus_dir() else { return };
     for (name, rel) in MODELS {
         let path: &Path = &corpus.join(rel);
-        let Ok((mesh, _)) = scode::io::read_mesh(path) else {
-            eprintln!("cannot read {}; skipped", path.display());
-            continue;
-        };
+        let (mesh, _) =
+            scode::io::read_mesh(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let hints = sidecar_hints(path, &mesh)
             .ok()
             .flatten()

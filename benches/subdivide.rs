@@ -63,21 +63,11 @@ fn run<R: Send>(pool: &rayon::ThreadPool, f: impl FnOnce() -> R + Send) -> R {
 }
 
 fn bench_model<M: Measurement>(c: &mut Criterion<M>, name: &str, rel: &str, max_level: u32) {
-    let Some(dir) = corpus_dir() else {
-        eprintln!("corpus not found, skipping");
-        return;
-    };
-    let mesh = match scode::io::read_mesh(&dir.join(rel)) {
-        Ok((mut mesh, _)) => {
-            // CAD-face boundaries are the control mesh's sharp edges.
-            mesh.sharpen_group_boundaries();
-            mesh
-        }
-        Err(e) => {
-            eprintln!("{rel}: {e}; skipping");
-            return;
-        }
-    };
+    let Some(dir) = corpus_dir() else { return };
+    let (mut mesh, _) =
+        scode::io::read_mesh(&dir.join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"));
+    // CAD-face boundaries are the control mesh's sharp edges.
+    mesh.sharpen_group_boundaries();
     let all = if cfg!(feature = "parallel") {
         rayon::current_num_threads()
     } else {

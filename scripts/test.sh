@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Sets up what the tests need on a fresh machine and runs them: formatting, lints, the whole
-# test suite (unit, property, corpus round-trips, spec vectors), the decoder-only and
-# WebAssembly-viewer checks, the viewer's end-to-end test in headless Chromium, and a short
-# fuzzing pass.
+# test suite (unit, property, corpus round-trips and encodes of the small corpus models, spec
+# vectors), the decoder-only and WebAssembly-viewer checks, the viewer's end-to-end test in
+# headless Chromium, and a short fuzzing pass. The same corpus checks on the larger models
+# are scripts/sweep.sh.
 # Usage: scripts/test.sh            (FUZZ_SECONDS=30 by default; FUZZ_SECONDS=0 skips fuzzing;
 #                                    E2E=0 skips the browser test)
 set -euo pipefail
@@ -14,8 +15,12 @@ echo "== toolchain"
 rustup component add rustfmt clippy >/dev/null 2>&1 || true
 cargo --version
 
-if [ ! -d ../shared/corpus ]; then
-  echo "note: ../shared/corpus not found; corpus tests will report that they were skipped" >&2
+if [ -z "${SCODE_CORPUS:-}" ] && [ ! -d ../shared/corpus ] && [ ! -d /work/shared/corpus ]; then
+  if [ -n "${CI:-}" ]; then
+    echo "error: corpus not found (../shared/corpus, /work/shared/corpus; or set SCODE_CORPUS)" >&2
+    exit 1
+  fi
+  echo "note: corpus not found; corpus tests will report that they were skipped" >&2
 fi
 
 echo "== cargo fmt --check"
@@ -28,8 +33,8 @@ viewer/build.sh --check
 echo "== decoder-only library (no default features)"
 cargo check --lib --no-default-features
 
-echo "== cargo clippy"
-cargo clippy --all-targets -- -D warnings
+echo "== cargo clippy (with the sweep tests, which cargo test leaves out)"
+cargo clippy --all-targets --features sweep -- -D warnings
 
 echo "== cargo test"
 PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test --all-targets

@@ -134,21 +134,18 @@ fn round_trip(name: &str, m: &ControlMesh) -> usize {
 
 #[test]
 fn corpus_meshes_round_trip() {
-    let Some(dir) = corpus_dir() else {
-        println!("corpus not found; skipping");
-        return;
-    };
+    let Some(dir) = corpus_dir() else { return };
     let mut files: Vec<PathBuf> = Vec::new();
     for sub in ["meshes", "tess"] {
-        if let Ok(rd) = std::fs::read_dir(dir.join(sub)) {
-            for e in rd.flatten() {
-                let p = e.path();
-                let n = p.file_name().unwrap().to_string_lossy().to_string();
-                let wanted = (sub == "meshes" && (n.ends_with(".obj") || n.ends_with(".off")))
-                    || (sub == "tess" && n.ends_with("_coarse.obj"));
-                if wanted {
-                    files.push(p);
-                }
+        let rd = std::fs::read_dir(dir.join(sub))
+            .unwrap_or_else(|e| panic!("{}: {e}", dir.join(sub).display()));
+        for e in rd.flatten() {
+            let p = e.path();
+            let n = p.file_name().unwrap().to_string_lossy().to_string();
+            let wanted = (sub == "meshes" && (n.ends_with(".obj") || n.ends_with(".off")))
+                || (sub == "tess" && n.ends_with("_coarse.obj"));
+            if wanted {
+                files.push(p);
             }
         }
     }
@@ -157,6 +154,7 @@ fn corpus_meshes_round_trip() {
     if let Ok(f) = std::env::var("CORPUS_FILTER") {
         files.retain(|p| p.to_string_lossy().contains(&f));
     }
+    assert!(!files.is_empty(), "no corpus mesh in {}", dir.display());
 
     for p in files {
         let name = p.file_name().unwrap().to_string_lossy().to_string();

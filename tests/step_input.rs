@@ -2,22 +2,26 @@
 //! corpus' fine tessellations of the same files; unsupported entities and broken files are
 //! reported by name instead of panicking or hanging.
 //!
-//! `cargo test --test step_input -- --ignored --nocapture corpus_sweep` prints the table of
-//! every corpus STEP file (what encodes, sizes, errors, and the STEP-vs-mesh comparison).
+//! The corpus encodes here use the small models; the same checks on the larger ones are in
+//! `sweep.rs` (`scripts/sweep.sh`), and `cargo run --release --example step_sweep` prints the
+//! table of every corpus STEP file (what encodes, sizes, errors, and the STEP-vs-mesh
+//! comparison).
 #![cfg(feature = "step")]
 
 mod common;
+mod step_support;
 use common::corpus_dir;
+use step_support::{
+    check_decoded_analytic_faces_on_exact_surfaces, check_encodes_within_tolerance,
+    check_step_path_no_larger_than_mesh_path, compare, fine_tessellation,
+};
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use scode::codec::{self, Content, Limits};
+use scode::codec::{self, Limits};
 use scode::io::step::{read_step, read_step_bytes, StepModel, StepOptions};
-use scode::metrics::{point_distances, TriangleSurface};
-use scode::pipeline::{encode_fitted, encode_step, sidecar_hints, ModelEncodeOptions};
-use scode::subdiv::{subdivide, SubdivOptions};
-use scode::ControlMesh;
+use scode::pipeline::{encode_fitted, Effort, ModelEncodeOptions};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -25,128 +29,16 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// The surface a `.scode` file decodes to (default level, limit positions), as `info
-/// --against` measures it.
-fn decoded_surface(bytes: &[u8]) -> ControlMesh {
-    let decoded = codec::decode(bytes, &Limits::default()).expect("decode");
-    let level = match decoded.header.content {
-        Content::ControlMesh { default_level } => u32::from(default_level),
-        Content::RawMesh => 0,
-    };
-    let (surface, _) = subdivide(
-        &decoded.mesh,
-        level,
-        &SubdivOptions {
-            limit: true,
-            ..Default::default()
-        },
-    )
-    .expect("subdivide");
-    surface
-}
-
-/// Distances between a decoded surface and a reference tessellation.
-struct Comparison {
-    /// Reference vertices (on the exact B-rep surface) to the decoded surface.
-    max_vertices: f64,
-    rms_vertices: f64,
-    /// Symmetric sampled Hausdorff distance (includes the reference's own chord error).
-    hausdorff: f64,
-    rms: f64,
-}
-
-fn compare(decoded: &ControlMesh, reference: &ControlMesh) -> Comparison {
-    let tris = |m: &ControlMesh| -> Vec<[u32; 3]> {
-        m.faces()
-            .flat_map(|f| (1..f.len() - 1).map(move |i| [f[0], f[i], f[i + 1]]))
-            .collect()
-    };
-    let surface = TriangleSurface::new(decoded.positions.clone(), tris(decoded)).unwrap();
-    let d = point_distances(&reference.positions, &surface);
-    let n = d.len().max(1) as f64;
-    let h = scode::metrics::hausdorff(decoded, reference, &Default::default()).unwrap();
-    Comparison {
-        max_vertices: d.iter().copied().fold(0.0, f64::max),
-        rms_vertices: (d.iter().map(|x| x * x).sum::<f64>() / n).sqrt(),
-        hausdorff: h.max,
-        rms: h.rms,
-    }
-}
-
-fn fine_tessellation(corpus: &Path, stem: &str) -> Option<PathBuf> {
-    let p = corpus.join("tess").join(format!("{stem}_fine.obj"));
-    p.is_file().then_some(p)
-}
-
-/// Encodes `file` at 1e-3 of the diagonal of its fine tessellation and checks the decoded
-/// surface against that tessellation: its vertices lie on the exact B-rep surface, so their
-/// distance to the decoded surface is the codec's error (plus our own chord error, which
-/// the fit allows for) and must stay within the tolerance.
-fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
-    let path = corpus.join("step").join(file);
-    let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
-    let fine_path = fine_tessellation(corpus, stem).expect("fine tessellation");
-    let (fine, _) = scode::io::read_mesh(&fine_path).unwrap();
-    let tol = 1e-3 * fine.diagonal();
-    let t0 = Instant::now();
-    let (model, bytes, report) =
-        encode_step(&path, Some(tol), false, &ModelEncodeOptions::default()).unwrap();
-    assert!(report.within_tolerance, "{file}: {:?}", report.error);
-    let surface = decoded_surface(&bytes);
-    let c = compare(&surface, &fine);
-    eprintln!(
-        "{file}: {} faces, {} skipped, {} bytes, tol {tol:.3e}: fine vertices -> decoded max \
-         {:.3e} rms {:.3e}; hausdorff {:.3e} rms {:.3e}; within tolerance (fit): {} [{:.1} s]",
-        model.faces.len(),
-        model.skipped.len(),
-        bytes.len(),
-        c.max_vertices,
-        c.rms_vertices,
-        c.hausdorff,
-        c.rms,
-        report.within_tolerance,
-        t0.elapsed().as_secs_f64()
-    );
-    assert!(model.skipped.is_empty(), "{file}: {:?}", model.skipped);
-    assert!(
-        (model.mesh.diagonal() - fine.diagonal()).abs() < 1e-2 * fine.diagonal(),
-        "{file}: the STEP model and its tessellation differ in size (units?)"
-    );
-    assert!(
-        c.max_vertices <= 1.5 * tol,
-        "{file}: decoded surface is {:.3e} from the fine tessellation (tolerance {tol:.3e})",
-        c.max_vertices
-    );
-    assert!(
-        c.rms_vertices <= 0.25 * tol,
-        "{file}: rms {:.3e}",
-        c.rms_vertices
-    );
-}
-
 #[test]
 fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
     let Some(corpus) = corpus_dir() else { return };
-    // Planes + cones; planes + cylinders; a solid with voids (inward shells); a sphere
-    // corner between cylinder fillets (periodic faces cut along a seam, a pole); an
-    // 18-solid assembly of planes and cylinders; a spindle torus (minor radius larger
-    // than the major one) and cones, which need the exact surfaces from the STEP
-    // records (truck's conversion misses the edges); planes, cylinders and a cone; rational
-    // B-spline strips and tori, where the projection from the previous edge point can stop
-    // off the surface (the loop would cross itself) unless it restarts between
-    // neighbours. (bug27693 needs the same restart and encodes all 110 faces, but its fine
-    // tessellation's vertices are 0.34 tol rms from the decoded surface: in the sweep.)
-    // Files whose fit does not meet the tolerance (an encoder limit, also on their
-    // mesh twins) are in the ignored sweep.
+    // Planes + cones; planes + cylinders; a solid with voids (inward shells); planes,
+    // cylinders and a cone. The larger models are in `sweep.rs`.
     for file in [
         "four_cone.step",
         "bug3883_xr2-ct-214_plate.stp",
         "tr8_bv1_ec.stp",
-        "block_fillet3.step",
-        "trj2_as1-ec-214.stp",
-        "screw.step",
         "bm2_ec_lever-A.stp",
-        "linkrods.step",
     ] {
         check_encodes_within_tolerance(&corpus, file);
     }
@@ -157,55 +49,13 @@ fn corpus_subset_encodes_within_tolerance_of_fine_tessellation() {
 #[test]
 fn step_path_no_larger_than_mesh_path() {
     let Some(corpus) = corpus_dir() else { return };
-    // The corpus tessellation's sphere facets sag up to 0.45 tol and the mesh path is not
-    // charged for its input's chord error, so a STEP path tessellated at 0.25 tol alone is
-    // larger on block_fillet3, screw and bm2. The STEP path therefore measures its analytic
-    // faces against their exact surfaces and also tries them tessellated at 0.45 tol
-    // (`encode_step`). occwl (110 B-spline faces) is smaller with all its faces at 0.45 tol,
-    // measured against the 0.25 tol tessellation; trj3 with the quarter-bit quantisation
-    // steps (its STEP path keeps a 1.5 bit coarser step). trj4 is not here: its STEP file is
-    // larger, but its mesh path is held to the corpus facets, over 1.4 mm off the exact
-    // surfaces in places, and ends 1.34 mm (4.3 tol) from them where the STEP path keeps
-    // 0.40 mm.
+    // The larger models are in `sweep.rs`.
     for file in [
-        "trj3_s1-ec-214.stp",
         "tr8_bv1_ec.stp",
-        "trj10_ap209-eb.stp",
         "four_cone.step",
         "bug3883_xr2-ct-214_plate.stp",
-        "block_fillet3.step",
-        "screw.step",
-        "bm2_ec_lever-A.stp",
-        "abc_00000050.step",
-        "occwl_example.stp",
     ] {
-        let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
-        let fine_path = fine_tessellation(&corpus, stem).expect("fine tessellation");
-        let (fine, _) = scode::io::read_mesh(&fine_path).unwrap();
-        let tol = 1e-3 * fine.diagonal();
-        let (_, step_bytes, report) = encode_step(
-            &corpus.join("step").join(file),
-            Some(tol),
-            false,
-            &ModelEncodeOptions::default(),
-        )
-        .unwrap();
-        assert!(report.within_tolerance, "{file}: {:?}", report.error);
-        let hints = sidecar_hints(&fine_path, &fine).unwrap().unwrap().1;
-        let mut opts = ModelEncodeOptions::default();
-        opts.fit.tolerance = Some(tol);
-        let (mesh_bytes, _) = encode_fitted(&fine, &hints, &opts).unwrap();
-        eprintln!(
-            "{file}: STEP path {} bytes, mesh path {} bytes",
-            step_bytes.len(),
-            mesh_bytes.len()
-        );
-        assert!(
-            step_bytes.len() <= mesh_bytes.len(),
-            "{file}: STEP path {} bytes, mesh path {} bytes",
-            step_bytes.len(),
-            mesh_bytes.len()
-        );
+        check_step_path_no_larger_than_mesh_path(&corpus, file, Effort::Default);
     }
 }
 
@@ -582,40 +432,8 @@ fn faces_bounded_by_a_vertex_loop_are_whole_spheres() {
 #[test]
 fn decoded_analytic_faces_stay_on_their_exact_surfaces() {
     let Some(corpus) = corpus_dir() else { return };
-    for file in ["block_fillet3.step", "screw.step", "bm2_ec_lever-A.stp"] {
-        let path = corpus.join("step").join(file);
-        let (model, bytes, report) =
-            encode_step(&path, None, false, &ModelEncodeOptions::default()).unwrap();
-        assert!(report.within_tolerance, "{file}: {:?}", report.error);
-        let exact = scode::pipeline::step_exact_surfaces(&model);
-        let decoded = decoded_surface(&bytes);
-        // Decoded groups keep the input's order.
-        assert_eq!(decoded.groups.len(), exact.len());
-        let mut groups_of: Vec<Vec<u32>> = vec![Vec::new(); decoded.vertex_count()];
-        for (f, &g) in decoded.face_groups.iter().enumerate() {
-            for &v in decoded.face(f) {
-                groups_of[v as usize].push(g);
-            }
-        }
-        let mut checked = 0usize;
-        let mut worst = 0.0f64;
-        for (v, gs) in groups_of.iter().enumerate() {
-            let g = gs[0];
-            if gs.iter().any(|&h| h != g) {
-                continue;
-            }
-            if let Some(s) = &exact[g as usize] {
-                worst = worst.max(s.distance(decoded.positions[v]) / report.tolerance);
-                checked += 1;
-            }
-        }
-        eprintln!("{file}: {checked} interior vertices, worst {worst:.3} tol");
-        assert!(checked > 1000, "{file}: {checked}");
-        assert!(
-            worst <= 1.05,
-            "{file}: {worst:.3} tol from the exact surface"
-        );
-    }
+    // block_fillet3 and screw are in `sweep.rs`.
+    check_decoded_analytic_faces_on_exact_surfaces(&corpus, "bm2_ec_lever-A.stp");
 }
 
 fn is_closed(model: &StepModel) -> bool {
@@ -707,117 +525,4 @@ fn slow_import_times_out_with_an_error() {
     };
     let e = read_step(&fixture("cube_offset_face.step"), &opts).unwrap_err();
     assert!(e.to_string().contains("did not finish"), "{e}");
-}
-
-/// Every corpus STEP file: encodes or fails with a named entity; sizes and errors, and the
-/// STEP path against the mesh path (`<name>_fine.obj` with its sidecar) at the same
-/// tolerance. Slow (many minutes): each file runs in its own process (this test binary,
-/// running [`sweep_one`]), because faces whose tessellation hangs leave threads behind that
-/// only the end of the process stops.
-#[test]
-#[ignore]
-fn corpus_sweep() {
-    let Some(corpus) = corpus_dir() else { return };
-    let mut files: Vec<PathBuf> = std::fs::read_dir(corpus.join("step"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    println!(
-        "| file | result | faces by type | skipped | bytes (STEP) | max / rms vs fine (vertices) | hausdorff / rms | bytes (fine.obj) | read+encode s |"
-    );
-    println!("|---|---|---|---|---:|---|---|---:|---:|");
-    for path in files {
-        let out = std::process::Command::new(std::env::current_exe().unwrap())
-            .args(["--ignored", "--exact", "sweep_one", "--nocapture"])
-            .env("SCODE_SWEEP_FILE", &path)
-            .output()
-            .unwrap();
-        let text = String::from_utf8_lossy(&out.stdout);
-        let rows: Vec<&str> = text.lines().filter(|l| l.starts_with("| ")).collect();
-        if rows.is_empty() {
-            println!(
-                "| {} | crashed: {} | | | | | | | |",
-                path.display(),
-                out.status
-            );
-        }
-        for r in rows {
-            println!("{r}");
-        }
-    }
-}
-
-/// One row of [`corpus_sweep`], for the file in `SCODE_SWEEP_FILE` (does nothing without).
-#[test]
-#[ignore]
-fn sweep_one() {
-    let Some(corpus) = corpus_dir() else { return };
-    let Ok(file) = std::env::var("SCODE_SWEEP_FILE") else {
-        return;
-    };
-    let path = PathBuf::from(file);
-    let name = path.file_name().unwrap().to_string_lossy().to_string();
-    let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-    let fine = fine_tessellation(&corpus, &stem).map(|p| {
-        let (m, _) = scode::io::read_mesh(&p).unwrap();
-        (p, m)
-    });
-    let tol = fine.as_ref().map(|(_, m)| 1e-3 * m.diagonal());
-    let t0 = Instant::now();
-    let result = encode_step(&path, tol, false, &ModelEncodeOptions::default());
-    let secs = t0.elapsed().as_secs_f64();
-    let (model, bytes, report) = match result {
-        Ok(r) => r,
-        Err(e) => {
-            println!("| {name} | fails: {e} | | | | | | | {secs:.1} |");
-            return;
-        }
-    };
-    let hist: Vec<String> = model
-        .surface_histogram()
-        .iter()
-        .map(|(k, n)| format!("{n} {k}"))
-        .collect();
-    let skipped: Vec<String> = model.skipped.iter().map(|s| s.to_string()).collect();
-    let (cmp, hausdorff, mesh_bytes) = match &fine {
-        Some((fine_path, fine_mesh)) => {
-            let c = compare(&decoded_surface(&bytes), fine_mesh);
-            let hints = sidecar_hints(fine_path, fine_mesh)
-                .unwrap()
-                .map(|(_, h)| h)
-                .unwrap_or_default();
-            let mut opts = ModelEncodeOptions::default();
-            opts.fit.tolerance = tol;
-            let mb = encode_fitted(fine_mesh, &hints, &opts)
-                .map(|(b, _)| b.len().to_string())
-                .unwrap_or_else(|e| format!("fails: {e}"));
-            (
-                format!(
-                    "{:.2e} / {:.2e} (tol {:.2e})",
-                    c.max_vertices,
-                    c.rms_vertices,
-                    tol.unwrap_or(0.0)
-                ),
-                format!("{:.2e} / {:.2e}", c.hausdorff, c.rms),
-                mb,
-            )
-        }
-        None => ("no fine tessellation".into(), String::new(), String::new()),
-    };
-    println!(
-        "| {name} | encodes{} | {} | {} | {} | {cmp} | {hausdorff} | {mesh_bytes} | {secs:.1} |",
-        if report.within_tolerance {
-            ""
-        } else {
-            " (fit tolerance NOT met)"
-        },
-        hist.join(", "),
-        if skipped.is_empty() {
-            "0".to_string()
-        } else {
-            skipped.join("; ")
-        },
-        bytes.len(),
-    );
 }

@@ -394,27 +394,4 @@ mod corpus_tests {
         let same = hausdorff(&fine, &fine, &opts).unwrap();
         assert!(same.max < 1e-9 * same.diagonal);
     }
-
-    #[test]
-    #[ignore = "timing: run in release"]
-    fn timing_large_hausdorff() {
-        let (Some(coarse), Some(fine)) = (
-            load_corpus("tess/trj4_pm2-ec-214_coarse.obj"),
-            load_corpus("tess/trj4_pm2-ec-214_fine.obj"),
-        ) else {
-            return;
-        };
-        let t = std::time::Instant::now();
-        let r = hausdorff(&coarse, &fine, &DistanceOptions::default()).unwrap();
-        println!(
-            "trj4 coarse ({} tris) vs fine ({} tris), {} + {} samples: {:?}; relative max {:.3e} rms {:.3e}",
-            coarse.face_count(),
-            fine.face_count(),
-            r.samples_a,
-            r.samples_b,
-            t.elapsed(),
-            r.relative().max,
-            r.relative().rms
-        );
-    }
 }

@@ -1,22 +1,42 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests (also used by the benches and examples).
 
 use std::path::{Path, PathBuf};
 
 /// The shared corpus: `$SCODE_CORPUS`, else `<repo>/../shared/corpus`, else
-/// `/work/shared/corpus`; `None` (with a message) when none exists, so corpus tests report that
-/// they were skipped. Also used by the benches.
+/// `/work/shared/corpus`.
+///
+/// A corpus test must not pass without having run: under CI (`CI` set and not empty) a
+/// missing corpus panics, naming where it was looked for. Elsewhere it returns `None` with a
+/// message, so a checkout without the corpus can still run the other tests. A `SCODE_CORPUS`
+/// that is not a directory always panics: it was asked for explicitly.
 pub fn corpus_dir() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("SCODE_CORPUS") {
-        return Some(PathBuf::from(p));
+        let p = PathBuf::from(p);
+        assert!(
+            p.is_dir(),
+            "SCODE_CORPUS={} is not a directory",
+            p.display()
+        );
+        return Some(p);
     }
-    let found = [
+    let candidates = [
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus"),
         PathBuf::from("/work/shared/corpus"),
-    ]
-    .into_iter()
-    .find(|p| p.join("MANIFEST.md").is_file());
-    if found.is_none() {
-        eprintln!("corpus not found; skipping");
+    ];
+    if let Some(found) = candidates.iter().find(|p| p.join("MANIFEST.md").is_file()) {
+        return Some(found.clone());
     }
-    found
+    let looked: Vec<String> = candidates
+        .iter()
+        .map(|p| p.join("MANIFEST.md").display().to_string())
+        .collect();
+    let message = format!(
+        "corpus not found: SCODE_CORPUS is not set and there is no {}",
+        looked.join(" nor ")
+    );
+    if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
+        panic!("{message} (CI is set, so corpus tests must run; set SCODE_CORPUS to the corpus folder)");
+    }
+    eprintln!("{message}; skipping this corpus test (set SCODE_CORPUS to run it)");
+    None
 }
