@@ -61,8 +61,9 @@ pub enum Command {
     /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the
     /// tolerance, its surface type decides the patch kind, and faces on planes, cylinders,
     /// cones, spheres and tori are fitted onto their exact surfaces and held to the
-    /// tolerance of them. Five tessellations are fitted and the smallest file kept
-    /// (--verbose says which). Faces the
+    /// tolerance of them. The file is tessellated once (analytic faces more coarsely,
+    /// since their exact surfaces are the reference); --effort max fits five
+    /// tessellations and keeps the smallest file (--verbose says which). Faces the
     /// reader cannot handle are named and skipped; `scode info part.step` shows the plan.
     ///
     /// With --raw the input mesh itself is stored as the control mesh (no fitting): a
