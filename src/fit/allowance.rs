@@ -15,10 +15,13 @@
 //!   facets but have no allowance. The point is also measured against its own face's
 //!   triangles ([`OwnFaces`]).
 
+use std::collections::BTreeMap;
+
 use glam::DVec3;
 
+use super::curves::CurveNetwork;
 use super::exact::ExactSurface;
-use crate::mesh::{Axis, BoundarySurface, PatchKind};
+use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, PatchKind};
 use crate::metrics::TriangleSurface;
 
 /// The input's faces (groups) one by one: a closest-point structure per group and the
@@ -220,6 +223,91 @@ pub(crate) fn add_analytic_surface_allowance(
         }
         if worst.is_finite() {
             *allowance = allowance.max(worst);
+        }
+    }
+}
+
+/// Per input triangle, how far its flat facet may be from the CAD surface it tessellates:
+/// the largest arc sagitta `L/2 tan(theta/4)` over its edges, where `theta` is the angle
+/// between the edge's two vertex normals within the triangle's group (planar facets get 0).
+/// A decoded surface that follows the CAD surface is this far from the facets, and the
+/// tolerance should not charge the codec for the input's own discretisation.
+pub(super) fn chord_allowance(mesh: &ControlMesh, tris: &[[u32; 3]]) -> Vec<f64> {
+    let mut normals: BTreeMap<(u32, u32), DVec3> = BTreeMap::new();
+    for (f, t) in tris.iter().enumerate() {
+        let g = mesh.face_groups[f];
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let n = (p[1] - p[0]).cross(p[2] - p[0]);
+        for &i in t {
+            *normals.entry((g, i)).or_insert(DVec3::ZERO) += n;
+        }
+    }
+    tris.iter()
+        .enumerate()
+        .map(|(f, t)| {
+            let g = mesh.face_groups[f];
+            (0..3)
+                .map(|k| {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    let (na, nb) = (normals[&(g, a)], normals[&(g, b)]);
+                    let theta = na.angle_between(nb);
+                    let len = (mesh.positions[a as usize] - mesh.positions[b as usize]).length();
+                    if theta.is_finite() {
+                        0.5 * len * (0.25 * theta).tan()
+                    } else {
+                        0.0
+                    }
+                })
+                .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+/// Facets along a curved CAD edge end at the edge's chord while the decoded patch follows
+/// the curve: give every triangle on a chain edge at least that edge's sagitta
+/// `L/2 tan(theta/4)`, `theta` the mean turning angle of the chain at the edge's ends.
+pub(super) fn add_curved_edge_allowance(
+    mesh: &ControlMesh,
+    tris: &[[u32; 3]],
+    net: &CurveNetwork,
+    chord: &mut [f64],
+) {
+    let mut edge_sag: BTreeMap<(u32, u32), f64> = BTreeMap::new();
+    for chain in &net.chains {
+        let p: Vec<DVec3> = chain
+            .vertices
+            .iter()
+            .map(|&v| mesh.positions[v as usize])
+            .collect();
+        let n = p.len();
+        let turn = |i: usize| -> f64 {
+            if i == 0 || i + 1 >= n {
+                return 0.0;
+            }
+            let a = (p[i] - p[i - 1]).angle_between(p[i + 1] - p[i]);
+            if a.is_finite() {
+                a
+            } else {
+                0.0
+            }
+        };
+        for i in 0..n.saturating_sub(1) {
+            let (ta, tb) = (turn(i), turn(i + 1));
+            let theta = match (i == 0, i + 2 >= n) {
+                (true, true) => 0.0,
+                (true, false) => tb,
+                (false, true) => ta,
+                _ => 0.5 * (ta + tb),
+            };
+            let sag = 0.5 * (p[i + 1] - p[i]).length() * (0.25 * theta).tan();
+            edge_sag.insert(edge_key(chain.vertices[i], chain.vertices[i + 1]), sag);
+        }
+    }
+    for (f, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            if let Some(&s) = edge_sag.get(&edge_key(t[k], t[(k + 1) % 3])) {
+                chord[f] = chord[f].max(s);
+            }
         }
     }
 }

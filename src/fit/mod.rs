@@ -6,6 +6,9 @@
 
 mod adjacency;
 mod allowance;
+mod build;
+mod chains;
+mod classify;
 pub mod curves;
 pub mod decimate;
 pub mod domain;
@@ -13,8 +16,14 @@ pub mod encoder;
 mod exact;
 mod linalg;
 mod measure;
+mod plan;
 pub mod primitives;
+mod quantise;
+mod reference;
+mod refine;
+mod rounds;
 pub mod segment;
+mod solve;
 
 #[cfg(test)]
 pub(crate) mod test_support;

@@ -1,0 +1,208 @@
+//! Steps 2 and 3 of the fit: the curve network (corners, and the boundary chains between
+//! them that adjacent faces share) and the control points each chain keeps: a few of its
+//! vertices, Douglas-Peucker within the chain's tolerance; on cylinders and cones at most an
+//! angle step apart about the axis.
+
+use glam::DVec3;
+
+use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
+use crate::error::Result;
+use crate::mesh::{Axis, ControlMesh};
+
+/// The curve network with what the rounds look up in it.
+pub(super) struct Chains {
+    pub net: CurveNetwork,
+    /// Per chain, the length (in chains) of the shortest face boundary loop it is on: a chain
+    /// on a loop of one or two chains needs interior control points.
+    pub loop_len: Vec<usize>,
+    /// Per group, the chains on its boundary.
+    pub group_chains: Vec<Vec<usize>>,
+}
+
+impl Chains {
+    /// The curve network of `mesh`'s groups, chains simplified within `tol`.
+    pub fn new(mesh: &ControlMesh, tol: f64) -> Result<Chains> {
+        let net = build_curve_network(
+            mesh,
+            &CurveOptions {
+                simplify_tolerance: Some(tol),
+                ..Default::default()
+            },
+        )?;
+        let mut loop_len = vec![usize::MAX; net.chains.len()];
+        for gl in &net.group_loops {
+            for lp in &gl.loops {
+                for lc in lp {
+                    let c = lc.chain as usize;
+                    loop_len[c] = loop_len[c].min(lp.len());
+                }
+            }
+        }
+        let mut group_chains: Vec<Vec<usize>> = vec![Vec::new(); mesh.groups.len()];
+        for (ci, c) in net.chains.iter().enumerate() {
+            for &g in &c.groups {
+                group_chains[g as usize].push(ci);
+            }
+        }
+        Ok(Chains {
+            net,
+            loop_len,
+            group_chains,
+        })
+    }
+
+    /// The positions of chain `c`'s vertices, in order.
+    pub fn points(&self, mesh: &ControlMesh, c: usize) -> Vec<DVec3> {
+        self.net.chains[c]
+            .vertices
+            .iter()
+            .map(|&v| mesh.positions[v as usize])
+            .collect()
+    }
+}
+
+/// Cylindrical coordinates about an axis: (theta, h, r).
+fn cyl_coords(axis: &Axis, p: DVec3) -> (f64, f64, f64) {
+    let (e1, e2) = axis.direction.any_orthonormal_pair();
+    let d = p - axis.origin;
+    let h = d.dot(axis.direction);
+    let q = d - axis.direction * h;
+    (q.dot(e2).atan2(q.dot(e1)), h, q.length())
+}
+
+/// Douglas-Peucker on a polyline given as points; returns kept indices (ends included).
+fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<usize> {
+    let n = points.len();
+    if n <= 2 {
+        return (0..n).collect();
+    }
+    let mut keep = vec![false; n];
+    keep[0] = true;
+    keep[n - 1] = true;
+    let mut stack = vec![(0usize, n - 1)];
+    while let Some((a, b)) = stack.pop() {
+        if b <= a + 1 {
+            continue;
+        }
+        let (pa, pb) = (points[a], points[b]);
+        let ab = pb - pa;
+        let len2 = ab.length_squared();
+        let (mut worst, mut at) = (-1.0, a);
+        for (i, &p) in points.iter().enumerate().take(b).skip(a + 1) {
+            let t = if len2 > 0.0 {
+                ((p - pa).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = (p - (pa + ab * t)).length();
+            if d > worst {
+                worst = d;
+                at = i;
+            }
+        }
+        if worst > tol {
+            keep[at] = true;
+            stack.push((a, at));
+            stack.push((at, b));
+        }
+    }
+    (0..n).filter(|&i| keep[i]).collect()
+}
+
+/// Control points (indices into `chain.vertices`) of one chain.
+pub(super) fn chain_controls(
+    points: &[DVec3],
+    frame: Option<Axis>,
+    tol: f64,
+    max_step: f64,
+    min_interior: usize,
+) -> Vec<usize> {
+    let n = points.len();
+    let mut keep: Vec<usize> = match frame {
+        None => douglas_peucker(points, tol),
+        Some(axis) => {
+            // Unwrapped cylindrical coordinates, scaled to lengths, then DP in that space,
+            // plus at most `max_step` radians between consecutive control points (a plane's
+            // straight interior edges leave an arc's end at up to half that angle from its
+            // chord, so coarse arcs let plane triangles cut across a hole).
+            let mut prev = None;
+            let mut unwrapped = 0.0;
+            let param: Vec<DVec3> = points
+                .iter()
+                .map(|&p| {
+                    let (th, h, r) = cyl_coords(&axis, p);
+                    if let Some(pt) = prev {
+                        let mut d: f64 = th - pt;
+                        while d > std::f64::consts::PI {
+                            d -= std::f64::consts::TAU;
+                        }
+                        while d <= -std::f64::consts::PI {
+                            d += std::f64::consts::TAU;
+                        }
+                        unwrapped += d;
+                    }
+                    prev = Some(th);
+                    DVec3::new(unwrapped, h, r)
+                })
+                .collect();
+            let rmax = param.iter().map(|q| q.z).fold(0.0, f64::max);
+            let scaled: Vec<DVec3> = param
+                .iter()
+                .map(|q| DVec3::new(q.x * rmax, q.y, q.z))
+                .collect();
+            let mut k = douglas_peucker(&scaled, tol);
+            let mut out = vec![0];
+            for w in k.windows(2) {
+                let (a, b) = (w[0], w[1]);
+                let span = (param[b].x - param[a].x).abs();
+                let pieces = (span / max_step).ceil().max(1.0) as usize;
+                // Insert evenly spaced (in angle) chain vertices between a and b.
+                for s in 1..pieces {
+                    let target = param[a].x + (param[b].x - param[a].x) * s as f64 / pieces as f64;
+                    let best = (a + 1..b)
+                        .min_by(|&i, &j| {
+                            (param[i].x - target)
+                                .abs()
+                                .total_cmp(&(param[j].x - target).abs())
+                        })
+                        .unwrap_or(a);
+                    if best > *out.last().unwrap_or(&0) {
+                        out.push(best);
+                    }
+                }
+                out.push(b);
+            }
+            k = out;
+            k.dedup();
+            k
+        }
+    };
+    // Short loops need interior points or the decimation would collapse them to a digon.
+    let interior = keep.len().saturating_sub(2);
+    if interior < min_interior && n > 2 {
+        let want = min_interior.min(n - 2);
+        keep = (0..want + 2).map(|i| i * (n - 1) / (want + 1)).collect();
+        keep.dedup();
+    }
+    keep
+}
+
+/// Closest point to `p` on a polyline.
+pub(super) fn closest_on_polyline(p: DVec3, line: &[DVec3]) -> DVec3 {
+    let mut best = (f64::INFINITY, line[0]);
+    for w in line.windows(2) {
+        let ab = w[1] - w[0];
+        let len2 = ab.length_squared();
+        let t = if len2 > 0.0 {
+            ((p - w[0]).dot(ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let q = w[0] + ab * t;
+        let d = (p - q).length_squared();
+        if d < best.0 {
+            best = (d, q);
+        }
+    }
+    best.1
+}

@@ -1,0 +1,282 @@
+//! The fit's rounds: build a control mesh from the plan, fit its geometry, measure what the
+//! decoder will make of it, and refine the plan where it fails, until the tolerance holds;
+//! then coarsen once where it ended far within it ([`Relaxation`]).
+
+use std::time::Instant;
+
+use super::build::{build_topology, Built};
+use super::chains::Chains;
+use super::classify::Faces;
+use super::domain::PlaneDomain;
+use super::encoder::{with_faces_involved, FitError, FitOptions, FitReport, Reconstruct};
+use super::exact::ExactSurface;
+use super::measure::{ErrorMeter, Measurement};
+use super::plan::Plan;
+use super::reference::Facets;
+use super::refine::{note_failures, refine_failing, relax_refined_groups, ChainReach, Relaxation};
+use super::solve::fit_geometry;
+use crate::error::{Error, Result};
+use crate::mesh::ControlMesh;
+
+/// When a round's worst excess stays above this fraction of the previous round's, adding
+/// control points has stopped paying and the fit moves to decode level 5 (once). A lower
+/// ratio moves models to level 5 that level 4 fits as well, at four times the triangles to
+/// measure.
+const STALL_RATIO: f64 = 0.85;
+
+/// A fitted model within reach of the output: its error, control mesh, decode level and
+/// file size at the default quantisation.
+pub(super) struct Candidate {
+    pub err: FitError,
+    pub control: ControlMesh,
+    pub level: u8,
+    pub bytes: usize,
+}
+
+/// What the rounds read and never change.
+pub(super) struct Rounds<'a> {
+    pub faces: &'a Faces,
+    pub chains: &'a Chains,
+    /// The input's facets, which the closed patches are fitted to.
+    pub input: &'a Facets,
+    /// By group: the face's exact surface, if the input knows it (empty: none).
+    pub exact: &'a [Option<ExactSurface>],
+    /// By group, where each plane face lies in its plane (empty: planes decimated freely).
+    pub plane_domains: &'a [Option<PlaneDomain>],
+    pub meter: &'a ErrorMeter<'a>,
+    pub opts: &'a FitOptions,
+    pub tol: f64,
+    /// [`FitOptions::keep_planes_on_faces`], for groups from the input.
+    pub keep_planes_on_faces: bool,
+}
+
+/// One round's model and its measurement.
+struct Round {
+    built: Built,
+    measured: Measurement,
+    level: u8,
+    /// Size of the model's file at the default quantisation.
+    bytes: usize,
+}
+
+/// What follows a round's measurement.
+enum Next {
+    /// The rounds are over.
+    Stop,
+    /// Build and measure the changed plan without refining it.
+    Measure,
+    /// Refine the plan where the model failed.
+    Refine,
+}
+
+impl Rounds<'_> {
+    /// Runs the rounds from `plan` and returns the model that converged (the best one when
+    /// none met the tolerance), then the relaxed one if relaxing held the tolerance.
+    pub fn run(
+        &self,
+        plan: &mut Plan,
+        reconstruct: &mut Reconstruct<'_>,
+        report: &mut FitReport,
+    ) -> Result<Vec<Candidate>> {
+        let (opts, tol) = (self.opts, self.tol);
+        let mut best: Option<Candidate> = None;
+        let mut relaxed_best: Option<Candidate> = None;
+        let mut levels_tried = opts.default_level;
+        let mut prev_worst: Option<f64> = None;
+        // Set once the model is within tolerance and refined patches are being coarsened again.
+        let mut relaxing: Option<Relaxation> = None;
+        for round in 0..opts.max_rounds.max(1) {
+            report.rounds = round + 1;
+            let level = levels_tried.unwrap_or(4);
+            let Round {
+                built,
+                measured,
+                level,
+                bytes,
+            } = self.round(plan, level, reconstruct, report)?;
+            let err = measured.error;
+            let worst = err.max_beyond_chord;
+            let ok = worst <= tol;
+            let better = best.as_ref().is_none_or(|b| {
+                let e = &b.err;
+                let e_ok = e.max_beyond_chord <= tol;
+                (ok && !e_ok) || (ok == e_ok && worst < e.max_beyond_chord)
+            });
+            let candidate = || Candidate {
+                err,
+                control: built.control.clone(),
+                level,
+                bytes,
+            };
+            if relaxing.is_none() && (better || ok) {
+                best = Some(candidate());
+            } else if relaxing.is_some() && ok {
+                relaxed_best = Some(candidate());
+            }
+            let last = round + 1 >= opts.max_rounds;
+            match self.after_measurement(ok, last, &mut relaxing, &measured, plan, report) {
+                Next::Stop => break,
+                Next::Measure => continue,
+                Next::Refine => {}
+            }
+            note_failures(&self.faces.mesh, &plan.groups, &measured, tol, report);
+            // When adding control points stops paying, the rest may be the piecewise-linear
+            // chord error of level 4: go to level 5 (4x the triangles) once.
+            if opts.default_level.is_none()
+                && levels_tried.is_none()
+                && prev_worst.is_some_and(|p| worst > STALL_RATIO * p)
+            {
+                levels_tried = Some(5);
+            }
+            prev_worst = Some(worst);
+            // Chains are refined only near where their groups fail (a plane with a hundred
+            // holes failing at one of them keeps the other holes coarse); the last rounds,
+            // and every round once the worst excess is within 1.5 tol, refine every chain of
+            // a failing group: convergence first (near the tolerance, refining only near the
+            // failures takes more rounds than it saves control points).
+            let reach = if round + 4 >= opts.max_rounds
+                || !self.keep_planes_on_faces
+                || worst < 1.5 * tol
+            {
+                ChainReach::All
+            } else {
+                ChainReach::NearFailures
+            };
+            refine_failing(
+                self.faces,
+                self.chains,
+                &built.control,
+                &measured,
+                reach,
+                opts.local_refinement,
+                tol,
+                plan,
+                report,
+            );
+        }
+        let Some(converged) = best else {
+            return Err(Error::Mesh("fitting produced no control mesh".into()));
+        };
+        let mut candidates = vec![converged];
+        candidates.extend(relaxed_best);
+        Ok(candidates)
+    }
+
+    /// Builds, fits and measures the plan's model at decode level `level`.
+    fn round(
+        &self,
+        plan: &Plan,
+        level: u8,
+        reconstruct: &mut Reconstruct<'_>,
+        report: &mut FitReport,
+    ) -> Result<Round> {
+        let mut t = Instant::now();
+        let mut built = build_topology(self.faces, self.chains, plan, self.tol, self.plane_domains);
+        let t_top = t.elapsed().as_secs_f64();
+        t = Instant::now();
+        fit_geometry(
+            &mut built,
+            &self.faces.mesh,
+            &self.chains.net,
+            &plan.groups,
+            &self.input.group_surfaces,
+            self.exact,
+        )
+        .map_err(|e| with_faces_involved(e, &built.control))?;
+        let t_fit = t.elapsed().as_secs_f64();
+        t = Instant::now();
+        let (decoded, bytes) = reconstruct(&built.control, level, 0)
+            .map_err(|e| with_faces_involved(e, &built.control))?;
+        let measured = self
+            .meter
+            .measure(&decoded, level)
+            .map_err(|e| with_faces_involved(e, &decoded))?;
+        let err = measured.error;
+        let tol = self.tol;
+        report.timings.push(("topology", t_top));
+        report.timings.push(("fit", t_fit));
+        report.timings.push(("measure", t.elapsed().as_secs_f64()));
+        report.notes.push(format!(
+            "round {}: {} control vertices, level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}; {} of {} faces measured anew",
+            report.rounds,
+            built.control.vertex_count(),
+            err.max,
+            err.max / tol,
+            err.max_beyond_chord / tol,
+            err.rms,
+            measured.changed_groups,
+            self.faces.mesh.groups.len()
+        ));
+        Ok(Round {
+            built,
+            measured,
+            level,
+            bytes,
+        })
+    }
+
+    /// Decides what follows a measurement (`ok`: within tolerance; `last`: the last round
+    /// allowed) and starts, checks or ends a relaxation: a model within tolerance relaxes its
+    /// refined closed patches once; when relaxing broke the tolerance, the relaxed groups
+    /// that fail get their converged thresholds back and the model is measured once more.
+    fn after_measurement(
+        &self,
+        ok: bool,
+        last: bool,
+        relaxing: &mut Option<Relaxation>,
+        measured: &Measurement,
+        plan: &mut Plan,
+        report: &mut FitReport,
+    ) -> Next {
+        let (faces, tol) = (self.faces, self.tol);
+        match relaxing.take() {
+            None if ok && (!self.opts.relax || last) => Next::Stop,
+            None if ok => {
+                let relaxed = relax_refined_groups(
+                    &faces.mesh,
+                    &faces.tris,
+                    &measured.group_excess,
+                    tol,
+                    &mut plan.groups,
+                    &mut plan.vertex_cost,
+                );
+                if relaxed.groups.is_empty() {
+                    return Next::Stop;
+                }
+                report.notes.push(format!(
+                    "  within tolerance; {} refined closed patches far within it get a coarser threshold",
+                    relaxed.groups.len()
+                ));
+                *relaxing = Some(relaxed);
+                Next::Measure
+            }
+            None => Next::Refine,
+            Some(r) if ok || r.verifying => Next::Stop,
+            Some(mut r) => {
+                // When a group that was not relaxed fails (relaxed patches moved vertices it
+                // shares), restoring would give the converged model again: keep it.
+                let failing: Vec<usize> = (0..faces.mesh.groups.len())
+                    .filter(|&g| measured.group_excess[g].0 > tol)
+                    .collect();
+                if failing.iter().any(|g| r.groups.binary_search(g).is_err()) || last {
+                    return Next::Stop;
+                }
+                for &g in &r.groups {
+                    if failing.binary_search(&g).is_ok() {
+                        plan.groups[g] = r.plans[g];
+                        for &v in &r.vertices[g] {
+                            plan.vertex_cost[v as usize] = r.vertex_cost[v as usize];
+                        }
+                    }
+                }
+                report.notes.push(format!(
+                    "  relaxing failed in {} groups: their thresholds restored",
+                    failing.len()
+                ));
+                r.verifying = true;
+                *relaxing = Some(r);
+                Next::Measure
+            }
+        }
+    }
+}
