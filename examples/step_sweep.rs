@@ -16,7 +16,7 @@ use scode::io::step::StepModel;
 use scode::metrics::{point_distances, TriangleSurface};
 use scode::pipeline::{encode_fitted, encode_step, sidecar_hints, ModelEncodeOptions};
 use scode::subdiv::{subdivide, SubdivOptions};
-use scode::ControlMesh;
+use scode::{ControlMesh, Tolerance};
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -76,7 +76,11 @@ fn row(corpus: &Path, path: &Path) {
         });
     let tol = fine.as_ref().map(|(_, m)| 1e-3 * m.diagonal());
     let t0 = Instant::now();
-    let result = encode_step(path, tol, false, &ModelEncodeOptions::default());
+    let mut opts = ModelEncodeOptions::default();
+    if let Some(t) = tol {
+        opts.fit.tolerance = Tolerance::Absolute(t);
+    }
+    let result = encode_step(path, &opts);
     let secs = t0.elapsed().as_secs_f64();
     let (model, bytes, report): (StepModel, Vec<u8>, _) = match result {
         Ok(r) => r,
@@ -100,8 +104,6 @@ fn row(corpus: &Path, path: &Path) {
                 .unwrap()
                 .map(|(_, h)| h)
                 .unwrap_or_default();
-            let mut opts = ModelEncodeOptions::default();
-            opts.fit.tolerance = tol;
             let mb = encode_fitted(fine_mesh, &hints, &opts)
                 .map(|(b, _)| b.len().to_string())
                 .unwrap_or_else(|e| format!("fails: {e}"));

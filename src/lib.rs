@@ -29,4 +29,4 @@ pub mod pipeline;
 pub mod report;
 
 pub use error::{Error, Result};
-pub use mesh::ControlMesh;
+pub use mesh::{ControlMesh, Tolerance};

@@ -10,6 +10,7 @@ use std::path::Path;
 use scode::codec::{self, Limits};
 use scode::fit::encoder::{FitReport, SurfaceHint};
 use scode::pipeline::{encode_fitted, sidecar_hints, Effort, ModelEncodeOptions};
+use scode::Tolerance;
 
 #[test]
 fn bundled_example_part() {
@@ -51,7 +52,7 @@ fn the_mean_tolerance_is_checked_and_reported() {
     let (input, _) = scode::io::read_mesh(&path).unwrap();
     let with_mean = |mean: Option<f64>| {
         let mut opts = ModelEncodeOptions::default();
-        opts.fit.mean_tolerance = mean;
+        opts.fit.mean_tolerance = mean.map(Tolerance::Absolute);
         encode_fitted(&input, &[], &opts)
     };
     assert!(matches!(
@@ -125,8 +126,8 @@ fn fandisk_at_the_seed_coders_operating_point() {
     let (input, _) = scode::io::read_mesh(&dir.join("meshes/fandisk.obj")).unwrap();
     let opts = ModelEncodeOptions {
         fit: scode::fit::encoder::FitOptions {
-            tolerance: Some(0.008 * input.diagonal()),
-            mean_tolerance: Some(1e-3 * input.diagonal()),
+            tolerance: Tolerance::Relative(0.008),
+            mean_tolerance: Some(Tolerance::Relative(1e-3)),
             ..Default::default()
         },
         ..Default::default()
@@ -349,7 +350,7 @@ fn closed_patches_are_fitted_onto_their_exact_surfaces() {
         radius: r,
     });
     let mut opts = ModelEncodeOptions::default();
-    opts.fit.tolerance = Some(1.0);
+    opts.fit.tolerance = Tolerance::Absolute(1.0);
     opts.fit.exact_surfaces = vec![sphere, sphere];
     let hints = [SurfaceHint::Freeform, SurfaceHint::Freeform];
     let (bytes, report) = encode_fitted(&m, &hints, &opts).unwrap();

@@ -22,6 +22,7 @@ use std::time::{Duration, Instant};
 use scode::codec::{self, Limits};
 use scode::io::step::{read_step, read_step_bytes, StepModel, StepOptions};
 use scode::pipeline::{encode_fitted, Effort, ModelEncodeOptions};
+use scode::Tolerance;
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -224,7 +225,7 @@ fn faces_meeting_at_a_knife_edge_keep_the_model_manifold() {
     let path = corpus.join("step/bug33398.step");
     let (fine, _) = scode::io::read_mesh(&corpus.join("tess/bug33398_fine.obj")).unwrap();
     let tol = 1e-3 * fine.diagonal();
-    let mut opts = scode::pipeline::step_options_for(Some(tol), false);
+    let mut opts = scode::pipeline::step_options_for(Tolerance::Absolute(tol));
     opts.analytic_chordal_factor =
         scode::pipeline::STEP_COARSE_CHORD_FRACTION / scode::pipeline::STEP_CHORD_FRACTION;
     opts.stretch_parameter_plane = false;
@@ -243,7 +244,7 @@ fn faces_meeting_at_a_knife_edge_keep_the_model_manifold() {
         }
     }
     let mut fit = ModelEncodeOptions::default();
-    fit.fit.tolerance = Some(tol);
+    fit.fit.tolerance = Tolerance::Absolute(tol);
     fit.fit.exact_surfaces = scode::pipeline::step_exact_surfaces(&model);
     let (_, report) = encode_fitted(&model.mesh, &scode::pipeline::step_hints(&model), &fit)
         .expect("the knife-edge faces fit");

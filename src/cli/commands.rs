@@ -81,7 +81,7 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
 /// Reads a STEP file for `encode --raw` (its tessellation, with the chordal tolerance tied
 /// to the encode tolerance), prints what was read and warns about every skipped face.
 fn read_step_input(args: &EncodeArgs) -> Result<ControlMesh> {
-    let opts = scode::pipeline::step_options_for(args.tolerance, args.relative);
+    let opts = scode::pipeline::step_options_for(args.tolerance());
     let bar = spinner(&format!("reading {}", args.input.display()));
     let result = step::read_step(&args.input, &opts);
     bar.finish_and_clear();
@@ -139,13 +139,13 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         effort: args.effort,
         ..Default::default()
     };
-    // As given: `encode_step` and the mesh path below scale it with --relative.
-    model_opts.fit.mean_tolerance = args.mean_tolerance;
+    model_opts.fit.tolerance = args.tolerance();
+    model_opts.fit.mean_tolerance = args.mean_tolerance();
     let is_step = step::is_step_path(&args.input);
     // A STEP file is read and fitted in one call (at `--effort max`, several tessellations).
     let (mesh, step_fit) = if is_step && !args.raw {
         let bar = spinner(&format!("reading and fitting {}", args.input.display()));
-        let result = encode_step(&args.input, args.tolerance, args.relative, &model_opts);
+        let result = encode_step(&args.input, &model_opts);
         bar.finish_and_clear();
         let (model, bytes, fit) =
             result.with_context(|| format!("cannot encode {}", args.input.display()))?;
@@ -186,18 +186,8 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
                     }
                     _ => Vec::new(),
                 };
-                let mut opts = model_opts.clone();
-                let scale = |t: f64| {
-                    if args.relative {
-                        t * mesh.diagonal()
-                    } else {
-                        t
-                    }
-                };
-                opts.fit.tolerance = args.tolerance.map(scale);
-                opts.fit.mean_tolerance = args.mean_tolerance.map(scale);
                 let bar = spinner(&format!("fitting {}", args.input.display()));
-                let result = encode_fitted(&mesh, &hints, &opts);
+                let result = encode_fitted(&mesh, &hints, &model_opts);
                 bar.finish_and_clear();
                 result.with_context(|| format!("cannot fit {}", args.input.display()))?
             }

@@ -31,6 +31,7 @@ use anyhow::{bail, Result};
 use clap::{Args, Parser, Subcommand};
 
 use scode::pipeline::Effort;
+use scode::Tolerance;
 
 /// scode: a subdivision-surface codec for CAD models.
 ///
@@ -203,6 +204,20 @@ pub struct EncodeArgs {
     /// Print what the reader repaired and per-stage timings.
     #[arg(short, long)]
     pub verbose: bool,
+}
+
+impl EncodeArgs {
+    /// --tolerance as given (read with --relative), else the encoder's default.
+    pub fn tolerance(&self) -> Tolerance {
+        self.tolerance
+            .map_or(Tolerance::DEFAULT, |t| Tolerance::new(t, self.relative))
+    }
+
+    /// --mean-tolerance as given (read with --relative).
+    pub fn mean_tolerance(&self) -> Option<Tolerance> {
+        self.mean_tolerance
+            .map(|t| Tolerance::new(t, self.relative))
+    }
 }
 
 #[derive(Args, Debug)]

@@ -37,7 +37,7 @@ use super::quantise::{smallest_file, Quantised};
 use super::reference::{reference_facets, triangulated, Allowances, Facets};
 use super::rounds::Rounds;
 use crate::error::{Error, Result};
-use crate::mesh::{ControlMesh, PatchKind};
+use crate::mesh::{ControlMesh, PatchKind, Tolerance};
 
 /// What the input says a group's surface is (a STEP face type or a sidecar entry).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,15 +54,15 @@ pub enum SurfaceHint {
 /// Options of [`fit_model`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitOptions {
-    /// Largest allowed distance between input and decoded surface, model units; default
-    /// `1e-3` of the bounding-box diagonal.
-    pub tolerance: Option<f64>,
-    /// Largest allowed mean distance (the larger of the two directions' means), model units;
-    /// `None`: unbounded. The fit's rounds are driven by `tolerance`; this bound keeps the
+    /// Largest allowed distance between input and decoded surface; default
+    /// [`Tolerance::DEFAULT`] (relative bounds are taken against the input's diagonal).
+    pub tolerance: Tolerance,
+    /// Largest allowed mean distance (the larger of the two directions' means); `None`:
+    /// unbounded. The fit's rounds are driven by `tolerance`; this bound keeps the
     /// quantisation search from trading mean error for bytes (at a loose `tolerance` a
     /// coarser grid step can keep the max within it while the mean grows). A fit whose mean
     /// is over it even at the default step is reported out of tolerance.
-    pub mean_tolerance: Option<f64>,
+    pub mean_tolerance: Option<Tolerance>,
     /// Decode level the tolerance is checked at; default: 4, raised to 5 when that is what
     /// it takes.
     pub default_level: Option<u8>,
@@ -116,7 +116,7 @@ pub struct FitOptions {
 impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
-            tolerance: None,
+            tolerance: Tolerance::DEFAULT,
             mean_tolerance: None,
             default_level: None,
             sharp_angle_deg: 30.0,
@@ -204,9 +204,9 @@ pub fn fit_model(
     // The fit works on the input's triangles.
     let mesh = triangulated(input);
     let diag = mesh.diagonal();
-    let tol = checked_tolerances(opts, diag)?;
+    let (tol, mean_tol) = checked_tolerances(opts, diag)?;
     report.tolerance = tol;
-    report.mean_tolerance = opts.mean_tolerance;
+    report.mean_tolerance = mean_tol;
     report.diagonal = diag;
     let mut t = Instant::now();
     let faces = classify_faces(mesh, hints, opts, tol, &mut report)?;
@@ -273,14 +273,14 @@ pub fn fit_model(
         faces.segmented,
         &meter,
         opts,
-        tol,
+        (tol, mean_tol),
         reconstruct,
         &mut report,
     )?;
     report
         .timings
         .push(("quantisation", t.elapsed().as_secs_f64()));
-    finish_report(&mut report, &chosen, opts, tol);
+    finish_report(&mut report, &chosen, tol, mean_tol);
     report
         .timings
         .push(("total", t_start.elapsed().as_secs_f64()));
@@ -292,23 +292,15 @@ pub fn fit_model(
     })
 }
 
-/// The tolerance the fit holds (the caller's, else 1e-3 of the diagonal `diag`), after
-/// checking it and the mean tolerance are positive and finite.
-fn checked_tolerances(opts: &FitOptions, diag: f64) -> Result<f64> {
-    let tol = opts.tolerance.unwrap_or(1e-3 * diag);
-    if !(tol > 0.0 && tol.is_finite()) {
-        return Err(Error::Parameter(format!(
-            "tolerance must be positive, got {tol}"
-        )));
-    }
-    if let Some(mt) = opts.mean_tolerance {
-        if !(mt > 0.0 && mt.is_finite()) {
-            return Err(Error::Parameter(format!(
-                "mean tolerance must be positive, got {mt}"
-            )));
-        }
-    }
-    Ok(tol)
+/// The tolerance and the mean tolerance the fit holds, in model units for a model of
+/// diagonal `diag`, checked to be positive and finite.
+fn checked_tolerances(opts: &FitOptions, diag: f64) -> Result<(f64, Option<f64>)> {
+    let tol = opts.tolerance.checked(diag, "tolerance")?;
+    let mean = opts
+        .mean_tolerance
+        .map(|m| m.checked(diag, "mean tolerance"))
+        .transpose()?;
+    Ok((tol, mean))
 }
 
 /// Where each plane face lies in its plane, for the decimation's domain test (`None` for
@@ -332,7 +324,7 @@ fn plane_domains(input: &Facets, surfaces: &[SurfaceRef], tol: f64) -> Vec<Optio
 }
 
 /// The report's summary of the chosen model.
-fn finish_report(report: &mut FitReport, chosen: &Quantised, opts: &FitOptions, tol: f64) {
+fn finish_report(report: &mut FitReport, chosen: &Quantised, tol: f64, mean_tol: Option<f64>) {
     let err = chosen.err;
     if chosen.coarser_quarter_bits > 0 {
         report.notes.push(format!(
@@ -343,14 +335,14 @@ fn finish_report(report: &mut FitReport, chosen: &Quantised, opts: &FitOptions, 
             err.max_beyond_chord / tol
         ));
     }
-    let mean_ok = opts.mean_tolerance.is_none_or(|mt| err.mean <= mt);
+    let mean_ok = mean_tol.is_none_or(|mt| err.mean <= mt);
     report.error = err;
     report.within_tolerance = err.max_beyond_chord <= tol && mean_ok;
     if !mean_ok {
         report.notes.push(format!(
             "mean error {:.3e} is over the mean tolerance {:.3e}: lower the tolerance",
             err.mean,
-            opts.mean_tolerance.unwrap_or(f64::INFINITY)
+            mean_tol.unwrap_or(f64::INFINITY)
         ));
     }
     report.default_level = chosen.level;

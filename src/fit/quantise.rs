@@ -19,7 +19,8 @@ pub(super) struct Quantised {
     pub coarser_quarter_bits: u8,
 }
 
-/// Quantises each candidate as coarsely as the tolerance allows and returns the one whose
+/// Quantises each candidate as coarsely as the tolerances (max, and mean if bounded; model
+/// units) allow and returns the one whose
 /// file is smallest (the first on a tie). A segmented model's made-up group names are
 /// dropped first.
 pub(super) fn smallest_file(
@@ -27,7 +28,7 @@ pub(super) fn smallest_file(
     segmented: bool,
     meter: &ErrorMeter<'_>,
     opts: &FitOptions,
-    tol: f64,
+    tolerances: (f64, Option<f64>),
     reconstruct: &mut Reconstruct<'_>,
     report: &mut FitReport,
 ) -> Result<Quantised> {
@@ -49,7 +50,8 @@ pub(super) fn smallest_file(
                     .1;
             }
         }
-        let (err, coarser, bytes) = coarsest_step(&candidate, meter, opts, tol, reconstruct)?;
+        let (err, coarser, bytes) =
+            coarsest_step(&candidate, meter, opts, tolerances, reconstruct)?;
         sizes.push((candidate.control.vertex_count(), coarser, bytes));
         if chosen.as_ref().is_none_or(|c| bytes < c.1) {
             let quantised = Quantised {
@@ -92,7 +94,7 @@ fn coarsest_step(
     candidate: &Candidate,
     meter: &ErrorMeter<'_>,
     opts: &FitOptions,
-    tol: f64,
+    (tol, mean_tol): (f64, Option<f64>),
     reconstruct: &mut Reconstruct<'_>,
 ) -> Result<(FitError, u8, usize)> {
     let Candidate {
@@ -105,7 +107,7 @@ fn coarsest_step(
     if err.max_beyond_chord > tol {
         return Ok((err, coarser_bits, bytes));
     }
-    let mean_ok = |e: &FitError| opts.mean_tolerance.is_none_or(|mt| e.mean <= mt);
+    let mean_ok = |e: &FitError| mean_tol.is_none_or(|mt| e.mean <= mt);
     // The chord allowance is for the input's facets, not for quantisation noise: the plain
     // max error may not grow beyond max(tolerance, the unquantised fit's).
     let max_cap = tol.max(err.max);

@@ -1,11 +1,13 @@
 //! Polygon mesh with CAD-face groups, sharp edges and corner vertices.
 //!
-//! [`ControlMesh`] is the contract between the encoder and the decoder (see
-//! `../shared/design.md`): everything the decoder needs to rebuild the surface and nothing
-//! else. The same type also carries input tessellations (raw mode stores the input mesh
+//! [`ControlMesh`] is the contract between the encoder and the decoder: everything the
+//! decoder needs to rebuild the surface and nothing else. The same type also carries input tessellations (raw mode stores the input mesh
 //! itself as the control mesh), so readers, the codec, subdivision and fitting all speak it.
 
+mod tolerance;
 pub mod topology;
+
+pub use tolerance::Tolerance;
 
 use std::collections::BTreeSet;
 

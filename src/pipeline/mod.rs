@@ -10,7 +10,7 @@ use crate::fit::encoder::{fit_model, ExactSurface, FitOptions, FitReport, Surfac
 #[cfg(feature = "step")]
 use crate::fit::primitives::Primitive;
 use crate::io::faces_json::{self, SurfaceType};
-use crate::mesh::ControlMesh;
+use crate::mesh::{ControlMesh, Tolerance};
 use glam::DVec3;
 
 mod search;
@@ -144,12 +144,11 @@ pub(crate) fn same_faces(a: &ControlMesh, b: &ControlMesh) -> bool {
 /// STEP reading options with one chordal tolerance for all faces,
 /// [`STEP_CHORD_FRACTION`] of the encode tolerance.
 #[cfg(feature = "step")]
-pub fn step_options_for(tolerance: Option<f64>, relative: bool) -> crate::io::step::StepOptions {
+pub fn step_options_for(tolerance: Tolerance) -> crate::io::step::StepOptions {
     let mut o = crate::io::step::StepOptions::default();
-    match (tolerance, relative) {
-        (Some(t), false) => o.chordal_tolerance = Some(STEP_CHORD_FRACTION * t),
-        (Some(t), true) => o.relative_chordal_tolerance = STEP_CHORD_FRACTION * t,
-        (None, _) => o.relative_chordal_tolerance = STEP_CHORD_FRACTION * 1e-3,
+    match tolerance.scaled(STEP_CHORD_FRACTION) {
+        Tolerance::Absolute(t) => o.chordal_tolerance = Some(t),
+        Tolerance::Relative(f) => o.relative_chordal_tolerance = f,
     }
     o
 }
@@ -194,7 +193,7 @@ pub(crate) fn encode_fitted_once(
         .bounding_box()
         .map(|(lo, hi)| (hi - lo).max_element())
         .unwrap_or(1.0);
-    let tol = opts.fit.tolerance.unwrap_or(1e-3 * input.diagonal());
+    let tol = opts.fit.tolerance.resolve(input.diagonal());
     let bits = opts
         .quantization_bits
         .unwrap_or_else(|| bits_for_tolerance(extent, tol, 0.25));

@@ -296,11 +296,10 @@ mod step {
         }
     }
 
-    /// Reads a STEP file with its tessellation tied to the encode tolerance, fits it with the
-    /// B-rep's surface types and its faces' exact surfaces, and encodes it. `tolerance` is in
-    /// millimetres (the model's output unit) or, with `relative`, a fraction of the
-    /// bounding-box diagonal; `None` is 1e-3 of the diagonal. `opts.fit.mean_tolerance` is in
-    /// the same units (scaled with `relative` too).
+    /// Reads a STEP file with its tessellation tied to the encode tolerance
+    /// (`opts.fit.tolerance`; a relative one is a fraction of the tessellation's diagonal),
+    /// fits it with the B-rep's surface types and its faces' exact surfaces, and encodes it.
+    /// Lengths are in millimetres, the model's output unit.
     ///
     /// The file is parsed and its faces converted once, and tessellated once per
     /// [`StepTessellation`] of the effort ([`read_step_tessellations`]); at [`Effort::Max`]
@@ -312,15 +311,13 @@ mod step {
     /// chosen model's notes say which tessellation it was.
     pub fn encode_step(
         path: &Path,
-        tolerance: Option<f64>,
-        relative: bool,
         opts: &ModelEncodeOptions,
     ) -> Result<(StepModel, Vec<u8>, FitReport)> {
         let variants = opts.effort.step_tessellations();
         let step_opts: Vec<_> = variants
             .iter()
             .map(|v| {
-                let mut o = step_options_for(tolerance, relative);
+                let mut o = step_options_for(opts.fit.tolerance);
                 if let Some(c) = &mut o.chordal_tolerance {
                     *c *= v.chord_factor;
                 }
@@ -346,15 +343,6 @@ mod step {
                 (true, _) => continue,
             };
             let mut opts = opts.clone();
-            let scale = |t: f64| {
-                if relative {
-                    t * model.mesh.diagonal()
-                } else {
-                    t
-                }
-            };
-            opts.fit.tolerance = tolerance.map(scale);
-            opts.fit.mean_tolerance = opts.fit.mean_tolerance.map(scale);
             opts.fit.exact_surfaces = step_exact_surfaces(&model);
             opts.fit.reference = reference;
             let fitted = encode_fitted(&model.mesh, &step_hints(&model), &opts);

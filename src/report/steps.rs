@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::codec::{self, Content, EncodeOptions};
 use crate::error::{Error, Result};
 use crate::io;
+use crate::mesh::Tolerance;
 use crate::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 
 /// One encoder setting: a point of a rate-distortion curve.
@@ -103,7 +104,7 @@ pub fn run_scode_job(job: &ScodeJob) -> Result<ScodeJobResult> {
                     .map(|(_, h)| h)
                     .unwrap_or_default();
                 let mut opts = ModelEncodeOptions::default();
-                opts.fit.tolerance = Some(tolerance * mesh.diagonal());
+                opts.fit.tolerance = Tolerance::Relative(tolerance);
                 let (bytes, fit) = encode_fitted(&mesh, &hints, &opts)?;
                 if run == 0 && !fit.within_tolerance {
                     result.note = Some(format!(

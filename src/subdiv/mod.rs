@@ -3,8 +3,7 @@
 //! and crack-free level-of-detail extraction.
 //!
 //! The exact rules are the format's decoding rules and are written down in
-//! `spec/subdivision.md`; the numbers were checked against
-//! `../shared/reference/loop-subdivision.md`.
+//! `spec/subdivision.md`.
 //!
 //! Usage: build a [`Refinement`] once per control-mesh connectivity (the topology of every
 //! level 0..=n), then evaluate positions for any set of control points with

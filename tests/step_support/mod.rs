@@ -8,7 +8,7 @@ use scode::codec::{self, Content, Limits};
 use scode::metrics::{point_distances, TriangleSurface};
 use scode::pipeline::{encode_fitted, encode_step, sidecar_hints, Effort, ModelEncodeOptions};
 use scode::subdiv::{subdivide, SubdivOptions};
-use scode::ControlMesh;
+use scode::{ControlMesh, Tolerance};
 
 /// The surface a `.scode` file decodes to (default level, limit positions), as `info
 /// --against` measures it.
@@ -74,8 +74,9 @@ pub fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
     let (fine, _) = scode::io::read_mesh(&fine_path).unwrap();
     let tol = 1e-3 * fine.diagonal();
     let t0 = Instant::now();
-    let (model, bytes, report) =
-        encode_step(&path, Some(tol), false, &ModelEncodeOptions::default()).unwrap();
+    let mut opts = ModelEncodeOptions::default();
+    opts.fit.tolerance = Tolerance::Absolute(tol);
+    let (model, bytes, report) = encode_step(&path, &opts).unwrap();
     assert!(report.within_tolerance, "{file}: {:?}", report.error);
     let surface = decoded_surface(&bytes);
     let c = compare(&surface, &fine);
@@ -119,23 +120,14 @@ pub fn check_step_path_no_larger_than_mesh_path(corpus: &Path, file: &str, effor
     let fine_path = fine_tessellation(corpus, stem).expect("fine tessellation");
     let (fine, _) = scode::io::read_mesh(&fine_path).unwrap();
     let tol = 1e-3 * fine.diagonal();
-    let (_, step_bytes, report) = encode_step(
-        &corpus.join("step").join(file),
-        Some(tol),
-        false,
-        &ModelEncodeOptions {
-            effort,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert!(report.within_tolerance, "{file}: {:?}", report.error);
-    let hints = sidecar_hints(&fine_path, &fine).unwrap().unwrap().1;
     let mut opts = ModelEncodeOptions {
         effort,
         ..Default::default()
     };
-    opts.fit.tolerance = Some(tol);
+    opts.fit.tolerance = Tolerance::Absolute(tol);
+    let (_, step_bytes, report) = encode_step(&corpus.join("step").join(file), &opts).unwrap();
+    assert!(report.within_tolerance, "{file}: {:?}", report.error);
+    let hints = sidecar_hints(&fine_path, &fine).unwrap().unwrap().1;
     let (mesh_bytes, _) = encode_fitted(&fine, &hints, &opts).unwrap();
     eprintln!(
         "{file} at effort {effort}: STEP path {} bytes, mesh path {} bytes",
@@ -155,8 +147,7 @@ pub fn check_step_path_no_larger_than_mesh_path(corpus: &Path, file: &str, effor
 /// away from face boundaries lie within 1.05 tolerance of their faces' exact surfaces.
 pub fn check_decoded_analytic_faces_on_exact_surfaces(corpus: &Path, file: &str) {
     let path = corpus.join("step").join(file);
-    let (model, bytes, report) =
-        encode_step(&path, None, false, &ModelEncodeOptions::default()).unwrap();
+    let (model, bytes, report) = encode_step(&path, &ModelEncodeOptions::default()).unwrap();
     assert!(report.within_tolerance, "{file}: {:?}", report.error);
     let exact = scode::pipeline::step_exact_surfaces(&model);
     let decoded = decoded_surface(&bytes);
