@@ -5,9 +5,10 @@
 
 use glam::DVec3;
 
-use super::curves::{build_curve_network, CurveNetwork, CurveOptions};
+use super::curves::{self, build_curve_network, CurveNetwork, CurveOptions};
 use crate::error::Result;
 use crate::mesh::{Axis, ControlMesh};
+use crate::metrics::segment_parameter;
 
 /// The curve network with what the rounds look up in it.
 pub(super) struct Chains {
@@ -72,41 +73,10 @@ fn cyl_coords(axis: &Axis, p: DVec3) -> (f64, f64, f64) {
 
 /// Douglas-Peucker on a polyline given as points; returns kept indices (ends included).
 fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<usize> {
-    let n = points.len();
-    if n <= 2 {
-        return (0..n).collect();
-    }
-    let mut keep = vec![false; n];
-    keep[0] = true;
-    keep[n - 1] = true;
-    let mut stack = vec![(0usize, n - 1)];
-    while let Some((a, b)) = stack.pop() {
-        if b <= a + 1 {
-            continue;
-        }
-        let (pa, pb) = (points[a], points[b]);
-        let ab = pb - pa;
-        let len2 = ab.length_squared();
-        let (mut worst, mut at) = (-1.0, a);
-        for (i, &p) in points.iter().enumerate().take(b).skip(a + 1) {
-            let t = if len2 > 0.0 {
-                ((p - pa).dot(ab) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let d = (p - (pa + ab * t)).length();
-            if d > worst {
-                worst = d;
-                at = i;
-            }
-        }
-        if worst > tol {
-            keep[at] = true;
-            stack.push((a, at));
-            stack.push((at, b));
-        }
-    }
-    (0..n).filter(|&i| keep[i]).collect()
+    curves::douglas_peucker(points, tol)
+        .into_iter()
+        .map(|i| i as usize)
+        .collect()
 }
 
 /// Control points (indices into `chain.vertices`) of one chain.
@@ -191,14 +161,8 @@ pub(super) fn chain_controls(
 pub(super) fn closest_on_polyline(p: DVec3, line: &[DVec3]) -> DVec3 {
     let mut best = (f64::INFINITY, line[0]);
     for w in line.windows(2) {
-        let ab = w[1] - w[0];
-        let len2 = ab.length_squared();
-        let t = if len2 > 0.0 {
-            ((p - w[0]).dot(ab) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let q = w[0] + ab * t;
+        // `w[0] + t (w[1] - w[0])`, not `lerp` (which rounds differently).
+        let q = w[0] + (w[1] - w[0]) * segment_parameter(p, w[0], w[1]);
         let d = (p - q).length_squared();
         if d < best.0 {
             best = (d, q);
