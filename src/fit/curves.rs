@@ -245,6 +245,28 @@ pub fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<u32> {
 /// Builds the curve network of a grouped mesh. Errors on invalid meshes, on groups whose
 /// faces are inconsistently oriented along a boundary, and on bad options.
 pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<CurveNetwork> {
+    let tol = checked_tolerance(mesh, opts)?;
+    let graph = BoundaryGraph::new(mesh);
+    let mut corner_reason = graph.corners(opts.corner_angle_deg.to_radians().cos());
+    let polylines = graph.polylines(&mut corner_reason);
+    let chains = graph.chains(polylines, tol)?;
+    let edge_chain = graph.edge_chains(&chains);
+    let group_loops =
+        build_group_loops(mesh, &graph.edges, &graph.edge_label, &edge_chain, &chains)?;
+    Ok(CurveNetwork {
+        corners: corner_reason
+            .into_iter()
+            .map(|(vertex, reason)| Corner { vertex, reason })
+            .collect(),
+        chains,
+        group_loops,
+        simplify_tolerance: tol,
+    })
+}
+
+/// Rejects invalid meshes and out-of-range options; returns the Douglas-Peucker tolerance
+/// to use.
+fn checked_tolerance(mesh: &ControlMesh, opts: &CurveOptions) -> Result<f64> {
     mesh.validate()?;
     if !(opts.corner_angle_deg > 0.0 && opts.corner_angle_deg <= 180.0) {
         return Err(Error::Parameter(format!(
@@ -258,14 +280,19 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             "simplification tolerance {tol} must be finite and >= 0"
         )));
     }
-    let edges = EdgeTable::new(mesh);
-    let ne = edges.len();
-    let nv = mesh.vertex_count();
+    Ok(tol)
+}
 
-    // Boundary edges and their labels (adjacent groups + open flag).
+/// Label of every edge (an index into the returned label list) and the distinct labels:
+/// (adjacent groups ascending, open-boundary flag). Interior edges of one group get
+/// `u32::MAX`; every other edge is a group-boundary edge.
+fn label_boundary_edges(
+    mesh: &ControlMesh,
+    edges: &EdgeTable,
+) -> (Vec<u32>, Vec<(Vec<u32>, bool)>) {
     let mut label_ids: BTreeMap<(Vec<u32>, bool), u32> = BTreeMap::new();
     let mut labels: Vec<(Vec<u32>, bool)> = Vec::new();
-    let mut edge_label = vec![u32::MAX; ne];
+    let mut edge_label = vec![u32::MAX; edges.len()];
     for (e, label) in edge_label.iter_mut().enumerate() {
         let fs = edges.faces(e);
         let mut groups: Vec<u32> = fs
@@ -285,9 +312,17 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
         });
         *label = id;
     }
-    let is_boundary = |e: usize| edge_label[e] != u32::MAX;
+    (edge_label, labels)
+}
 
-    // Boundary edges per vertex (CSR, ascending edge id).
+/// Boundary edges of every vertex as CSR (offsets, edge ids ascending per vertex).
+fn boundary_edges_per_vertex(
+    edges: &EdgeTable,
+    edge_label: &[u32],
+    nv: usize,
+) -> (Vec<u32>, Vec<u32>) {
+    let ne = edges.len();
+    let is_boundary = |e: usize| edge_label[e] != u32::MAX;
     let mut deg = vec![0u32; nv + 1];
     for e in 0..ne {
         if is_boundary(e) {
@@ -311,18 +346,11 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             }
         }
     }
-    let vertex_edges =
-        |v: u32| &vedges[vstart[v as usize] as usize..vstart[v as usize + 1] as usize];
-    let other_end = |e: u32, v: u32| {
-        let (a, b) = edges.keys[e as usize];
-        if a == v {
-            b
-        } else {
-            a
-        }
-    };
+    (vstart, vedges)
+}
 
-    // Number of distinct groups around each vertex.
+/// Number of distinct groups among the faces around each vertex.
+fn groups_per_vertex(mesh: &ControlMesh) -> Vec<u32> {
     let mut vg: Vec<(u32, u32)> = Vec::with_capacity(mesh.face_vertices.len());
     for f in 0..mesh.face_count() {
         for &v in mesh.face(f) {
@@ -331,97 +359,19 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
     }
     vg.sort_unstable();
     vg.dedup();
-    let mut group_count = vec![0u32; nv];
+    let mut group_count = vec![0u32; mesh.vertex_count()];
     for &(v, _) in &vg {
         group_count[v as usize] += 1;
     }
+    group_count
+}
 
-    // Corners.
-    let cos_turn = opts.corner_angle_deg.to_radians().cos();
-    let mut corner_reason: BTreeMap<u32, CornerReason> = BTreeMap::new();
-    for v in 0..nv as u32 {
-        let es = vertex_edges(v);
-        if es.is_empty() {
-            continue;
-        }
-        let reason = if es.len() != 2 || group_count[v as usize] >= 3 {
-            Some(CornerReason::Junction)
-        } else if edge_label[es[0] as usize] != edge_label[es[1] as usize] {
-            Some(CornerReason::GroupChange)
-        } else {
-            let p = mesh.positions[v as usize];
-            let a = mesh.positions[other_end(es[0], v) as usize];
-            let b = mesh.positions[other_end(es[1], v) as usize];
-            let (din, dout) = ((p - a).normalize_or_zero(), (b - p).normalize_or_zero());
-            (din.dot(dout) < cos_turn).then_some(CornerReason::SharpTurn)
-        };
-        if let Some(r) = reason {
-            corner_reason.insert(v, r);
-        }
-    }
-
-    // Walk chains from corners; then closed loops without corners.
-    let mut visited = vec![false; ne];
-    let mut chains: Vec<Chain> = Vec::new();
-    let walk = |start: u32,
-                first: u32,
-                visited: &mut Vec<bool>,
-                corner_reason: &BTreeMap<u32, CornerReason>|
-     -> Vec<u32> {
-        let mut verts = vec![start];
-        let (mut v, mut e) = (start, first);
-        loop {
-            visited[e as usize] = true;
-            let w = other_end(e, v);
-            verts.push(w);
-            if corner_reason.contains_key(&w) {
-                break;
-            }
-            // A non-corner vertex has exactly two boundary edges.
-            let es = vertex_edges(w);
-            let next = if es[0] == e { es[1] } else { es[0] };
-            if visited[next as usize] {
-                break; // closed loop back to its start (only for corner-less loops)
-            }
-            v = w;
-            e = next;
-        }
-        verts
-    };
-    let mut pending: Vec<Vec<u32>> = Vec::new();
-    let corner_list: Vec<u32> = corner_reason.keys().copied().collect();
-    for &c in &corner_list {
-        for &e in vertex_edges(c) {
-            if !visited[e as usize] {
-                pending.push(walk(c, e, &mut visited, &corner_reason));
-            }
-        }
-    }
-    for e0 in 0..ne {
-        if !is_boundary(e0) || visited[e0] {
-            continue;
-        }
-        // A closed loop with no corner: collect it, cut at its lowest vertex and at the
-        // vertex half-way round.
-        let (a, _) = edges.keys[e0];
-        let mut loop_verts = walk(a, e0 as u32, &mut visited, &corner_reason);
-        loop_verts.pop(); // last == first
-        let n = loop_verts.len();
-        let (imin, _) = loop_verts
-            .iter()
-            .enumerate()
-            .min_by_key(|(_, &v)| v)
-            .unwrap_or((0, &a));
-        loop_verts.rotate_left(imin);
-        let half = n / 2;
-        corner_reason.insert(loop_verts[0], CornerReason::LoopSplit);
-        corner_reason.insert(loop_verts[half], CornerReason::LoopSplit);
-        pending.push(loop_verts[..=half].to_vec());
-        let mut second = loop_verts[half..].to_vec();
-        second.push(loop_verts[0]);
-        pending.push(second);
-    }
-    // Chains that start and end at the same corner are cut in the middle.
+/// Cuts every polyline that starts and ends at the same corner in the middle, making the
+/// cut vertex a corner, so that every chain has two distinct ends.
+fn cut_self_closing(
+    pending: Vec<Vec<u32>>,
+    corner_reason: &mut BTreeMap<u32, CornerReason>,
+) -> Vec<Vec<u32>> {
     let mut polylines: Vec<Vec<u32>> = Vec::with_capacity(pending.len());
     for p in pending {
         if p.len() >= 3 && p[0] == p[p.len() - 1] {
@@ -433,41 +383,206 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             polylines.push(p);
         }
     }
-    for verts in polylines {
-        let e = edges
-            .find(verts[0], verts[1])
-            .ok_or_else(|| Error::Mesh("internal: chain edge not found".into()))?;
-        let (groups, open) = labels[edge_label[e] as usize].clone();
-        let pts: Vec<DVec3> = verts.iter().map(|&v| mesh.positions[v as usize]).collect();
-        let control = douglas_peucker(&pts, tol);
-        chains.push(Chain {
-            vertices: verts,
-            groups,
-            open_boundary: open,
-            control,
-        });
-    }
+    polylines
+}
 
-    // Edge -> (chain, position) to map group boundary cycles onto chains.
-    let mut edge_chain = vec![(u32::MAX, 0u32); ne];
-    for (ci, c) in chains.iter().enumerate() {
-        for (i, w) in c.vertices.windows(2).enumerate() {
-            if let Some(e) = edges.find(w[0], w[1]) {
-                edge_chain[e] = (ci as u32, i as u32);
-            }
+/// The group-boundary edges of a mesh, labelled by their adjacent groups and listed per
+/// vertex: the graph whose corners and chains make the curve network.
+struct BoundaryGraph<'a> {
+    mesh: &'a ControlMesh,
+    edges: EdgeTable,
+    /// Per edge: index into `labels`, `u32::MAX` for an interior edge of one group.
+    edge_label: Vec<u32>,
+    /// Distinct (adjacent groups ascending, open boundary) pairs.
+    labels: Vec<(Vec<u32>, bool)>,
+    /// Boundary edges per vertex (CSR, ascending edge id).
+    vstart: Vec<u32>,
+    vedges: Vec<u32>,
+}
+
+impl<'a> BoundaryGraph<'a> {
+    /// Labels the edges of `mesh` and lists the boundary edges of every vertex.
+    fn new(mesh: &'a ControlMesh) -> Self {
+        let edges = EdgeTable::new(mesh);
+        let (edge_label, labels) = label_boundary_edges(mesh, &edges);
+        let (vstart, vedges) = boundary_edges_per_vertex(&edges, &edge_label, mesh.vertex_count());
+        BoundaryGraph {
+            mesh,
+            edges,
+            edge_label,
+            labels,
+            vstart,
+            vedges,
         }
     }
-    let group_loops = build_group_loops(mesh, &edges, &edge_label, &edge_chain, &chains)?;
 
-    Ok(CurveNetwork {
-        corners: corner_reason
-            .into_iter()
-            .map(|(vertex, reason)| Corner { vertex, reason })
-            .collect(),
-        chains,
-        group_loops,
-        simplify_tolerance: tol,
-    })
+    fn is_boundary(&self, e: usize) -> bool {
+        self.edge_label[e] != u32::MAX
+    }
+
+    /// Boundary edges at vertex `v`, ascending.
+    fn vertex_edges(&self, v: u32) -> &[u32] {
+        &self.vedges[self.vstart[v as usize] as usize..self.vstart[v as usize + 1] as usize]
+    }
+
+    /// The vertex of edge `e` that is not `v`.
+    fn other_end(&self, e: u32, v: u32) -> u32 {
+        let (a, b) = self.edges.keys[e as usize];
+        if a == v {
+            b
+        } else {
+            a
+        }
+    }
+
+    /// The boundary vertices that are corners, and why: junctions, changes of adjacent
+    /// groups, and turns sharper than the angle whose cosine is `cos_turn`.
+    fn corners(&self, cos_turn: f64) -> BTreeMap<u32, CornerReason> {
+        let mesh = self.mesh;
+        let group_count = groups_per_vertex(mesh);
+        let mut corner_reason: BTreeMap<u32, CornerReason> = BTreeMap::new();
+        for v in 0..mesh.vertex_count() as u32 {
+            let es = self.vertex_edges(v);
+            if es.is_empty() {
+                continue;
+            }
+            let reason = if es.len() != 2 || group_count[v as usize] >= 3 {
+                Some(CornerReason::Junction)
+            } else if self.edge_label[es[0] as usize] != self.edge_label[es[1] as usize] {
+                Some(CornerReason::GroupChange)
+            } else {
+                let p = mesh.positions[v as usize];
+                let a = mesh.positions[self.other_end(es[0], v) as usize];
+                let b = mesh.positions[self.other_end(es[1], v) as usize];
+                let (din, dout) = ((p - a).normalize_or_zero(), (b - p).normalize_or_zero());
+                (din.dot(dout) < cos_turn).then_some(CornerReason::SharpTurn)
+            };
+            if let Some(r) = reason {
+                corner_reason.insert(v, r);
+            }
+        }
+        corner_reason
+    }
+
+    /// Vertices of the boundary polyline that leaves `start` along edge `first` and runs
+    /// to the next corner (or, on a corner-less loop, back to `start`), marking its edges
+    /// visited.
+    fn walk(
+        &self,
+        start: u32,
+        first: u32,
+        visited: &mut [bool],
+        corner_reason: &BTreeMap<u32, CornerReason>,
+    ) -> Vec<u32> {
+        let mut verts = vec![start];
+        let (mut v, mut e) = (start, first);
+        loop {
+            visited[e as usize] = true;
+            let w = self.other_end(e, v);
+            verts.push(w);
+            if corner_reason.contains_key(&w) {
+                break;
+            }
+            // A non-corner vertex has exactly two boundary edges.
+            let es = self.vertex_edges(w);
+            let next = if es[0] == e { es[1] } else { es[0] };
+            if visited[next as usize] {
+                break; // closed loop back to its start (only for corner-less loops)
+            }
+            v = w;
+            e = next;
+        }
+        verts
+    }
+
+    /// The polylines of all boundary edges, each running between two distinct corners;
+    /// corners are added to `corner_reason` where loops had to be cut.
+    fn polylines(&self, corner_reason: &mut BTreeMap<u32, CornerReason>) -> Vec<Vec<u32>> {
+        let mut visited = vec![false; self.edges.len()];
+        let mut pending: Vec<Vec<u32>> = Vec::new();
+        let corner_list: Vec<u32> = corner_reason.keys().copied().collect();
+        for &c in &corner_list {
+            for &e in self.vertex_edges(c) {
+                if !visited[e as usize] {
+                    pending.push(self.walk(c, e, &mut visited, corner_reason));
+                }
+            }
+        }
+        self.cut_cornerless_loops(&mut visited, corner_reason, &mut pending);
+        cut_self_closing(pending, corner_reason)
+    }
+
+    /// Walks the closed loops that no corner walk reached and cuts each at its lowest
+    /// vertex and at the vertex half-way round (both become corners), appending the two
+    /// halves to `pending`.
+    fn cut_cornerless_loops(
+        &self,
+        visited: &mut [bool],
+        corner_reason: &mut BTreeMap<u32, CornerReason>,
+        pending: &mut Vec<Vec<u32>>,
+    ) {
+        for e0 in 0..self.edges.len() {
+            if !self.is_boundary(e0) || visited[e0] {
+                continue;
+            }
+            let (a, _) = self.edges.keys[e0];
+            let mut loop_verts = self.walk(a, e0 as u32, visited, corner_reason);
+            loop_verts.pop(); // last == first
+            let n = loop_verts.len();
+            let (imin, _) = loop_verts
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, &v)| v)
+                .unwrap_or((0, &a));
+            loop_verts.rotate_left(imin);
+            let half = n / 2;
+            corner_reason.insert(loop_verts[0], CornerReason::LoopSplit);
+            corner_reason.insert(loop_verts[half], CornerReason::LoopSplit);
+            pending.push(loop_verts[..=half].to_vec());
+            let mut second = loop_verts[half..].to_vec();
+            second.push(loop_verts[0]);
+            pending.push(second);
+        }
+    }
+
+    /// One chain per polyline, with its edges' label and a Douglas-Peucker control polygon
+    /// within `tol`.
+    fn chains(&self, polylines: Vec<Vec<u32>>, tol: f64) -> Result<Vec<Chain>> {
+        let mut chains: Vec<Chain> = Vec::with_capacity(polylines.len());
+        for verts in polylines {
+            let e = self
+                .edges
+                .find(verts[0], verts[1])
+                .ok_or_else(|| Error::Mesh("internal: chain edge not found".into()))?;
+            let (groups, open) = self.labels[self.edge_label[e] as usize].clone();
+            let pts: Vec<DVec3> = verts
+                .iter()
+                .map(|&v| self.mesh.positions[v as usize])
+                .collect();
+            let control = douglas_peucker(&pts, tol);
+            chains.push(Chain {
+                vertices: verts,
+                groups,
+                open_boundary: open,
+                control,
+            });
+        }
+        Ok(chains)
+    }
+
+    /// Per edge: the chain it belongs to and its position in that chain, `(u32::MAX, 0)`
+    /// for edges in no chain. Maps group boundary cycles onto chains.
+    fn edge_chains(&self, chains: &[Chain]) -> Vec<(u32, u32)> {
+        let mut edge_chain = vec![(u32::MAX, 0u32); self.edges.len()];
+        for (ci, c) in chains.iter().enumerate() {
+            for (i, w) in c.vertices.windows(2).enumerate() {
+                if let Some(e) = self.edges.find(w[0], w[1]) {
+                    edge_chain[e] = (ci as u32, i as u32);
+                }
+            }
+        }
+        edge_chain
+    }
 }
 
 /// Traces every group's boundary half-edges into cycles (rotating around each vertex
