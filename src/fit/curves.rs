@@ -595,43 +595,162 @@ fn build_group_loops(
     edge_chain: &[(u32, u32)],
     chains: &[Chain],
 ) -> Result<Vec<GroupLoops>> {
-    let ng = mesh.groups.len();
     // Chain end points, for finding a cycle position where a chain starts.
     let mut is_end = std::collections::BTreeSet::new();
     for c in chains {
         is_end.insert(c.start());
         is_end.insert(c.end());
     }
-    // Half-edge id = face corner index (face_offsets[f] + i).
+    let half_edges = HalfEdges::new(mesh, edges, edge_label);
     let nh = mesh.face_vertices.len();
     let mut visited = vec![false; nh];
-    let mut face_of = vec![0u32; nh];
+    let mut traced: Vec<Vec<TracedLoop>> = vec![Vec::new(); mesh.groups.len()];
+    for h0 in 0..nh {
+        if visited[h0] || !half_edges.is_boundary(h0) {
+            continue;
+        }
+        let g = mesh.face_groups[half_edges.face_of[h0] as usize] as usize;
+        let mut cycle = half_edges.trace_cycle(h0, g, &mut visited)?;
+        // Start the cycle where a chain starts.
+        let Some(s) = cycle
+            .iter()
+            .position(|&h| is_end.contains(&half_edges.tail(h)))
+        else {
+            return Err(Error::Mesh(format!(
+                "boundary loop of group {g} passes no corner"
+            )));
+        };
+        cycle.rotate_left(s);
+        let (loop_chains, length) = half_edges.loop_chains(&cycle, g, edge_chain, chains)?;
+        traced[g].push(TracedLoop {
+            chains: loop_chains,
+            length,
+            area: half_edges.vector_area(&cycle),
+        });
+    }
+    let (normal, total) = group_area_vectors(mesh);
+    Ok(traced
+        .into_iter()
+        .enumerate()
+        .map(|(g, loops)| order_loops(loops, normal[g], total[g]))
+        .collect())
+}
+
+/// One traced boundary loop of a group, with what orders it among the group's loops.
+#[derive(Clone)]
+struct TracedLoop {
+    chains: Vec<LoopChain>,
+    length: f64,
+    /// Vector area of the loop polygon.
+    area: DVec3,
+}
+
+/// Per group: the sum of its faces' vector areas and the sum of their areas. The two have
+/// (nearly) equal length only for a (nearly) planar group.
+fn group_area_vectors(mesh: &ControlMesh) -> (Vec<DVec3>, Vec<f64>) {
+    let ng = mesh.groups.len();
+    let mut normal = vec![DVec3::ZERO; ng];
+    let mut total = vec![0.0; ng];
     for f in 0..mesh.face_count() {
-        for h in mesh.face_offsets[f]..mesh.face_offsets[f + 1] {
-            face_of[h as usize] = f as u32;
+        let face = mesh.face(f);
+        let mut n = DVec3::ZERO;
+        for i in 0..face.len() {
+            let p = mesh.positions[face[i] as usize];
+            let q = mesh.positions[face[(i + 1) % face.len()] as usize];
+            n += p.cross(q);
+        }
+        let g = mesh.face_groups[f] as usize;
+        normal[g] += 0.5 * n;
+        total[g] += 0.5 * n.length();
+    }
+    (normal, total)
+}
+
+/// Orders one group's loops as [`GroupLoops`] documents: by signed area about the group
+/// normal for a planar group (outer loop first), else by length; ties keep tracing order.
+fn order_loops(loops: Vec<TracedLoop>, normal: DVec3, total: f64) -> GroupLoops {
+    let planar = normal.length() >= 0.99 * total && total > 0.0;
+    let axis = normal.normalize_or_zero();
+    let key = |i: usize| {
+        if planar {
+            loops[i].area.dot(axis)
+        } else {
+            loops[i].length
+        }
+    };
+    let mut order: Vec<usize> = (0..loops.len()).collect();
+    order.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
+    GroupLoops {
+        loops: order.iter().map(|&i| loops[i].chains.clone()).collect(),
+    }
+}
+
+/// The mesh's half-edges (id = face corner index `face_offsets[f] + i`, running from that
+/// corner to the next one of the face) and the group boundary among them.
+struct HalfEdges<'a> {
+    mesh: &'a ControlMesh,
+    edges: &'a EdgeTable,
+    edge_label: &'a [u32],
+    /// Face of every half-edge.
+    face_of: Vec<u32>,
+}
+
+impl<'a> HalfEdges<'a> {
+    fn new(mesh: &'a ControlMesh, edges: &'a EdgeTable, edge_label: &'a [u32]) -> Self {
+        let mut face_of = vec![0u32; mesh.face_vertices.len()];
+        for f in 0..mesh.face_count() {
+            for h in mesh.face_offsets[f]..mesh.face_offsets[f + 1] {
+                face_of[h as usize] = f as u32;
+            }
+        }
+        HalfEdges {
+            mesh,
+            edges,
+            edge_label,
+            face_of,
         }
     }
-    let edge_of = |h: usize| edges.face_edge[h] as usize;
-    let head = |h: usize| {
-        let f = face_of[h] as usize;
+
+    fn edge_of(&self, h: usize) -> usize {
+        self.edges.face_edge[h] as usize
+    }
+
+    /// True when half-edge `h` lies on its group's boundary.
+    fn is_boundary(&self, h: usize) -> bool {
+        self.edge_label[self.edge_of(h)] != u32::MAX
+    }
+
+    /// The vertex half-edge `h` starts at.
+    fn tail(&self, h: usize) -> u32 {
+        self.mesh.face_vertices[h]
+    }
+
+    /// The vertex half-edge `h` ends at, and the half-edge of the same face leaving it.
+    fn head(&self, h: usize) -> (u32, usize) {
+        let mesh = self.mesh;
+        let f = self.face_of[h] as usize;
         let (s, e) = (
             mesh.face_offsets[f] as usize,
             mesh.face_offsets[f + 1] as usize,
         );
         let next = if h + 1 == e { s } else { h + 1 };
         (mesh.face_vertices[next], next)
-    };
-    let successor = |h: usize| -> Result<usize> {
-        let (b, mut cur) = head(h);
+    }
+
+    /// The next boundary half-edge of the group after `h`, found by rotating around the
+    /// head of `h` through the group's faces.
+    fn successor(&self, h: usize) -> Result<usize> {
+        let mesh = self.mesh;
+        let (b, mut cur) = self.head(h);
         // A vertex is surrounded by at most all faces: bounds the walk on broken input.
         for _ in 0..=mesh.face_count() {
-            let e = edge_of(cur);
-            if edge_label[e] != u32::MAX {
+            let e = self.edge_of(cur);
+            if self.edge_label[e] != u32::MAX {
                 return Ok(cur);
             }
             // Interior edge of the group: continue in the other face around b.
-            let f = face_of[cur];
-            let Some(&(g, gi)) = edges.faces(e).iter().find(|&&(g, _)| g != f) else {
+            let f = self.face_of[cur];
+            let Some(&(g, gi)) = self.edges.faces(e).iter().find(|&&(g, _)| g != f) else {
                 break;
             };
             let gs = mesh.face_offsets[g as usize] as usize;
@@ -648,15 +767,12 @@ fn build_group_loops(
         Err(Error::Mesh(format!(
             "cannot walk around vertex {b} inside its group"
         )))
-    };
-    let mut out = vec![GroupLoops::default(); ng];
-    let mut loops_len: Vec<Vec<f64>> = vec![Vec::new(); ng];
-    let mut loops_area: Vec<Vec<DVec3>> = vec![Vec::new(); ng];
-    for h0 in 0..nh {
-        if visited[h0] || edge_label[edge_of(h0)] == u32::MAX {
-            continue;
-        }
-        let g = mesh.face_groups[face_of[h0] as usize] as usize;
+    }
+
+    /// The boundary cycle of group `g` through half-edge `h0`, marking its half-edges
+    /// visited; errors if the walk runs into another cycle or does not close.
+    fn trace_cycle(&self, h0: usize, g: usize, visited: &mut [bool]) -> Result<Vec<usize>> {
+        let nh = visited.len();
         let mut cycle = Vec::new();
         let mut h = h0;
         loop {
@@ -670,32 +786,37 @@ fn build_group_loops(
             }
             visited[h] = true;
             cycle.push(h);
-            h = successor(h)?;
+            h = self.successor(h)?;
             if cycle.len() > nh {
                 return Err(Error::Mesh(format!(
                     "boundary walk of group {g} does not close"
                 )));
             }
         }
-        // Start the cycle where a chain starts.
-        let tail = |h: usize| mesh.face_vertices[h];
-        let Some(s) = cycle.iter().position(|&h| is_end.contains(&tail(h))) else {
-            return Err(Error::Mesh(format!(
-                "boundary loop of group {g} passes no corner"
-            )));
-        };
-        cycle.rotate_left(s);
+        Ok(cycle)
+    }
+
+    /// The chains that `cycle` (starting where a chain starts) runs through, in order, and
+    /// the cycle's length; errors if the cycle enters or leaves a chain part-way.
+    fn loop_chains(
+        &self,
+        cycle: &[usize],
+        g: usize,
+        edge_chain: &[(u32, u32)],
+        chains: &[Chain],
+    ) -> Result<(Vec<LoopChain>, f64)> {
+        let positions = &self.mesh.positions;
         let mut lp: Vec<LoopChain> = Vec::new();
         let mut length = 0.0;
         let mut i = 0;
         while i < cycle.len() {
             let h = cycle[i];
-            let (ci, _) = edge_chain[edge_of(h)];
+            let (ci, _) = edge_chain[self.edge_of(h)];
             if ci == u32::MAX {
                 return Err(Error::Mesh(format!("group {g}: boundary edge in no chain")));
             }
             let c = &chains[ci as usize];
-            let reversed = tail(h) != c.start();
+            let reversed = self.tail(h) != c.start();
             let n = c.edge_count();
             // The next n half-edges must be this chain's edges, in order.
             for k in 0..n {
@@ -704,14 +825,14 @@ fn build_group_loops(
                 })?;
                 let pos = if reversed { n - 1 - k } else { k };
                 let (a, b) = (c.vertices[pos], c.vertices[pos + 1]);
-                let t = tail(hk);
+                let t = self.tail(hk);
                 let expect = if reversed { b } else { a };
-                if edge_chain[edge_of(hk)].0 != ci || t != expect {
+                if edge_chain[self.edge_of(hk)].0 != ci || t != expect {
                     return Err(Error::Mesh(format!(
                         "group {g}: loop leaves chain {ci} before its end"
                     )));
                 }
-                length += (mesh.positions[a as usize] - mesh.positions[b as usize]).length();
+                length += (positions[a as usize] - positions[b as usize]).length();
             }
             lp.push(LoopChain {
                 chain: ci,
@@ -719,46 +840,19 @@ fn build_group_loops(
             });
             i += n;
         }
-        // Vector area of the loop polygon (for outer-loop detection).
+        Ok((lp, length))
+    }
+
+    /// Vector area of the polygon of `cycle` (for outer-loop detection).
+    fn vector_area(&self, cycle: &[usize]) -> DVec3 {
+        let positions = &self.mesh.positions;
         let mut area = DVec3::ZERO;
-        for &h in &cycle {
-            let (b, _) = head(h);
-            area += mesh.positions[tail(h) as usize].cross(mesh.positions[b as usize]);
+        for &h in cycle {
+            let (b, _) = self.head(h);
+            area += positions[self.tail(h) as usize].cross(positions[b as usize]);
         }
-        out[g].loops.push(lp);
-        loops_len[g].push(length);
-        loops_area[g].push(0.5 * area);
+        0.5 * area
     }
-    // Group normals (area vectors) and total areas, to tell planar groups.
-    let mut normal = vec![DVec3::ZERO; ng];
-    let mut total = vec![0.0; ng];
-    for f in 0..mesh.face_count() {
-        let face = mesh.face(f);
-        let mut n = DVec3::ZERO;
-        for i in 0..face.len() {
-            let p = mesh.positions[face[i] as usize];
-            let q = mesh.positions[face[(i + 1) % face.len()] as usize];
-            n += p.cross(q);
-        }
-        let g = mesh.face_groups[f] as usize;
-        normal[g] += 0.5 * n;
-        total[g] += 0.5 * n.length();
-    }
-    for (g, gl) in out.iter_mut().enumerate() {
-        let planar = normal[g].length() >= 0.99 * total[g] && total[g] > 0.0;
-        let axis = normal[g].normalize_or_zero();
-        let key = |i: usize| {
-            if planar {
-                loops_area[g][i].dot(axis)
-            } else {
-                loops_len[g][i]
-            }
-        };
-        let mut order: Vec<usize> = (0..gl.loops.len()).collect();
-        order.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
-        gl.loops = order.iter().map(|&i| gl.loops[i].clone()).collect();
-    }
-    Ok(out)
 }
 
 #[cfg(test)]
