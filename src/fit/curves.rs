@@ -245,6 +245,28 @@ pub fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<u32> {
 /// Builds the curve network of a grouped mesh. Errors on invalid meshes, on groups whose
 /// faces are inconsistently oriented along a boundary, and on bad options.
 pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<CurveNetwork> {
+    let tol = checked_tolerance(mesh, opts)?;
+    let graph = BoundaryGraph::new(mesh);
+    let mut corner_reason = graph.corners(opts.corner_angle_deg.to_radians().cos());
+    let polylines = graph.polylines(&mut corner_reason);
+    let chains = graph.chains(polylines, tol)?;
+    let edge_chain = graph.edge_chains(&chains);
+    let group_loops =
+        build_group_loops(mesh, &graph.edges, &graph.edge_label, &edge_chain, &chains)?;
+    Ok(CurveNetwork {
+        corners: corner_reason
+            .into_iter()
+            .map(|(vertex, reason)| Corner { vertex, reason })
+            .collect(),
+        chains,
+        group_loops,
+        simplify_tolerance: tol,
+    })
+}
+
+/// Rejects invalid meshes and out-of-range options; returns the Douglas-Peucker tolerance
+/// to use.
+fn checked_tolerance(mesh: &ControlMesh, opts: &CurveOptions) -> Result<f64> {
     mesh.validate()?;
     if !(opts.corner_angle_deg > 0.0 && opts.corner_angle_deg <= 180.0) {
         return Err(Error::Parameter(format!(
@@ -258,14 +280,19 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             "simplification tolerance {tol} must be finite and >= 0"
         )));
     }
-    let edges = EdgeTable::new(mesh);
-    let ne = edges.len();
-    let nv = mesh.vertex_count();
+    Ok(tol)
+}
 
-    // Boundary edges and their labels (adjacent groups + open flag).
+/// Label of every edge (an index into the returned label list) and the distinct labels:
+/// (adjacent groups ascending, open-boundary flag). Interior edges of one group get
+/// `u32::MAX`; every other edge is a group-boundary edge.
+fn label_boundary_edges(
+    mesh: &ControlMesh,
+    edges: &EdgeTable,
+) -> (Vec<u32>, Vec<(Vec<u32>, bool)>) {
     let mut label_ids: BTreeMap<(Vec<u32>, bool), u32> = BTreeMap::new();
     let mut labels: Vec<(Vec<u32>, bool)> = Vec::new();
-    let mut edge_label = vec![u32::MAX; ne];
+    let mut edge_label = vec![u32::MAX; edges.len()];
     for (e, label) in edge_label.iter_mut().enumerate() {
         let fs = edges.faces(e);
         let mut groups: Vec<u32> = fs
@@ -285,9 +312,17 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
         });
         *label = id;
     }
-    let is_boundary = |e: usize| edge_label[e] != u32::MAX;
+    (edge_label, labels)
+}
 
-    // Boundary edges per vertex (CSR, ascending edge id).
+/// Boundary edges of every vertex as CSR (offsets, edge ids ascending per vertex).
+fn boundary_edges_per_vertex(
+    edges: &EdgeTable,
+    edge_label: &[u32],
+    nv: usize,
+) -> (Vec<u32>, Vec<u32>) {
+    let ne = edges.len();
+    let is_boundary = |e: usize| edge_label[e] != u32::MAX;
     let mut deg = vec![0u32; nv + 1];
     for e in 0..ne {
         if is_boundary(e) {
@@ -311,18 +346,11 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             }
         }
     }
-    let vertex_edges =
-        |v: u32| &vedges[vstart[v as usize] as usize..vstart[v as usize + 1] as usize];
-    let other_end = |e: u32, v: u32| {
-        let (a, b) = edges.keys[e as usize];
-        if a == v {
-            b
-        } else {
-            a
-        }
-    };
+    (vstart, vedges)
+}
 
-    // Number of distinct groups around each vertex.
+/// Number of distinct groups among the faces around each vertex.
+fn groups_per_vertex(mesh: &ControlMesh) -> Vec<u32> {
     let mut vg: Vec<(u32, u32)> = Vec::with_capacity(mesh.face_vertices.len());
     for f in 0..mesh.face_count() {
         for &v in mesh.face(f) {
@@ -331,97 +359,19 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
     }
     vg.sort_unstable();
     vg.dedup();
-    let mut group_count = vec![0u32; nv];
+    let mut group_count = vec![0u32; mesh.vertex_count()];
     for &(v, _) in &vg {
         group_count[v as usize] += 1;
     }
+    group_count
+}
 
-    // Corners.
-    let cos_turn = opts.corner_angle_deg.to_radians().cos();
-    let mut corner_reason: BTreeMap<u32, CornerReason> = BTreeMap::new();
-    for v in 0..nv as u32 {
-        let es = vertex_edges(v);
-        if es.is_empty() {
-            continue;
-        }
-        let reason = if es.len() != 2 || group_count[v as usize] >= 3 {
-            Some(CornerReason::Junction)
-        } else if edge_label[es[0] as usize] != edge_label[es[1] as usize] {
-            Some(CornerReason::GroupChange)
-        } else {
-            let p = mesh.positions[v as usize];
-            let a = mesh.positions[other_end(es[0], v) as usize];
-            let b = mesh.positions[other_end(es[1], v) as usize];
-            let (din, dout) = ((p - a).normalize_or_zero(), (b - p).normalize_or_zero());
-            (din.dot(dout) < cos_turn).then_some(CornerReason::SharpTurn)
-        };
-        if let Some(r) = reason {
-            corner_reason.insert(v, r);
-        }
-    }
-
-    // Walk chains from corners; then closed loops without corners.
-    let mut visited = vec![false; ne];
-    let mut chains: Vec<Chain> = Vec::new();
-    let walk = |start: u32,
-                first: u32,
-                visited: &mut Vec<bool>,
-                corner_reason: &BTreeMap<u32, CornerReason>|
-     -> Vec<u32> {
-        let mut verts = vec![start];
-        let (mut v, mut e) = (start, first);
-        loop {
-            visited[e as usize] = true;
-            let w = other_end(e, v);
-            verts.push(w);
-            if corner_reason.contains_key(&w) {
-                break;
-            }
-            // A non-corner vertex has exactly two boundary edges.
-            let es = vertex_edges(w);
-            let next = if es[0] == e { es[1] } else { es[0] };
-            if visited[next as usize] {
-                break; // closed loop back to its start (only for corner-less loops)
-            }
-            v = w;
-            e = next;
-        }
-        verts
-    };
-    let mut pending: Vec<Vec<u32>> = Vec::new();
-    let corner_list: Vec<u32> = corner_reason.keys().copied().collect();
-    for &c in &corner_list {
-        for &e in vertex_edges(c) {
-            if !visited[e as usize] {
-                pending.push(walk(c, e, &mut visited, &corner_reason));
-            }
-        }
-    }
-    for e0 in 0..ne {
-        if !is_boundary(e0) || visited[e0] {
-            continue;
-        }
-        // A closed loop with no corner: collect it, cut at its lowest vertex and at the
-        // vertex half-way round.
-        let (a, _) = edges.keys[e0];
-        let mut loop_verts = walk(a, e0 as u32, &mut visited, &corner_reason);
-        loop_verts.pop(); // last == first
-        let n = loop_verts.len();
-        let (imin, _) = loop_verts
-            .iter()
-            .enumerate()
-            .min_by_key(|(_, &v)| v)
-            .unwrap_or((0, &a));
-        loop_verts.rotate_left(imin);
-        let half = n / 2;
-        corner_reason.insert(loop_verts[0], CornerReason::LoopSplit);
-        corner_reason.insert(loop_verts[half], CornerReason::LoopSplit);
-        pending.push(loop_verts[..=half].to_vec());
-        let mut second = loop_verts[half..].to_vec();
-        second.push(loop_verts[0]);
-        pending.push(second);
-    }
-    // Chains that start and end at the same corner are cut in the middle.
+/// Cuts every polyline that starts and ends at the same corner in the middle, making the
+/// cut vertex a corner, so that every chain has two distinct ends.
+fn cut_self_closing(
+    pending: Vec<Vec<u32>>,
+    corner_reason: &mut BTreeMap<u32, CornerReason>,
+) -> Vec<Vec<u32>> {
     let mut polylines: Vec<Vec<u32>> = Vec::with_capacity(pending.len());
     for p in pending {
         if p.len() >= 3 && p[0] == p[p.len() - 1] {
@@ -433,41 +383,206 @@ pub fn build_curve_network(mesh: &ControlMesh, opts: &CurveOptions) -> Result<Cu
             polylines.push(p);
         }
     }
-    for verts in polylines {
-        let e = edges
-            .find(verts[0], verts[1])
-            .ok_or_else(|| Error::Mesh("internal: chain edge not found".into()))?;
-        let (groups, open) = labels[edge_label[e] as usize].clone();
-        let pts: Vec<DVec3> = verts.iter().map(|&v| mesh.positions[v as usize]).collect();
-        let control = douglas_peucker(&pts, tol);
-        chains.push(Chain {
-            vertices: verts,
-            groups,
-            open_boundary: open,
-            control,
-        });
-    }
+    polylines
+}
 
-    // Edge -> (chain, position) to map group boundary cycles onto chains.
-    let mut edge_chain = vec![(u32::MAX, 0u32); ne];
-    for (ci, c) in chains.iter().enumerate() {
-        for (i, w) in c.vertices.windows(2).enumerate() {
-            if let Some(e) = edges.find(w[0], w[1]) {
-                edge_chain[e] = (ci as u32, i as u32);
-            }
+/// The group-boundary edges of a mesh, labelled by their adjacent groups and listed per
+/// vertex: the graph whose corners and chains make the curve network.
+struct BoundaryGraph<'a> {
+    mesh: &'a ControlMesh,
+    edges: EdgeTable,
+    /// Per edge: index into `labels`, `u32::MAX` for an interior edge of one group.
+    edge_label: Vec<u32>,
+    /// Distinct (adjacent groups ascending, open boundary) pairs.
+    labels: Vec<(Vec<u32>, bool)>,
+    /// Boundary edges per vertex (CSR, ascending edge id).
+    vstart: Vec<u32>,
+    vedges: Vec<u32>,
+}
+
+impl<'a> BoundaryGraph<'a> {
+    /// Labels the edges of `mesh` and lists the boundary edges of every vertex.
+    fn new(mesh: &'a ControlMesh) -> Self {
+        let edges = EdgeTable::new(mesh);
+        let (edge_label, labels) = label_boundary_edges(mesh, &edges);
+        let (vstart, vedges) = boundary_edges_per_vertex(&edges, &edge_label, mesh.vertex_count());
+        BoundaryGraph {
+            mesh,
+            edges,
+            edge_label,
+            labels,
+            vstart,
+            vedges,
         }
     }
-    let group_loops = build_group_loops(mesh, &edges, &edge_label, &edge_chain, &chains)?;
 
-    Ok(CurveNetwork {
-        corners: corner_reason
-            .into_iter()
-            .map(|(vertex, reason)| Corner { vertex, reason })
-            .collect(),
-        chains,
-        group_loops,
-        simplify_tolerance: tol,
-    })
+    fn is_boundary(&self, e: usize) -> bool {
+        self.edge_label[e] != u32::MAX
+    }
+
+    /// Boundary edges at vertex `v`, ascending.
+    fn vertex_edges(&self, v: u32) -> &[u32] {
+        &self.vedges[self.vstart[v as usize] as usize..self.vstart[v as usize + 1] as usize]
+    }
+
+    /// The vertex of edge `e` that is not `v`.
+    fn other_end(&self, e: u32, v: u32) -> u32 {
+        let (a, b) = self.edges.keys[e as usize];
+        if a == v {
+            b
+        } else {
+            a
+        }
+    }
+
+    /// The boundary vertices that are corners, and why: junctions, changes of adjacent
+    /// groups, and turns sharper than the angle whose cosine is `cos_turn`.
+    fn corners(&self, cos_turn: f64) -> BTreeMap<u32, CornerReason> {
+        let mesh = self.mesh;
+        let group_count = groups_per_vertex(mesh);
+        let mut corner_reason: BTreeMap<u32, CornerReason> = BTreeMap::new();
+        for v in 0..mesh.vertex_count() as u32 {
+            let es = self.vertex_edges(v);
+            if es.is_empty() {
+                continue;
+            }
+            let reason = if es.len() != 2 || group_count[v as usize] >= 3 {
+                Some(CornerReason::Junction)
+            } else if self.edge_label[es[0] as usize] != self.edge_label[es[1] as usize] {
+                Some(CornerReason::GroupChange)
+            } else {
+                let p = mesh.positions[v as usize];
+                let a = mesh.positions[self.other_end(es[0], v) as usize];
+                let b = mesh.positions[self.other_end(es[1], v) as usize];
+                let (din, dout) = ((p - a).normalize_or_zero(), (b - p).normalize_or_zero());
+                (din.dot(dout) < cos_turn).then_some(CornerReason::SharpTurn)
+            };
+            if let Some(r) = reason {
+                corner_reason.insert(v, r);
+            }
+        }
+        corner_reason
+    }
+
+    /// Vertices of the boundary polyline that leaves `start` along edge `first` and runs
+    /// to the next corner (or, on a corner-less loop, back to `start`), marking its edges
+    /// visited.
+    fn walk(
+        &self,
+        start: u32,
+        first: u32,
+        visited: &mut [bool],
+        corner_reason: &BTreeMap<u32, CornerReason>,
+    ) -> Vec<u32> {
+        let mut verts = vec![start];
+        let (mut v, mut e) = (start, first);
+        loop {
+            visited[e as usize] = true;
+            let w = self.other_end(e, v);
+            verts.push(w);
+            if corner_reason.contains_key(&w) {
+                break;
+            }
+            // A non-corner vertex has exactly two boundary edges.
+            let es = self.vertex_edges(w);
+            let next = if es[0] == e { es[1] } else { es[0] };
+            if visited[next as usize] {
+                break; // closed loop back to its start (only for corner-less loops)
+            }
+            v = w;
+            e = next;
+        }
+        verts
+    }
+
+    /// The polylines of all boundary edges, each running between two distinct corners;
+    /// corners are added to `corner_reason` where loops had to be cut.
+    fn polylines(&self, corner_reason: &mut BTreeMap<u32, CornerReason>) -> Vec<Vec<u32>> {
+        let mut visited = vec![false; self.edges.len()];
+        let mut pending: Vec<Vec<u32>> = Vec::new();
+        let corner_list: Vec<u32> = corner_reason.keys().copied().collect();
+        for &c in &corner_list {
+            for &e in self.vertex_edges(c) {
+                if !visited[e as usize] {
+                    pending.push(self.walk(c, e, &mut visited, corner_reason));
+                }
+            }
+        }
+        self.cut_cornerless_loops(&mut visited, corner_reason, &mut pending);
+        cut_self_closing(pending, corner_reason)
+    }
+
+    /// Walks the closed loops that no corner walk reached and cuts each at its lowest
+    /// vertex and at the vertex half-way round (both become corners), appending the two
+    /// halves to `pending`.
+    fn cut_cornerless_loops(
+        &self,
+        visited: &mut [bool],
+        corner_reason: &mut BTreeMap<u32, CornerReason>,
+        pending: &mut Vec<Vec<u32>>,
+    ) {
+        for e0 in 0..self.edges.len() {
+            if !self.is_boundary(e0) || visited[e0] {
+                continue;
+            }
+            let (a, _) = self.edges.keys[e0];
+            let mut loop_verts = self.walk(a, e0 as u32, visited, corner_reason);
+            loop_verts.pop(); // last == first
+            let n = loop_verts.len();
+            let (imin, _) = loop_verts
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, &v)| v)
+                .unwrap_or((0, &a));
+            loop_verts.rotate_left(imin);
+            let half = n / 2;
+            corner_reason.insert(loop_verts[0], CornerReason::LoopSplit);
+            corner_reason.insert(loop_verts[half], CornerReason::LoopSplit);
+            pending.push(loop_verts[..=half].to_vec());
+            let mut second = loop_verts[half..].to_vec();
+            second.push(loop_verts[0]);
+            pending.push(second);
+        }
+    }
+
+    /// One chain per polyline, with its edges' label and a Douglas-Peucker control polygon
+    /// within `tol`.
+    fn chains(&self, polylines: Vec<Vec<u32>>, tol: f64) -> Result<Vec<Chain>> {
+        let mut chains: Vec<Chain> = Vec::with_capacity(polylines.len());
+        for verts in polylines {
+            let e = self
+                .edges
+                .find(verts[0], verts[1])
+                .ok_or_else(|| Error::Mesh("internal: chain edge not found".into()))?;
+            let (groups, open) = self.labels[self.edge_label[e] as usize].clone();
+            let pts: Vec<DVec3> = verts
+                .iter()
+                .map(|&v| self.mesh.positions[v as usize])
+                .collect();
+            let control = douglas_peucker(&pts, tol);
+            chains.push(Chain {
+                vertices: verts,
+                groups,
+                open_boundary: open,
+                control,
+            });
+        }
+        Ok(chains)
+    }
+
+    /// Per edge: the chain it belongs to and its position in that chain, `(u32::MAX, 0)`
+    /// for edges in no chain. Maps group boundary cycles onto chains.
+    fn edge_chains(&self, chains: &[Chain]) -> Vec<(u32, u32)> {
+        let mut edge_chain = vec![(u32::MAX, 0u32); self.edges.len()];
+        for (ci, c) in chains.iter().enumerate() {
+            for (i, w) in c.vertices.windows(2).enumerate() {
+                if let Some(e) = self.edges.find(w[0], w[1]) {
+                    edge_chain[e] = (ci as u32, i as u32);
+                }
+            }
+        }
+        edge_chain
+    }
 }
 
 /// Traces every group's boundary half-edges into cycles (rotating around each vertex
@@ -480,43 +595,162 @@ fn build_group_loops(
     edge_chain: &[(u32, u32)],
     chains: &[Chain],
 ) -> Result<Vec<GroupLoops>> {
-    let ng = mesh.groups.len();
     // Chain end points, for finding a cycle position where a chain starts.
     let mut is_end = std::collections::BTreeSet::new();
     for c in chains {
         is_end.insert(c.start());
         is_end.insert(c.end());
     }
-    // Half-edge id = face corner index (face_offsets[f] + i).
+    let half_edges = HalfEdges::new(mesh, edges, edge_label);
     let nh = mesh.face_vertices.len();
     let mut visited = vec![false; nh];
-    let mut face_of = vec![0u32; nh];
+    let mut traced: Vec<Vec<TracedLoop>> = vec![Vec::new(); mesh.groups.len()];
+    for h0 in 0..nh {
+        if visited[h0] || !half_edges.is_boundary(h0) {
+            continue;
+        }
+        let g = mesh.face_groups[half_edges.face_of[h0] as usize] as usize;
+        let mut cycle = half_edges.trace_cycle(h0, g, &mut visited)?;
+        // Start the cycle where a chain starts.
+        let Some(s) = cycle
+            .iter()
+            .position(|&h| is_end.contains(&half_edges.tail(h)))
+        else {
+            return Err(Error::Mesh(format!(
+                "boundary loop of group {g} passes no corner"
+            )));
+        };
+        cycle.rotate_left(s);
+        let (loop_chains, length) = half_edges.loop_chains(&cycle, g, edge_chain, chains)?;
+        traced[g].push(TracedLoop {
+            chains: loop_chains,
+            length,
+            area: half_edges.vector_area(&cycle),
+        });
+    }
+    let (normal, total) = group_area_vectors(mesh);
+    Ok(traced
+        .into_iter()
+        .enumerate()
+        .map(|(g, loops)| order_loops(loops, normal[g], total[g]))
+        .collect())
+}
+
+/// One traced boundary loop of a group, with what orders it among the group's loops.
+#[derive(Clone)]
+struct TracedLoop {
+    chains: Vec<LoopChain>,
+    length: f64,
+    /// Vector area of the loop polygon.
+    area: DVec3,
+}
+
+/// Per group: the sum of its faces' vector areas and the sum of their areas. The two have
+/// (nearly) equal length only for a (nearly) planar group.
+fn group_area_vectors(mesh: &ControlMesh) -> (Vec<DVec3>, Vec<f64>) {
+    let ng = mesh.groups.len();
+    let mut normal = vec![DVec3::ZERO; ng];
+    let mut total = vec![0.0; ng];
     for f in 0..mesh.face_count() {
-        for h in mesh.face_offsets[f]..mesh.face_offsets[f + 1] {
-            face_of[h as usize] = f as u32;
+        let face = mesh.face(f);
+        let mut n = DVec3::ZERO;
+        for i in 0..face.len() {
+            let p = mesh.positions[face[i] as usize];
+            let q = mesh.positions[face[(i + 1) % face.len()] as usize];
+            n += p.cross(q);
+        }
+        let g = mesh.face_groups[f] as usize;
+        normal[g] += 0.5 * n;
+        total[g] += 0.5 * n.length();
+    }
+    (normal, total)
+}
+
+/// Orders one group's loops as [`GroupLoops`] documents: by signed area about the group
+/// normal for a planar group (outer loop first), else by length; ties keep tracing order.
+fn order_loops(loops: Vec<TracedLoop>, normal: DVec3, total: f64) -> GroupLoops {
+    let planar = normal.length() >= 0.99 * total && total > 0.0;
+    let axis = normal.normalize_or_zero();
+    let key = |i: usize| {
+        if planar {
+            loops[i].area.dot(axis)
+        } else {
+            loops[i].length
+        }
+    };
+    let mut order: Vec<usize> = (0..loops.len()).collect();
+    order.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
+    GroupLoops {
+        loops: order.iter().map(|&i| loops[i].chains.clone()).collect(),
+    }
+}
+
+/// The mesh's half-edges (id = face corner index `face_offsets[f] + i`, running from that
+/// corner to the next one of the face) and the group boundary among them.
+struct HalfEdges<'a> {
+    mesh: &'a ControlMesh,
+    edges: &'a EdgeTable,
+    edge_label: &'a [u32],
+    /// Face of every half-edge.
+    face_of: Vec<u32>,
+}
+
+impl<'a> HalfEdges<'a> {
+    fn new(mesh: &'a ControlMesh, edges: &'a EdgeTable, edge_label: &'a [u32]) -> Self {
+        let mut face_of = vec![0u32; mesh.face_vertices.len()];
+        for f in 0..mesh.face_count() {
+            for h in mesh.face_offsets[f]..mesh.face_offsets[f + 1] {
+                face_of[h as usize] = f as u32;
+            }
+        }
+        HalfEdges {
+            mesh,
+            edges,
+            edge_label,
+            face_of,
         }
     }
-    let edge_of = |h: usize| edges.face_edge[h] as usize;
-    let head = |h: usize| {
-        let f = face_of[h] as usize;
+
+    fn edge_of(&self, h: usize) -> usize {
+        self.edges.face_edge[h] as usize
+    }
+
+    /// True when half-edge `h` lies on its group's boundary.
+    fn is_boundary(&self, h: usize) -> bool {
+        self.edge_label[self.edge_of(h)] != u32::MAX
+    }
+
+    /// The vertex half-edge `h` starts at.
+    fn tail(&self, h: usize) -> u32 {
+        self.mesh.face_vertices[h]
+    }
+
+    /// The vertex half-edge `h` ends at, and the half-edge of the same face leaving it.
+    fn head(&self, h: usize) -> (u32, usize) {
+        let mesh = self.mesh;
+        let f = self.face_of[h] as usize;
         let (s, e) = (
             mesh.face_offsets[f] as usize,
             mesh.face_offsets[f + 1] as usize,
         );
         let next = if h + 1 == e { s } else { h + 1 };
         (mesh.face_vertices[next], next)
-    };
-    let successor = |h: usize| -> Result<usize> {
-        let (b, mut cur) = head(h);
+    }
+
+    /// The next boundary half-edge of the group after `h`, found by rotating around the
+    /// head of `h` through the group's faces.
+    fn successor(&self, h: usize) -> Result<usize> {
+        let mesh = self.mesh;
+        let (b, mut cur) = self.head(h);
         // A vertex is surrounded by at most all faces: bounds the walk on broken input.
         for _ in 0..=mesh.face_count() {
-            let e = edge_of(cur);
-            if edge_label[e] != u32::MAX {
+            let e = self.edge_of(cur);
+            if self.edge_label[e] != u32::MAX {
                 return Ok(cur);
             }
             // Interior edge of the group: continue in the other face around b.
-            let f = face_of[cur];
-            let Some(&(g, gi)) = edges.faces(e).iter().find(|&&(g, _)| g != f) else {
+            let f = self.face_of[cur];
+            let Some(&(g, gi)) = self.edges.faces(e).iter().find(|&&(g, _)| g != f) else {
                 break;
             };
             let gs = mesh.face_offsets[g as usize] as usize;
@@ -533,15 +767,12 @@ fn build_group_loops(
         Err(Error::Mesh(format!(
             "cannot walk around vertex {b} inside its group"
         )))
-    };
-    let mut out = vec![GroupLoops::default(); ng];
-    let mut loops_len: Vec<Vec<f64>> = vec![Vec::new(); ng];
-    let mut loops_area: Vec<Vec<DVec3>> = vec![Vec::new(); ng];
-    for h0 in 0..nh {
-        if visited[h0] || edge_label[edge_of(h0)] == u32::MAX {
-            continue;
-        }
-        let g = mesh.face_groups[face_of[h0] as usize] as usize;
+    }
+
+    /// The boundary cycle of group `g` through half-edge `h0`, marking its half-edges
+    /// visited; errors if the walk runs into another cycle or does not close.
+    fn trace_cycle(&self, h0: usize, g: usize, visited: &mut [bool]) -> Result<Vec<usize>> {
+        let nh = visited.len();
         let mut cycle = Vec::new();
         let mut h = h0;
         loop {
@@ -555,32 +786,37 @@ fn build_group_loops(
             }
             visited[h] = true;
             cycle.push(h);
-            h = successor(h)?;
+            h = self.successor(h)?;
             if cycle.len() > nh {
                 return Err(Error::Mesh(format!(
                     "boundary walk of group {g} does not close"
                 )));
             }
         }
-        // Start the cycle where a chain starts.
-        let tail = |h: usize| mesh.face_vertices[h];
-        let Some(s) = cycle.iter().position(|&h| is_end.contains(&tail(h))) else {
-            return Err(Error::Mesh(format!(
-                "boundary loop of group {g} passes no corner"
-            )));
-        };
-        cycle.rotate_left(s);
+        Ok(cycle)
+    }
+
+    /// The chains that `cycle` (starting where a chain starts) runs through, in order, and
+    /// the cycle's length; errors if the cycle enters or leaves a chain part-way.
+    fn loop_chains(
+        &self,
+        cycle: &[usize],
+        g: usize,
+        edge_chain: &[(u32, u32)],
+        chains: &[Chain],
+    ) -> Result<(Vec<LoopChain>, f64)> {
+        let positions = &self.mesh.positions;
         let mut lp: Vec<LoopChain> = Vec::new();
         let mut length = 0.0;
         let mut i = 0;
         while i < cycle.len() {
             let h = cycle[i];
-            let (ci, _) = edge_chain[edge_of(h)];
+            let (ci, _) = edge_chain[self.edge_of(h)];
             if ci == u32::MAX {
                 return Err(Error::Mesh(format!("group {g}: boundary edge in no chain")));
             }
             let c = &chains[ci as usize];
-            let reversed = tail(h) != c.start();
+            let reversed = self.tail(h) != c.start();
             let n = c.edge_count();
             // The next n half-edges must be this chain's edges, in order.
             for k in 0..n {
@@ -589,14 +825,14 @@ fn build_group_loops(
                 })?;
                 let pos = if reversed { n - 1 - k } else { k };
                 let (a, b) = (c.vertices[pos], c.vertices[pos + 1]);
-                let t = tail(hk);
+                let t = self.tail(hk);
                 let expect = if reversed { b } else { a };
-                if edge_chain[edge_of(hk)].0 != ci || t != expect {
+                if edge_chain[self.edge_of(hk)].0 != ci || t != expect {
                     return Err(Error::Mesh(format!(
                         "group {g}: loop leaves chain {ci} before its end"
                     )));
                 }
-                length += (mesh.positions[a as usize] - mesh.positions[b as usize]).length();
+                length += (positions[a as usize] - positions[b as usize]).length();
             }
             lp.push(LoopChain {
                 chain: ci,
@@ -604,46 +840,19 @@ fn build_group_loops(
             });
             i += n;
         }
-        // Vector area of the loop polygon (for outer-loop detection).
+        Ok((lp, length))
+    }
+
+    /// Vector area of the polygon of `cycle` (for outer-loop detection).
+    fn vector_area(&self, cycle: &[usize]) -> DVec3 {
+        let positions = &self.mesh.positions;
         let mut area = DVec3::ZERO;
-        for &h in &cycle {
-            let (b, _) = head(h);
-            area += mesh.positions[tail(h) as usize].cross(mesh.positions[b as usize]);
+        for &h in cycle {
+            let (b, _) = self.head(h);
+            area += positions[self.tail(h) as usize].cross(positions[b as usize]);
         }
-        out[g].loops.push(lp);
-        loops_len[g].push(length);
-        loops_area[g].push(0.5 * area);
+        0.5 * area
     }
-    // Group normals (area vectors) and total areas, to tell planar groups.
-    let mut normal = vec![DVec3::ZERO; ng];
-    let mut total = vec![0.0; ng];
-    for f in 0..mesh.face_count() {
-        let face = mesh.face(f);
-        let mut n = DVec3::ZERO;
-        for i in 0..face.len() {
-            let p = mesh.positions[face[i] as usize];
-            let q = mesh.positions[face[(i + 1) % face.len()] as usize];
-            n += p.cross(q);
-        }
-        let g = mesh.face_groups[f] as usize;
-        normal[g] += 0.5 * n;
-        total[g] += 0.5 * n.length();
-    }
-    for (g, gl) in out.iter_mut().enumerate() {
-        let planar = normal[g].length() >= 0.99 * total[g] && total[g] > 0.0;
-        let axis = normal[g].normalize_or_zero();
-        let key = |i: usize| {
-            if planar {
-                loops_area[g][i].dot(axis)
-            } else {
-                loops_len[g][i]
-            }
-        };
-        let mut order: Vec<usize> = (0..gl.loops.len()).collect();
-        order.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
-        gl.loops = order.iter().map(|&i| gl.loops[i].clone()).collect();
-    }
-    Ok(out)
 }
 
 #[cfg(test)]

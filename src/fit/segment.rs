@@ -190,11 +190,16 @@ struct Segmenter<'a> {
     opts: &'a SegmentOptions,
     tol: f64,
     cos_normal: f64,
+    /// Cosine of `sharp_angle_deg`.
+    cos_sharp: f64,
+    edges: EdgeTable,
     normals: Vec<DVec3>,
     areas: Vec<f64>,
     /// Smooth, manifold neighbours of every face (CSR).
     nbr_offsets: Vec<u32>,
     nbrs: Vec<u32>,
+    /// Number of manifold edges found sharp.
+    sharp_edges: usize,
     vertex_stamp: Vec<u32>,
     vertex_slot: Vec<u32>,
     face_stamp: Vec<u32>,
@@ -674,6 +679,28 @@ impl<'a> Segmenter<'a> {
 /// group per region (`face_<i>`, patch kind from the region type), the group-boundary edges
 /// whose dihedral angle is sharp added to `sharp_edges`, and a report.
 pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh, SegmentReport)> {
+    let tol = checked_tolerance(mesh, opts)?;
+    let mut seg = Segmenter::new(mesh, opts, tol);
+    let components = seg.smooth_components();
+    let mut regions = seg.classify_components(&components);
+    seg.merge_small_regions(&mut regions);
+    seg.merge_facets(&mut regions);
+    // Groups in order of their first face.
+    regions.sort_by_key(|r| r.faces[0]);
+    let (out, infos) = seg.grouped_mesh(&regions);
+    Ok((
+        out,
+        SegmentReport {
+            tolerance: tol,
+            sharp_edges: seg.sharp_edges,
+            smooth_components: components.len(),
+            regions: infos,
+        },
+    ))
+}
+
+/// Rejects meshes without faces and out-of-range options; returns the tolerance to use.
+fn checked_tolerance(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<f64> {
     mesh.validate()?;
     if mesh.face_count() == 0 {
         return Err(Error::Mesh("cannot segment a mesh without faces".into()));
@@ -696,15 +723,24 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
             "segmentation tolerance {tol} must be positive (degenerate mesh?)"
         )));
     }
-    let nf = mesh.face_count();
-    let (normals, areas) = face_normals_and_areas(mesh);
-    let edges = EdgeTable::new(mesh);
-    let cos_sharp = opts.sharp_angle_deg.to_radians().cos();
-    let is_sharp_pair = |normals: &[DVec3], f: u32, g: u32| {
-        let (a, b) = (normals[f as usize], normals[g as usize]);
-        a != DVec3::ZERO && b != DVec3::ZERO && a.dot(b) < cos_sharp
-    };
-    // Smooth manifold adjacency.
+    Ok(tol)
+}
+
+/// True when faces `f` and `g` meet at more than the sharp angle. Degenerate faces (zero
+/// normal) have no reliable angle, so they are never sharp.
+fn is_sharp_pair(normals: &[DVec3], cos_sharp: f64, f: u32, g: u32) -> bool {
+    let (a, b) = (normals[f as usize], normals[g as usize]);
+    a != DVec3::ZERO && b != DVec3::ZERO && a.dot(b) < cos_sharp
+}
+
+/// Neighbours of every face across its smooth manifold edges, as CSR (offsets, neighbours
+/// sorted per face), and the number of manifold edges that are sharp.
+fn smooth_adjacency(
+    edges: &EdgeTable,
+    normals: &[DVec3],
+    cos_sharp: f64,
+    nf: usize,
+) -> (Vec<u32>, Vec<u32>, usize) {
     let mut pairs: Vec<(u32, u32)> = Vec::new();
     let mut sharp_count = 0;
     for e in 0..edges.len() {
@@ -716,7 +752,7 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         if f == g {
             continue;
         }
-        if is_sharp_pair(&normals, f, g) {
+        if is_sharp_pair(normals, cos_sharp, f, g) {
             sharp_count += 1;
         } else {
             pairs.push((f, g));
@@ -733,92 +769,168 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         nbr_offsets[i + 1] += nbr_offsets[i];
     }
     let nbrs: Vec<u32> = pairs.iter().map(|p| p.1).collect();
-    let mut seg = Segmenter {
-        mesh,
-        opts,
-        tol,
-        cos_normal: opts.normal_angle_deg.to_radians().cos(),
-        normals,
-        areas,
-        nbr_offsets,
-        nbrs,
-        vertex_stamp: vec![0; mesh.vertex_count()],
-        vertex_slot: vec![0; mesh.vertex_count()],
-        face_stamp: vec![0; nf],
-        region_label: vec![u32::MAX; nf],
-        generation: 0,
-    };
+    (nbr_offsets, nbrs, sharp_count)
+}
 
-    // 1. Smooth components.
-    let mut comp_of = vec![UNLABELLED; nf];
-    let mut components: Vec<Vec<u32>> = Vec::new();
-    for start in 0..nf as u32 {
-        if comp_of[start as usize] != UNLABELLED {
-            continue;
+/// The boundary patch a region's primitive gives its group; everything but planes,
+/// cylinders and cones is a closed patch.
+fn patch_kind(primitive: Option<Primitive>) -> PatchKind {
+    match primitive {
+        Some(Primitive::Plane { .. }) => PatchKind::Boundary(BoundarySurface::Plane),
+        Some(Primitive::Cylinder { axis, .. }) => {
+            PatchKind::Boundary(BoundarySurface::Cylinder { axis })
         }
-        let c = components.len() as u32;
-        let mut faces = vec![start];
-        comp_of[start as usize] = c;
-        let mut i = 0;
-        while i < faces.len() {
-            let f = faces[i];
-            i += 1;
-            for &g in seg.neighbours(f) {
-                if comp_of[g as usize] == UNLABELLED {
-                    comp_of[g as usize] = c;
-                    faces.push(g);
+        Some(Primitive::Cone { axis, .. }) => PatchKind::Boundary(BoundarySurface::Cone {
+            axis: Axis {
+                origin: axis.origin,
+                direction: axis.direction,
+            },
+        }),
+        _ => PatchKind::Closed,
+    }
+}
+
+/// Construction, the pipeline steps of [`segment`] (1-5 in the module documentation) and
+/// the assembly of its output.
+impl<'a> Segmenter<'a> {
+    /// Computes face normals, the edge table and the smooth adjacency of `mesh`.
+    fn new(mesh: &'a ControlMesh, opts: &'a SegmentOptions, tol: f64) -> Self {
+        let nf = mesh.face_count();
+        let (normals, areas) = face_normals_and_areas(mesh);
+        let edges = EdgeTable::new(mesh);
+        let cos_sharp = opts.sharp_angle_deg.to_radians().cos();
+        let (nbr_offsets, nbrs, sharp_edges) = smooth_adjacency(&edges, &normals, cos_sharp, nf);
+        Segmenter {
+            mesh,
+            opts,
+            tol,
+            cos_normal: opts.normal_angle_deg.to_radians().cos(),
+            cos_sharp,
+            edges,
+            normals,
+            areas,
+            nbr_offsets,
+            nbrs,
+            sharp_edges,
+            vertex_stamp: vec![0; mesh.vertex_count()],
+            vertex_slot: vec![0; mesh.vertex_count()],
+            face_stamp: vec![0; nf],
+            region_label: vec![u32::MAX; nf],
+            generation: 0,
+        }
+    }
+
+    /// Step 1: the connected components of the smooth adjacency, each with ascending
+    /// faces, in order of their lowest face.
+    fn smooth_components(&self) -> Vec<Vec<u32>> {
+        let nf = self.mesh.face_count();
+        let mut comp_of = vec![UNLABELLED; nf];
+        let mut components: Vec<Vec<u32>> = Vec::new();
+        for start in 0..nf as u32 {
+            if comp_of[start as usize] != UNLABELLED {
+                continue;
+            }
+            let c = components.len() as u32;
+            let mut faces = vec![start];
+            comp_of[start as usize] = c;
+            let mut i = 0;
+            while i < faces.len() {
+                let f = faces[i];
+                i += 1;
+                for &g in self.neighbours(f) {
+                    if comp_of[g as usize] == UNLABELLED {
+                        comp_of[g as usize] = c;
+                        faces.push(g);
+                    }
+                }
+            }
+            faces.sort_unstable();
+            components.push(faces);
+        }
+        components
+    }
+
+    /// Steps 2-3: a component that one primitive fits is one region; any other is split by
+    /// region growing and its uncertain pieces merged.
+    fn classify_components(&mut self, components: &[Vec<u32>]) -> Vec<Region> {
+        let mut regions: Vec<Region> = Vec::new();
+        let mut state = vec![FaceState::Free; self.mesh.face_count()];
+        let kinds = self.opts.kinds.clone();
+        for comp in components {
+            if let Some(fit) = self.fit_faces(comp, &kinds) {
+                regions.push(Region {
+                    faces: comp.clone(),
+                    fit: Some(fit),
+                    from_split: false,
+                });
+            } else {
+                let first = regions.len();
+                self.split_component(comp, &mut state, &mut regions);
+                self.merge_uncertain(&mut regions, first);
+            }
+        }
+        regions
+    }
+
+    /// Step 4: slivers join the primitive they lie on, then fragments from splitting join
+    /// their best smooth neighbour; emptied regions are dropped.
+    fn merge_small_regions(&mut self, regions: &mut Vec<Region>) {
+        let mut label = vec![UNLABELLED; self.mesh.face_count()];
+        for (r, reg) in regions.iter().enumerate() {
+            for &f in &reg.faces {
+                label[f as usize] = r as u32;
+            }
+        }
+        // Regions that grew need new residuals (`dirty`, their primitive still fits) or a
+        // new fit (`refit`); both are recomputed once at the end: recomputing per merge
+        // would be quadratic when many fragments join one region.
+        let mut dirty = vec![false; regions.len()];
+        let mut refit = vec![false; regions.len()];
+        self.absorb_slivers(regions, &mut label, &mut dirty);
+        self.merge_fragments(regions, &mut label, &mut dirty, &mut refit);
+        self.update_grown_fits(regions, &dirty, &refit);
+        regions.retain(|r| !r.faces.is_empty());
+    }
+
+    /// Tiny components bounded by sharp edges whose vertices all lie on an adjacent
+    /// region's primitive are slivers with unreliable normals (common in decimated or
+    /// exported tessellations): they join that region. Genuine small faces (a chamfer, a
+    /// small boss top) are off the neighbours' surfaces and stay.
+    fn absorb_slivers(&self, regions: &mut [Region], label: &mut [u32], dirty: &mut [bool]) {
+        for s in 0..regions.len() {
+            if regions[s].from_split
+                || regions[s].faces.is_empty()
+                || regions[s].faces.len() >= self.opts.min_region_triangles
+            {
+                continue;
+            }
+            for (t, _) in self.regions_across_edges(&regions[s].faces, s as u32, label) {
+                let t = t as usize;
+                let Some(fit) = regions[t].fit else { continue };
+                if self.lies_on(&regions[s].faces, &fit.primitive) {
+                    let moved = std::mem::take(&mut regions[s].faces);
+                    for &f in &moved {
+                        label[f as usize] = t as u32;
+                    }
+                    regions[t].faces.extend(moved);
+                    dirty[t] = true;
+                    break;
                 }
             }
         }
-        faces.sort_unstable();
-        components.push(faces);
     }
 
-    // 2-3. Classify or split each component.
-    let mut regions: Vec<Region> = Vec::new();
-    let mut state = vec![FaceState::Free; nf];
-    let kinds = opts.kinds.clone();
-    for comp in &components {
-        if let Some(fit) = seg.fit_faces(comp, &kinds) {
-            regions.push(Region {
-                faces: comp.clone(),
-                fit: Some(fit),
-                from_split: false,
-            });
-        } else {
-            let first = regions.len();
-            seg.split_component(comp, &mut state, &mut regions);
-            seg.merge_uncertain(&mut regions, first);
-        }
-    }
-
-    // 4. Merge small fragments from splitting into their best smooth neighbour.
-    let mut label = vec![UNLABELLED; nf];
-    for (r, reg) in regions.iter().enumerate() {
-        for &f in &reg.faces {
-            label[f as usize] = r as u32;
-        }
-    }
-    let mut dirty = vec![false; regions.len()];
-    let mut refit = vec![false; regions.len()];
-    // Tiny components bounded by sharp edges whose vertices all lie on an adjacent
-    // region's primitive are slivers with unreliable normals (common in decimated or
-    // exported tessellations): they join that region. Genuine small faces (a chamfer, a
-    // small boss top) are off the neighbours' surfaces and stay.
-    for s in 0..regions.len() {
-        if regions[s].from_split
-            || regions[s].faces.is_empty()
-            || regions[s].faces.len() >= opts.min_region_triangles
-        {
-            continue;
-        }
+    /// Regions other than `own` that share any edge (sharp ones included) with `faces`,
+    /// with the number of shared face pairs, most shared first, then by region index.
+    fn regions_across_edges(&self, faces: &[u32], own: u32, label: &[u32]) -> Vec<(u32, usize)> {
+        let mesh = self.mesh;
         let mut shared: BTreeMap<u32, usize> = BTreeMap::new();
-        for &f in &regions[s].faces {
+        for &f in faces {
             let base = mesh.face_offsets[f as usize] as usize;
             for k in 0..mesh.face(f as usize).len() {
-                for &(g, _) in edges.faces(edges.face_edge[base + k] as usize) {
+                for &(g, _) in self.edges.faces(self.edges.face_edge[base + k] as usize) {
                     let l = label[g as usize];
-                    if l != s as u32 && l != UNLABELLED {
+                    if l != own && l != UNLABELLED {
                         *shared.entry(l).or_insert(0) += 1;
                     }
                 }
@@ -826,52 +938,84 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         }
         let mut order: Vec<(u32, usize)> = shared.into_iter().collect();
         order.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
-        for (t, _) in order {
-            let t = t as usize;
-            let Some(fit) = regions[t].fit else { continue };
-            let on_surface = regions[s].faces.iter().all(|&f| {
-                mesh.face(f as usize)
-                    .iter()
-                    .all(|&v| fit.primitive.distance(mesh.positions[v as usize]) <= tol)
-            });
-            if on_surface {
-                let moved = std::mem::take(&mut regions[s].faces);
-                for &f in &moved {
-                    label[f as usize] = t as u32;
-                }
-                regions[t].faces.extend(moved);
+        order
+    }
+
+    /// True when every vertex of `faces` is within the tolerance of `primitive` (normals
+    /// are not checked).
+    fn lies_on(&self, faces: &[u32], primitive: &Primitive) -> bool {
+        faces.iter().all(|&f| {
+            self.mesh
+                .face(f as usize)
+                .iter()
+                .all(|&v| primitive.distance(self.mesh.positions[v as usize]) <= self.tol)
+        })
+    }
+
+    /// Merges fragments from splitting that are smaller than `min_region_triangles`,
+    /// smallest first, into a smooth neighbour; an isolated fragment is kept. Marks the
+    /// grown regions in `dirty` (fit kept) or `refit` (fit to be redone).
+    fn merge_fragments(
+        &self,
+        regions: &mut [Region],
+        label: &mut [u32],
+        dirty: &mut [bool],
+        refit: &mut [bool],
+    ) {
+        while let Some(s) = self.smallest_fragment(regions) {
+            let Some((target, keep)) = self.fragment_target(regions, s, label) else {
+                regions[s].from_split = false; // isolated: keep
+                continue;
+            };
+            let moved = std::mem::take(&mut regions[s].faces);
+            for &f in &moved {
+                label[f as usize] = target;
+            }
+            let t = target as usize;
+            regions[t].faces.extend(moved);
+            if keep {
                 dirty[t] = true;
-                break;
+            } else {
+                refit[t] = true;
             }
         }
     }
-    loop {
-        let small = regions
+
+    /// The smallest (then lowest-index) non-empty region from splitting that is below
+    /// `min_region_triangles`.
+    fn smallest_fragment(&self, regions: &[Region]) -> Option<usize> {
+        regions
             .iter()
             .enumerate()
             .filter(|(_, r)| {
-                r.from_split && !r.faces.is_empty() && r.faces.len() < opts.min_region_triangles
+                r.from_split
+                    && !r.faces.is_empty()
+                    && r.faces.len() < self.opts.min_region_triangles
             })
             .min_by_key(|(i, r)| (r.faces.len(), *i))
-            .map(|(i, _)| i);
-        let Some(s) = small else { break };
+            .map(|(i, _)| i)
+    }
+
+    /// The smooth neighbour fragment `s` should join and whether that neighbour's
+    /// primitive fits it. Prefers a neighbour whose primitive already fits the fragment;
+    /// among those (or among all if none fits), the one sharing the most edges, then the
+    /// lowest index.
+    fn fragment_target(&self, regions: &[Region], s: usize, label: &[u32]) -> Option<(u32, bool)> {
         let mut shared: BTreeMap<u32, usize> = BTreeMap::new();
         for &f in &regions[s].faces {
-            for &g in seg.neighbours(f) {
+            for &g in self.neighbours(f) {
                 let l = label[g as usize];
                 if l != s as u32 && l != UNLABELLED {
                     *shared.entry(l).or_insert(0) += 1;
                 }
             }
         }
-        // Prefer a neighbour whose primitive already fits the fragment; among those (or
-        // among all if none fits), the one sharing the most edges, then the lowest index.
         let fits_fragment = |r: &Region| {
             r.fit.as_ref().is_some_and(|fit| {
                 regions[s]
                     .faces
                     .iter()
-                    .all(|&f| seg.face_fits(&fit.primitive, f))
+                    .all(|&f| self.face_fits(&fit.primitive, f))
             })
         };
         let best = |want_fit: bool| {
@@ -881,53 +1025,68 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
                 .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
                 .map(|(&l, _)| (l, want_fit))
         };
-        let Some((target, keep)) = best(true).or_else(|| best(false)) else {
-            regions[s].from_split = false; // isolated: keep
-            continue;
-        };
-        let moved = std::mem::take(&mut regions[s].faces);
-        for &f in &moved {
-            label[f as usize] = target;
-        }
-        let t = target as usize;
-        regions[t].faces.extend(moved);
-        // Residuals (or the whole fit) of the grown region are recomputed once at the end:
-        // recomputing per merge would be quadratic when many fragments join one region.
-        if keep {
-            dirty[t] = true;
-        } else {
-            refit[t] = true;
-        }
+        best(true).or_else(|| best(false))
     }
-    for t in 0..regions.len() {
-        if regions[t].faces.is_empty() || !(dirty[t] || refit[t]) {
-            continue;
-        }
-        let mut faces = std::mem::take(&mut regions[t].faces);
-        faces.sort_unstable();
-        let old = regions[t].fit.map(|f| f.primitive);
-        regions[t].fit = match old {
-            Some(p) if !refit[t] => {
-                let (pts, _) = seg.points_and_normals(&faces);
-                Some(PrimitiveFit {
-                    primitive: p,
-                    residuals: p.residuals(&pts),
-                })
-            }
-            Some(p) => seg
-                .refine_faces(&faces, &p)
-                .or_else(|| seg.fit_faces(&faces, &kinds)),
-            None => None,
-        };
-        regions[t].faces = faces;
-    }
-    regions.retain(|r| !r.faces.is_empty());
 
-    // 5. Merge across moderately sharp edges when one primitive fits the union
-    //    confidently and every face normal agrees with it (coarse facets of one surface).
-    let cos_facet = opts.facet_merge_angle_deg.to_radians().cos();
-    for _round in 0..8 {
-        let mut label = vec![0u32; nf];
+    /// Recomputes the residuals of the `dirty` regions under their primitive, and refits
+    /// the `refit` ones (refined from their primitive, else fitted afresh).
+    fn update_grown_fits(&mut self, regions: &mut [Region], dirty: &[bool], refit: &[bool]) {
+        let kinds = self.opts.kinds.clone();
+        for t in 0..regions.len() {
+            if regions[t].faces.is_empty() || !(dirty[t] || refit[t]) {
+                continue;
+            }
+            let mut faces = std::mem::take(&mut regions[t].faces);
+            faces.sort_unstable();
+            let old = regions[t].fit.map(|f| f.primitive);
+            regions[t].fit = match old {
+                Some(p) if !refit[t] => {
+                    let (pts, _) = self.points_and_normals(&faces);
+                    Some(PrimitiveFit {
+                        primitive: p,
+                        residuals: p.residuals(&pts),
+                    })
+                }
+                Some(p) => self
+                    .refine_faces(&faces, &p)
+                    .or_else(|| self.fit_faces(&faces, &kinds)),
+                None => None,
+            };
+            regions[t].faces = faces;
+        }
+    }
+
+    /// Step 5: merges regions across moderately sharp edges when one primitive fits the
+    /// union confidently and every face normal agrees with it (coarse facets of one
+    /// surface). Each region merges at most once per round; rounds repeat while any merge
+    /// happens.
+    fn merge_facets(&mut self, regions: &mut Vec<Region>) {
+        let cos_facet = self.opts.facet_merge_angle_deg.to_radians().cos();
+        for _round in 0..8 {
+            let candidates = self.facet_merge_candidates(regions, cos_facet);
+            let mut touched = vec![false; regions.len()];
+            let mut merged = false;
+            for (a, b) in candidates {
+                if touched[a] || touched[b] {
+                    continue;
+                }
+                if self.merge_facet_pair(regions, a, b) {
+                    touched[a] = true;
+                    touched[b] = true;
+                    merged = true;
+                }
+            }
+            regions.retain(|r| !r.faces.is_empty());
+            if !merged {
+                break;
+            }
+        }
+    }
+
+    /// Pairs of adjacent regions (lower index first) whose shared edges are all no sharper
+    /// than `cos_facet`, most shared edges first, then by index.
+    fn facet_merge_candidates(&self, regions: &[Region], cos_facet: f64) -> Vec<(usize, usize)> {
+        let mut label = vec![0u32; self.mesh.face_count()];
         for (r, reg) in regions.iter().enumerate() {
             for &f in &reg.faces {
                 label[f as usize] = r as u32;
@@ -935,8 +1094,8 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
         }
         // (region a < region b) -> (shared edges, min normal dot across them)
         let mut pairs: BTreeMap<(u32, u32), (usize, f64)> = BTreeMap::new();
-        for e in 0..edges.len() {
-            let fs = edges.faces(e);
+        for e in 0..self.edges.len() {
+            let fs = self.edges.faces(e);
             if fs.len() != 2 {
                 continue;
             }
@@ -945,7 +1104,7 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
             if a == b {
                 continue;
             }
-            let d = seg.normals[f].dot(seg.normals[g]);
+            let d = self.normals[f].dot(self.normals[g]);
             let entry = pairs.entry((a.min(b), a.max(b))).or_insert((0, 1.0));
             entry.0 += 1;
             entry.1 = entry.1.min(d);
@@ -956,110 +1115,99 @@ pub fn segment(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<(ControlMesh
             .map(|(k, (n, _))| (k, n))
             .collect();
         cands.sort_by(|x, y| y.1.cmp(&x.1).then(x.0.cmp(&y.0)));
-        let mut touched = vec![false; regions.len()];
-        let mut merged = false;
-        for ((a, b), _) in cands {
-            let (a, b) = (a as usize, b as usize);
-            if touched[a] || touched[b] {
-                continue;
-            }
-            // Only pieces of the same curved kind (two strips of one coarse cylinder, two
-            // patches of one sphere); a plane next to a plane across a sharp edge, or a
-            // plane strip next to a curved piece, stays apart (ambiguous on facets).
-            let (Some(fa), Some(fb)) = (regions[a].fit, regions[b].fit) else {
-                continue;
-            };
-            let kind = fa.primitive.kind();
-            if kind == PrimitiveKind::Plane || fb.primitive.kind() != kind {
-                continue;
-            }
-            let mut faces = regions[a].faces.clone();
-            faces.extend_from_slice(&regions[b].faces);
-            faces.sort_unstable();
-            let start = if regions[a].faces.len() >= regions[b].faces.len() {
-                fa.primitive
-            } else {
-                fb.primitive
-            };
-            let Some(fit) = seg.refine_faces(&faces, &start) else {
-                continue;
-            };
-            if !seg.is_confident(&Some(fit))
-                || !faces.iter().all(|&f| seg.face_fits(&fit.primitive, f))
-            {
-                continue;
-            }
-            regions[a].faces = faces;
-            regions[a].fit = Some(fit);
-            regions[b].faces.clear();
-            touched[a] = true;
-            touched[b] = true;
-            merged = true;
-        }
-        regions.retain(|r| !r.faces.is_empty());
-        if !merged {
-            break;
-        }
+        cands
+            .into_iter()
+            .map(|((a, b), _)| (a as usize, b as usize))
+            .collect()
     }
-    // Groups in order of their first face.
-    regions.sort_by_key(|r| r.faces[0]);
 
-    let mut out = mesh.clone();
-    out.groups.clear();
-    let mut infos = Vec::with_capacity(regions.len());
-    for (i, r) in regions.iter().enumerate() {
-        let patch = match r.fit.map(|f| f.primitive) {
-            Some(Primitive::Plane { .. }) => PatchKind::Boundary(BoundarySurface::Plane),
-            Some(Primitive::Cylinder { axis, .. }) => {
-                PatchKind::Boundary(BoundarySurface::Cylinder { axis })
-            }
-            Some(Primitive::Cone { axis, .. }) => PatchKind::Boundary(BoundarySurface::Cone {
-                axis: Axis {
-                    origin: axis.origin,
-                    direction: axis.direction,
-                },
-            }),
-            _ => PatchKind::Closed,
+    /// Moves region `b` into region `a` if both are pieces of the same curved kind and one
+    /// primitive, refined from the larger piece's, fits the union confidently with every
+    /// face normal agreeing. Returns whether they merged.
+    fn merge_facet_pair(&mut self, regions: &mut [Region], a: usize, b: usize) -> bool {
+        // Only pieces of the same curved kind (two strips of one coarse cylinder, two
+        // patches of one sphere); a plane next to a plane across a sharp edge, or a
+        // plane strip next to a curved piece, stays apart (ambiguous on facets).
+        let (Some(fa), Some(fb)) = (regions[a].fit, regions[b].fit) else {
+            return false;
         };
-        out.groups.push(Group {
-            name: format!("face_{i}"),
-            patch,
-        });
-        for &f in &r.faces {
-            out.face_groups[f as usize] = i as u32;
+        let kind = fa.primitive.kind();
+        if kind == PrimitiveKind::Plane || fb.primitive.kind() != kind {
+            return false;
         }
-        infos.push(RegionInfo {
+        let mut faces = regions[a].faces.clone();
+        faces.extend_from_slice(&regions[b].faces);
+        faces.sort_unstable();
+        let start = if regions[a].faces.len() >= regions[b].faces.len() {
+            fa.primitive
+        } else {
+            fb.primitive
+        };
+        let Some(fit) = self.refine_faces(&faces, &start) else {
+            return false;
+        };
+        if !self.is_confident(&Some(fit))
+            || !faces.iter().all(|&f| self.face_fits(&fit.primitive, f))
+        {
+            return false;
+        }
+        regions[a].faces = faces;
+        regions[a].fit = Some(fit);
+        regions[b].faces.clear();
+        true
+    }
+
+    /// The input mesh with one group per region, in region order, its sharp group
+    /// boundaries marked, and the report entry of each region.
+    fn grouped_mesh(&self, regions: &[Region]) -> (ControlMesh, Vec<RegionInfo>) {
+        let mut out = self.mesh.clone();
+        out.groups.clear();
+        let mut infos = Vec::with_capacity(regions.len());
+        for (i, r) in regions.iter().enumerate() {
+            out.groups.push(Group {
+                name: format!("face_{i}"),
+                patch: patch_kind(r.fit.map(|f| f.primitive)),
+            });
+            for &f in &r.faces {
+                out.face_groups[f as usize] = i as u32;
+            }
+            infos.push(self.region_info(r));
+        }
+        self.mark_sharp_group_boundaries(&mut out);
+        (out, infos)
+    }
+
+    /// The report entry of one region.
+    fn region_info(&self, r: &Region) -> RegionInfo {
+        RegionInfo {
             kind: r
                 .fit
                 .map(|f| RegionKind::Primitive(f.primitive.kind()))
                 .unwrap_or(RegionKind::Freeform),
             triangles: r.faces.len(),
-            area: r.faces.iter().map(|&f| seg.areas[f as usize]).sum(),
+            area: r.faces.iter().map(|&f| self.areas[f as usize]).sum(),
             primitive: r.fit.map(|f| f.primitive),
             residuals: r.fit.map(|f| f.residuals),
-        });
+        }
     }
-    for e in 0..edges.len() {
-        let fs = edges.faces(e);
-        if fs.len() == 2 {
-            let (f, g) = (fs[0].0, fs[1].0);
-            if out.face_groups[f as usize] != out.face_groups[g as usize]
-                && is_sharp_pair(&seg.normals, f, g)
-            {
-                let (a, b) = edges.keys[e];
-                out.set_sharp(a, b);
+
+    /// Adds to `out.sharp_edges` every manifold edge between two groups whose dihedral
+    /// angle is sharp.
+    fn mark_sharp_group_boundaries(&self, out: &mut ControlMesh) {
+        let edges = &self.edges;
+        for e in 0..edges.len() {
+            let fs = edges.faces(e);
+            if fs.len() == 2 {
+                let (f, g) = (fs[0].0, fs[1].0);
+                if out.face_groups[f as usize] != out.face_groups[g as usize]
+                    && is_sharp_pair(&self.normals, self.cos_sharp, f, g)
+                {
+                    let (a, b) = edges.keys[e];
+                    out.set_sharp(a, b);
+                }
             }
         }
     }
-    Ok((
-        out,
-        SegmentReport {
-            tolerance: tol,
-            sharp_edges: sharp_count,
-            smooth_components: components.len(),
-            regions: infos,
-        },
-    ))
 }
 
 #[cfg(test)]
