@@ -308,7 +308,7 @@ fn relaxing_refined_closed_patches_makes_a_smaller_file_within_tolerance() {
 #[test]
 fn closed_patches_are_fitted_onto_their_exact_surfaces() {
     use scode::fit::encoder::ExactSurface;
-    use scode::fit::primitives::Primitive;
+    use scode::mesh::AnalyticSurface;
     use scode::mesh::PatchKind;
     use scode::pipeline::{decode_surface, SurfaceOptions};
     let (r, step) = (10.0f64, 15usize);
@@ -345,7 +345,7 @@ fn closed_patches_are_fitted_onto_their_exact_surfaces() {
             m.push_face(&[a, c, d], group(i));
         }
     }
-    let sphere = ExactSurface::new(Primitive::Sphere {
+    let sphere = ExactSurface::new(AnalyticSurface::Sphere {
         center: glam::DVec3::ZERO,
         radius: r,
     });

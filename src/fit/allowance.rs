@@ -471,12 +471,10 @@ mod tests {
         let own = [Some(TriangleSurface::new(p, vec![[0, 1, 2]]).unwrap())];
         let ids = [vec![0u32]];
         let chord = [1.0];
-        let exact = [ExactSurface::new(
-            crate::fit::primitives::Primitive::Sphere {
-                center: DVec3::ZERO,
-                radius: 10.0,
-            },
-        )];
+        let exact = [ExactSurface::new(crate::mesh::AnalyticSurface::Sphere {
+            center: DVec3::ZERO,
+            radius: 10.0,
+        })];
         let with = OwnFaces {
             surfaces: &own,
             triangles: &ids,

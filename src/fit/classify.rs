@@ -10,9 +10,10 @@ use glam::DVec3;
 use super::decimate::SurfaceRef;
 use super::encoder::{FitOptions, FitReport, SurfaceHint};
 use super::plan::GroupPlan;
-use super::primitives::{fit_cone, fit_cylinder, fit_plane, Primitive};
+use super::primitives::{fit_cone, fit_cylinder, fit_plane};
 use super::segment::{segment, SegmentOptions};
 use crate::error::Result;
+use crate::mesh::AnalyticSurface;
 use crate::mesh::{BoundarySurface, ControlMesh, PatchKind};
 
 /// The input's faces as the fit works on them.
@@ -121,7 +122,7 @@ fn classify_group(
     if points.len() < 3 {
         return PatchKind::Closed;
     }
-    let within = |r: &super::primitives::PrimitiveFit| r.residuals.max <= 0.25 * tol;
+    let within = |r: &super::primitives::SurfaceFit| r.residuals.max <= 0.25 * tol;
     let try_plane = || {
         fit_plane(&points)
             .filter(within)
@@ -130,8 +131,8 @@ fn classify_group(
     let try_cyl = || {
         fit_cylinder(&points, &normals)
             .filter(within)
-            .and_then(|f| match f.primitive {
-                Primitive::Cylinder { axis, .. } => {
+            .and_then(|f| match f.surface {
+                AnalyticSurface::Cylinder { axis, .. } => {
                     Some(PatchKind::Boundary(BoundarySurface::Cylinder { axis }))
                 }
                 _ => None,
@@ -140,8 +141,8 @@ fn classify_group(
     let try_cone = || {
         fit_cone(&points, &normals)
             .filter(within)
-            .and_then(|f| match f.primitive {
-                Primitive::Cone { axis, .. } => {
+            .and_then(|f| match f.surface {
+                AnalyticSurface::Cone { axis, .. } => {
                     Some(PatchKind::Boundary(BoundarySurface::Cone { axis }))
                 }
                 _ => None,
@@ -214,8 +215,8 @@ fn collapse_surface(
         PatchKind::Boundary(BoundarySurface::Plane) => {
             let (pts, _) = group_points_normals(mesh, tris, group);
             let normal = fit_plane(&pts)
-                .and_then(|f| match f.primitive {
-                    Primitive::Plane { normal, .. } => Some(normal),
+                .and_then(|f| match f.surface {
+                    AnalyticSurface::Plane { normal, .. } => Some(normal),
                     _ => None,
                 })
                 .unwrap_or(DVec3::Z);

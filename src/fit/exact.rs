@@ -11,21 +11,21 @@
 
 use glam::DVec3;
 
-use super::primitives::Primitive;
+use crate::mesh::AnalyticSurface;
 use crate::mesh::Axis;
 
-/// The untrimmed analytic surface under one input face (model units): a [`Primitive`] with
+/// The untrimmed analytic surface under one input face (model units): a [`AnalyticSurface`] with
 /// finite parameters and unit directions, whose cone has both nappes (a STEP cone face may
 /// lie on either side of the apex; a fitted cone is the one nappe its points are on). A
 /// face on any other surface has none and is measured against its facets alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ExactSurface(Primitive);
+pub struct ExactSurface(AnalyticSurface);
 
 impl ExactSurface {
     /// The surface, with unit directions; `None` when a parameter is not finite, a radius
     /// is negative, a cone's half angle is not strictly between 0 and 90 degrees or a
     /// direction is zero (such a surface would measure nothing sensible).
-    pub fn new(surface: Primitive) -> Option<ExactSurface> {
+    pub fn new(surface: AnalyticSurface) -> Option<ExactSurface> {
         let unit = |a: Axis| -> Option<Axis> {
             let direction = a.direction.try_normalize()?;
             a.origin.is_finite().then_some(Axis {
@@ -35,36 +35,40 @@ impl ExactSurface {
         };
         let radius_ok = |r: f64| r.is_finite() && r >= 0.0;
         let s = match surface {
-            Primitive::Plane { point, normal } => {
+            AnalyticSurface::Plane { point, normal } => {
                 let axis = unit(Axis {
                     origin: point,
                     direction: normal,
                 })?;
-                Primitive::Plane {
+                AnalyticSurface::Plane {
                     point: axis.origin,
                     normal: axis.direction,
                 }
             }
-            Primitive::Cylinder { axis, radius } if radius_ok(radius) => Primitive::Cylinder {
-                axis: unit(axis)?,
-                radius,
-            },
-            Primitive::Cone { axis, half_angle }
+            AnalyticSurface::Cylinder { axis, radius } if radius_ok(radius) => {
+                AnalyticSurface::Cylinder {
+                    axis: unit(axis)?,
+                    radius,
+                }
+            }
+            AnalyticSurface::Cone { axis, half_angle }
                 if half_angle > 0.0 && half_angle < std::f64::consts::FRAC_PI_2 =>
             {
-                Primitive::Cone {
+                AnalyticSurface::Cone {
                     axis: unit(axis)?,
                     half_angle,
                 }
             }
-            Primitive::Sphere { center, radius } if radius_ok(radius) && center.is_finite() => {
-                Primitive::Sphere { center, radius }
+            AnalyticSurface::Sphere { center, radius }
+                if radius_ok(radius) && center.is_finite() =>
+            {
+                AnalyticSurface::Sphere { center, radius }
             }
-            Primitive::Torus {
+            AnalyticSurface::Torus {
                 axis,
                 major_radius,
                 minor_radius,
-            } if radius_ok(major_radius) && radius_ok(minor_radius) => Primitive::Torus {
+            } if radius_ok(major_radius) && radius_ok(minor_radius) => AnalyticSurface::Torus {
                 axis: unit(axis)?,
                 major_radius,
                 minor_radius,
@@ -76,10 +80,10 @@ impl ExactSurface {
 
     /// The surface itself, and for a cone its other nappe (a STEP cone face may lie on
     /// either side of the apex).
-    fn nappes(&self) -> (Primitive, Option<Primitive>) {
+    fn nappes(&self) -> (AnalyticSurface, Option<AnalyticSurface>) {
         match self.0 {
-            Primitive::Cone { axis, half_angle } => {
-                let other = Primitive::Cone {
+            AnalyticSurface::Cone { axis, half_angle } => {
+                let other = AnalyticSurface::Cone {
                     axis: Axis {
                         origin: axis.origin,
                         direction: -axis.direction,
@@ -161,7 +165,7 @@ mod tests {
         let (n, x) = (a.direction, across());
         let cases = [
             (
-                Primitive::Plane {
+                AnalyticSurface::Plane {
                     point: a.origin,
                     normal: n,
                 },
@@ -169,7 +173,7 @@ mod tests {
                 0.3,
             ),
             (
-                Primitive::Cylinder {
+                AnalyticSurface::Cylinder {
                     axis: a,
                     radius: 2.0,
                 },
@@ -177,7 +181,7 @@ mod tests {
                 0.5,
             ),
             (
-                Primitive::Sphere {
+                AnalyticSurface::Sphere {
                     center: a.origin,
                     radius: 2.0,
                 },
@@ -185,7 +189,7 @@ mod tests {
                 0.5,
             ),
             (
-                Primitive::Torus {
+                AnalyticSurface::Torus {
                     axis: a,
                     major_radius: 5.0,
                     minor_radius: 1.0,
@@ -196,7 +200,7 @@ mod tests {
             // A spindle torus: the point 2 from the axis at the centre's height is on the
             // tube circle about the opposite side's centre (v = pi: 1 + 3 cos v = -2).
             (
-                Primitive::Torus {
+                AnalyticSurface::Torus {
                     axis: a,
                     major_radius: 1.0,
                     minor_radius: 3.0,
@@ -221,28 +225,28 @@ mod tests {
         let (n, x) = (a.direction, across());
         let y = n.cross(x);
         let surfaces = [
-            Primitive::Plane {
+            AnalyticSurface::Plane {
                 point: a.origin,
                 normal: n,
             },
-            Primitive::Cylinder {
+            AnalyticSurface::Cylinder {
                 axis: a,
                 radius: 2.0,
             },
-            Primitive::Cone {
+            AnalyticSurface::Cone {
                 axis: a,
                 half_angle: 0.4,
             },
-            Primitive::Sphere {
+            AnalyticSurface::Sphere {
                 center: a.origin,
                 radius: 2.0,
             },
-            Primitive::Torus {
+            AnalyticSurface::Torus {
                 axis: a,
                 major_radius: 3.0,
                 minor_radius: 1.0,
             },
-            Primitive::Torus {
+            AnalyticSurface::Torus {
                 axis: a,
                 major_radius: 1.0,
                 minor_radius: 3.0,
@@ -272,12 +276,12 @@ mod tests {
     fn a_point_near_a_circle_where_a_plane_cuts_a_sphere_goes_onto_it() {
         let a = tilted();
         let (n, x) = (a.direction, across());
-        let plane = ExactSurface::new(Primitive::Plane {
+        let plane = ExactSurface::new(AnalyticSurface::Plane {
             point: a.origin + n,
             normal: n,
         })
         .unwrap();
-        let sphere = ExactSurface::new(Primitive::Sphere {
+        let sphere = ExactSurface::new(AnalyticSurface::Sphere {
             center: a.origin,
             radius: 2.0,
         })
@@ -288,7 +292,7 @@ mod tests {
         let q = onto_all(&[plane, sphere], p).unwrap();
         assert!(q.distance(on) < 1e-6, "{q} is not {on}");
         // A plane and a sphere that do not meet: no common point.
-        let far = ExactSurface::new(Primitive::Plane {
+        let far = ExactSurface::new(AnalyticSurface::Plane {
             point: a.origin + 3.0 * n,
             normal: n,
         })
@@ -301,7 +305,7 @@ mod tests {
         let a = tilted();
         let (n, x) = (a.direction, across());
         // 45 degrees: the generator through (h, r) = (1, 1).
-        let s = ExactSurface::new(Primitive::Cone {
+        let s = ExactSurface::new(AnalyticSurface::Cone {
             axis: a,
             half_angle: std::f64::consts::FRAC_PI_4,
         })
@@ -325,23 +329,23 @@ mod tests {
             direction: DVec3::ZERO,
         };
         for s in [
-            Primitive::Plane {
+            AnalyticSurface::Plane {
                 point: zero.origin,
                 normal: zero.direction,
             },
-            Primitive::Cylinder {
+            AnalyticSurface::Cylinder {
                 axis: a,
                 radius: f64::NAN,
             },
-            Primitive::Cone {
+            AnalyticSurface::Cone {
                 axis: a,
                 half_angle: 0.0,
             },
-            Primitive::Sphere {
+            AnalyticSurface::Sphere {
                 center: DVec3::splat(f64::INFINITY),
                 radius: 1.0,
             },
-            Primitive::Torus {
+            AnalyticSurface::Torus {
                 axis: a,
                 major_radius: 2.0,
                 minor_radius: -1.0,
@@ -350,7 +354,7 @@ mod tests {
             assert_eq!(ExactSurface::new(s), None, "{s:?}");
         }
         // A non-unit direction is normalised.
-        let s = ExactSurface::new(Primitive::Plane {
+        let s = ExactSurface::new(AnalyticSurface::Plane {
             point: DVec3::ZERO,
             normal: DVec3::new(0.0, 0.0, 4.0),
         })

@@ -20,206 +20,13 @@
 use glam::DVec3;
 
 use super::linalg::{levenberg_marquardt, solve, sym_eigen, sym_eigen3};
-use crate::mesh::Axis;
+use crate::mesh::{AnalyticSurface, Axis, Residuals, SurfaceKind};
 
-/// Maximum and root-mean-square distance of the fitted points to the surface.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Residuals {
-    pub max: f64,
-    pub rms: f64,
-}
-
-/// Surface types, in the order of preference used by classification (fewest parameters
-/// first: a plane is also a cylinder of infinite radius, a cylinder a cone of zero angle).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum PrimitiveKind {
-    Plane,
-    Cylinder,
-    Cone,
-    Sphere,
-    Torus,
-}
-
-impl PrimitiveKind {
-    pub const ALL: [PrimitiveKind; 5] = [
-        PrimitiveKind::Plane,
-        PrimitiveKind::Cylinder,
-        PrimitiveKind::Cone,
-        PrimitiveKind::Sphere,
-        PrimitiveKind::Torus,
-    ];
-}
-
-/// An analytic surface in model coordinates. Directions are unit vectors.
+/// A fitted surface with its residuals over the fitted points.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Primitive {
-    Plane {
-        point: DVec3,
-        normal: DVec3,
-    },
-    Sphere {
-        center: DVec3,
-        radius: f64,
-    },
-    /// `axis.origin` is a point on the axis.
-    Cylinder {
-        axis: Axis,
-        radius: f64,
-    },
-    /// `axis.origin` is the apex; the cone opens along `axis.direction`.
-    Cone {
-        axis: Axis,
-        half_angle: f64,
-    },
-    /// `axis.origin` is the centre; `major_radius` is the spine circle's radius.
-    Torus {
-        axis: Axis,
-        major_radius: f64,
-        minor_radius: f64,
-    },
-}
-
-/// A fitted primitive with its residuals over the fitted points.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PrimitiveFit {
-    pub primitive: Primitive,
+pub struct SurfaceFit {
+    pub surface: AnalyticSurface,
     pub residuals: Residuals,
-}
-
-/// Cylindrical coordinates of `p` about an axis: (height along it, distance from it, unit
-/// radial direction or any perpendicular when on the axis).
-fn axial(axis: &Axis, p: DVec3) -> (f64, f64, DVec3) {
-    let v = p - axis.origin;
-    let h = v.dot(axis.direction);
-    let radial = v - h * axis.direction;
-    let rho = radial.length();
-    let dir = if rho > 0.0 {
-        radial / rho
-    } else {
-        axis.direction.any_orthonormal_vector()
-    };
-    (h, rho, dir)
-}
-
-impl Primitive {
-    pub fn kind(&self) -> PrimitiveKind {
-        match self {
-            Primitive::Plane { .. } => PrimitiveKind::Plane,
-            Primitive::Sphere { .. } => PrimitiveKind::Sphere,
-            Primitive::Cylinder { .. } => PrimitiveKind::Cylinder,
-            Primitive::Cone { .. } => PrimitiveKind::Cone,
-            Primitive::Torus { .. } => PrimitiveKind::Torus,
-        }
-    }
-
-    /// Unsigned Euclidean distance from `p` to the surface (cones: the nappe that opens
-    /// along the axis, including the apex).
-    pub fn distance(&self, p: DVec3) -> f64 {
-        match *self {
-            Primitive::Plane { point, normal } => (p - point).dot(normal).abs(),
-            Primitive::Sphere { center, radius } => ((p - center).length() - radius).abs(),
-            Primitive::Cylinder { axis, radius } => (axial(&axis, p).1 - radius).abs(),
-            Primitive::Cone { axis, half_angle } => {
-                let (h, rho, _) = axial(&axis, p);
-                let (s, c) = half_angle.sin_cos();
-                if h * c + rho * s >= 0.0 {
-                    (rho * c - h * s).abs()
-                } else {
-                    (h * h + rho * rho).sqrt()
-                }
-            }
-            Primitive::Torus {
-                axis,
-                major_radius,
-                minor_radius,
-            } => {
-                // The tube's section in p's plane through the axis is two circles, at
-                // +major and -major from the axis; with the minor radius larger (a spindle
-                // torus, as STEP allows) the far one may be nearer.
-                let (h, rho, _) = axial(&axis, p);
-                let near = ((rho - major_radius).hypot(h) - minor_radius).abs();
-                let far = ((rho + major_radius).hypot(h) - minor_radius).abs();
-                near.min(far)
-            }
-        }
-    }
-
-    /// The point of the surface nearest to `p` (cones: on the nappe that opens along the
-    /// axis, the apex when `p` is behind it; a point on an axis or at a centre goes to any
-    /// of its nearest points).
-    pub fn project(&self, p: DVec3) -> DVec3 {
-        match *self {
-            Primitive::Plane { point, normal } => p - (p - point).dot(normal) * normal,
-            Primitive::Sphere { center, radius } => {
-                center + radius * (p - center).try_normalize().unwrap_or(DVec3::Z)
-            }
-            Primitive::Cylinder { axis, radius } => {
-                let (h, _, r) = axial(&axis, p);
-                axis.origin + h * axis.direction + radius * r
-            }
-            Primitive::Cone { axis, half_angle } => {
-                let (h, rho, r) = axial(&axis, p);
-                let (s, c) = half_angle.sin_cos();
-                let t = (h * c + rho * s).max(0.0);
-                axis.origin + t * (c * axis.direction + s * r)
-            }
-            Primitive::Torus {
-                axis,
-                major_radius,
-                minor_radius,
-            } => {
-                // As in `distance`: the nearer of the two circles of p's axial section.
-                let (_, _, r) = axial(&axis, p);
-                let on_circle = |spine: DVec3| {
-                    let foot = spine + minor_radius * (p - spine).try_normalize().unwrap_or(r);
-                    (foot.distance(p), foot)
-                };
-                let near = on_circle(axis.origin + major_radius * r);
-                let far = on_circle(axis.origin - major_radius * r);
-                if far.0 < near.0 {
-                    far.1
-                } else {
-                    near.1
-                }
-            }
-        }
-    }
-
-    /// Unit surface normal at the foot point of `p` (orientation not meaningful).
-    pub fn normal_at(&self, p: DVec3) -> DVec3 {
-        match *self {
-            Primitive::Plane { normal, .. } => normal,
-            Primitive::Sphere { center, .. } => (p - center).normalize_or(DVec3::Z),
-            Primitive::Cylinder { axis, .. } => axial(&axis, p).2,
-            Primitive::Cone { axis, half_angle } => {
-                let (_, _, r) = axial(&axis, p);
-                let (s, c) = half_angle.sin_cos();
-                (c * r - s * axis.direction).normalize_or(DVec3::Z)
-            }
-            Primitive::Torus {
-                axis, major_radius, ..
-            } => {
-                let (_, _, r) = axial(&axis, p);
-                let spine = axis.origin + major_radius * r;
-                (p - spine).normalize_or(r)
-            }
-        }
-    }
-
-    /// Max and RMS of the distances of `points` to the surface.
-    pub fn residuals(&self, points: &[DVec3]) -> Residuals {
-        let mut r = Residuals::default();
-        let mut s2 = 0.0;
-        for &p in points {
-            let d = self.distance(p);
-            r.max = r.max.max(d);
-            s2 += d * d;
-        }
-        if !points.is_empty() {
-            r.rms = (s2 / points.len() as f64).sqrt();
-        }
-        r
-    }
 }
 
 /// Normalising similarity: `local = (world - center) / scale`.
@@ -254,23 +61,23 @@ impl Frame {
     }
 }
 
-fn finish(primitive: Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
-    let ok = match primitive {
-        Primitive::Plane { point, normal } => point.is_finite() && normal.is_finite(),
-        Primitive::Sphere { center, radius } => center.is_finite() && radius.is_finite(),
-        Primitive::Cylinder { axis, radius }
-        | Primitive::Torus {
+fn finish(surface: AnalyticSurface, points: &[DVec3]) -> Option<SurfaceFit> {
+    let ok = match surface {
+        AnalyticSurface::Plane { point, normal } => point.is_finite() && normal.is_finite(),
+        AnalyticSurface::Sphere { center, radius } => center.is_finite() && radius.is_finite(),
+        AnalyticSurface::Cylinder { axis, radius }
+        | AnalyticSurface::Torus {
             axis,
             major_radius: radius,
             ..
         } => axis.origin.is_finite() && axis.direction.is_finite() && radius.is_finite(),
-        Primitive::Cone { axis, half_angle } => {
+        AnalyticSurface::Cone { axis, half_angle } => {
             axis.origin.is_finite() && axis.direction.is_finite() && half_angle.is_finite()
         }
     };
-    ok.then(|| PrimitiveFit {
-        primitive,
-        residuals: primitive.residuals(points),
+    ok.then(|| SurfaceFit {
+        surface,
+        residuals: surface.residuals(points),
     })
 }
 
@@ -321,7 +128,7 @@ fn circle_2d(pts: &[(f64, f64)]) -> Option<((f64, f64), f64)> {
 }
 
 /// Best-fit plane through the centroid (total least squares). Needs 3 non-collinear points.
-pub fn fit_plane(points: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn fit_plane(points: &[DVec3]) -> Option<SurfaceFit> {
     let (frame, q) = Frame::new(points)?;
     if q.len() < 3 {
         return None;
@@ -331,7 +138,7 @@ pub fn fit_plane(points: &[DVec3]) -> Option<PrimitiveFit> {
         return None; // collinear
     }
     finish(
-        Primitive::Plane {
+        AnalyticSurface::Plane {
             point: frame.center,
             normal: vecs[0],
         },
@@ -340,11 +147,11 @@ pub fn fit_plane(points: &[DVec3]) -> Option<PrimitiveFit> {
 }
 
 /// Best-fit sphere (geometric distances). Needs 4 points not on one plane.
-pub fn fit_sphere(points: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn fit_sphere(points: &[DVec3]) -> Option<SurfaceFit> {
     fit_sphere_impl(points, f64::INFINITY)
 }
 
-fn fit_sphere_impl(points: &[DVec3], abandon_world: f64) -> Option<PrimitiveFit> {
+fn fit_sphere_impl(points: &[DVec3], abandon_world: f64) -> Option<SurfaceFit> {
     let (frame, q) = Frame::new(points)?;
     let abandon = abandon_world / frame.scale;
     if q.len() < 4 {
@@ -378,7 +185,7 @@ fn lm_sphere(
     r: f64,
     points: &[DVec3],
     abandon: f64,
-) -> Option<PrimitiveFit> {
+) -> Option<SurfaceFit> {
     let mut p = [c.x, c.y, c.z, r];
     levenberg_marquardt(
         &mut p,
@@ -393,7 +200,7 @@ fn lm_sphere(
         abandon,
     );
     finish(
-        Primitive::Sphere {
+        AnalyticSurface::Sphere {
             center: frame.point(DVec3::new(p[0], p[1], p[2])),
             radius: frame.len(p[3].abs()),
         },
@@ -406,7 +213,7 @@ fn normals_ok(points: &[DVec3], normals: &[DVec3]) -> bool {
 }
 
 /// Best-fit cylinder. `normals` (one per point, any orientation) initialise the axis.
-pub fn fit_cylinder(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn fit_cylinder(points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     fit_cylinder_impl(points, normals, f64::INFINITY)
 }
 
@@ -414,7 +221,7 @@ fn fit_cylinder_impl(
     points: &[DVec3],
     normals: &[DVec3],
     abandon_world: f64,
-) -> Option<PrimitiveFit> {
+) -> Option<SurfaceFit> {
     if !normals_ok(points, normals) || points.len() < 5 {
         return None;
     }
@@ -438,7 +245,7 @@ fn lm_cylinder(
     r: f64,
     points: &[DVec3],
     abandon: f64,
-) -> Option<PrimitiveFit> {
+) -> Option<SurfaceFit> {
     if points.len() < 5 {
         return None;
     }
@@ -463,7 +270,7 @@ fn lm_cylinder(
     // Report the axis point closest to the centroid of the points.
     let c = c - c.dot(a) * a;
     finish(
-        Primitive::Cylinder {
+        AnalyticSurface::Cylinder {
             axis: Axis {
                 origin: frame.point(c),
                 direction: a,
@@ -475,7 +282,7 @@ fn lm_cylinder(
 }
 
 /// Best-fit cone (one nappe). `normals` initialise the axis and the apex.
-pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn fit_cone(points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     fit_cone_impl(points, normals, f64::INFINITY, None)
 }
 
@@ -484,8 +291,8 @@ fn fit_cone_impl(
     points: &[DVec3],
     normals: &[DVec3],
     abandon_world: f64,
-    cylinder: Option<PrimitiveFit>,
-) -> Option<PrimitiveFit> {
+    cylinder: Option<SurfaceFit>,
+) -> Option<SurfaceFit> {
     if !normals_ok(points, normals) || points.len() < 6 {
         return None;
     }
@@ -525,8 +332,8 @@ fn fit_cone_impl(
     if good_enough {
         return best;
     }
-    if let Some(PrimitiveFit {
-        primitive: Primitive::Cylinder { axis, radius },
+    if let Some(SurfaceFit {
+        surface: AnalyticSurface::Cylinder { axis, radius },
         ..
     }) = cylinder.or_else(|| fit_cylinder_impl(points, normals, abandon_world))
     {
@@ -556,7 +363,7 @@ fn lm_cone(
     angle: f64,
     points: &[DVec3],
     abandon: f64,
-) -> Option<PrimitiveFit> {
+) -> Option<SurfaceFit> {
     if points.len() < 6 {
         return None;
     }
@@ -588,7 +395,7 @@ fn lm_cone(
         a = -a;
     }
     finish(
-        Primitive::Cone {
+        AnalyticSurface::Cone {
             axis: Axis {
                 origin: frame.point(DVec3::new(p[0], p[1], p[2])),
                 direction: a,
@@ -600,11 +407,11 @@ fn lm_cone(
 }
 
 /// Best-fit torus. `normals` initialise the axis (every normal line meets it).
-pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     fit_torus_impl(points, normals, f64::INFINITY)
 }
 
-fn fit_torus_impl(points: &[DVec3], normals: &[DVec3], abandon_world: f64) -> Option<PrimitiveFit> {
+fn fit_torus_impl(points: &[DVec3], normals: &[DVec3], abandon_world: f64) -> Option<SurfaceFit> {
     if !normals_ok(points, normals) || points.len() < 8 {
         return None;
     }
@@ -662,7 +469,7 @@ fn lm_torus(
     small_r: f64,
     points: &[DVec3],
     abandon: f64,
-) -> Option<PrimitiveFit> {
+) -> Option<SurfaceFit> {
     if points.len() < 8 {
         return None;
     }
@@ -685,7 +492,7 @@ fn lm_torus(
         abandon,
     );
     finish(
-        Primitive::Torus {
+        AnalyticSurface::Torus {
             axis: Axis {
                 origin: frame.point(DVec3::new(p[0], p[1], p[2])),
                 direction: perturbed(a0, e1, e2, p[3], p[4]),
@@ -700,18 +507,18 @@ fn lm_torus(
 /// Refits `start`'s kind to `points`, starting Levenberg-Marquardt from `start` (much more
 /// robust than a fresh initialisation when a region grows: the old fit is already close).
 /// Planes are refitted in closed form.
-pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn refine(start: &AnalyticSurface, points: &[DVec3]) -> Option<SurfaceFit> {
     let (frame, q) = Frame::new(points)?;
     let abandon = f64::INFINITY;
     let lp = |p: DVec3| (p - frame.center) / frame.scale;
     let ll = |l: f64| l / frame.scale;
     match *start {
-        Primitive::Plane { .. } => fit_plane(points),
-        Primitive::Sphere { center, radius } => {
+        AnalyticSurface::Plane { .. } => fit_plane(points),
+        AnalyticSurface::Sphere { center, radius } => {
             (q.len() >= 4).then_some(())?;
             lm_sphere(&frame, &q, lp(center), ll(radius), points, abandon)
         }
-        Primitive::Cylinder { axis, radius } => lm_cylinder(
+        AnalyticSurface::Cylinder { axis, radius } => lm_cylinder(
             &frame,
             &q,
             axis.direction,
@@ -720,7 +527,7 @@ pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
             points,
             abandon,
         ),
-        Primitive::Cone { axis, half_angle } => lm_cone(
+        AnalyticSurface::Cone { axis, half_angle } => lm_cone(
             &frame,
             &q,
             lp(axis.origin),
@@ -729,7 +536,7 @@ pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
             points,
             abandon,
         ),
-        Primitive::Torus {
+        AnalyticSurface::Torus {
             axis,
             major_radius,
             minor_radius,
@@ -747,13 +554,13 @@ pub fn refine(start: &Primitive, points: &[DVec3]) -> Option<PrimitiveFit> {
 }
 
 /// Fits `kind` to the points (normals are needed for cylinder, cone and torus).
-pub fn fit_kind(kind: PrimitiveKind, points: &[DVec3], normals: &[DVec3]) -> Option<PrimitiveFit> {
+pub fn fit_kind(kind: SurfaceKind, points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     match kind {
-        PrimitiveKind::Plane => fit_plane(points),
-        PrimitiveKind::Sphere => fit_sphere(points),
-        PrimitiveKind::Cylinder => fit_cylinder(points, normals),
-        PrimitiveKind::Cone => fit_cone(points, normals),
-        PrimitiveKind::Torus => fit_torus(points, normals),
+        SurfaceKind::Plane => fit_plane(points),
+        SurfaceKind::Sphere => fit_sphere(points),
+        SurfaceKind::Cylinder => fit_cylinder(points, normals),
+        SurfaceKind::Cone => fit_cone(points, normals),
+        SurfaceKind::Torus => fit_torus(points, normals),
     }
 }
 
@@ -761,30 +568,30 @@ pub fn fit_kind(kind: PrimitiveKind, points: &[DVec3], normals: &[DVec3]) -> Opt
 /// `tolerance`: hopeless fits are abandoned early, and a cylinder fit of the same points
 /// (if any) seeds the cone fit.
 pub(crate) fn fit_kind_within(
-    kind: PrimitiveKind,
+    kind: SurfaceKind,
     points: &[DVec3],
     normals: &[DVec3],
     tolerance: f64,
-    cylinder: Option<PrimitiveFit>,
-) -> Option<PrimitiveFit> {
+    cylinder: Option<SurfaceFit>,
+) -> Option<SurfaceFit> {
     // RMS <= max, and LM rarely gains a factor 4 after six iterations.
     let abandon = 4.0 * tolerance;
     match kind {
-        PrimitiveKind::Plane => fit_plane(points),
-        PrimitiveKind::Sphere => fit_sphere_impl(points, abandon),
-        PrimitiveKind::Cylinder => fit_cylinder_impl(points, normals, abandon),
-        PrimitiveKind::Cone => fit_cone_impl(points, normals, abandon, cylinder),
-        PrimitiveKind::Torus => fit_torus_impl(points, normals, abandon),
+        SurfaceKind::Plane => fit_plane(points),
+        SurfaceKind::Sphere => fit_sphere_impl(points, abandon),
+        SurfaceKind::Cylinder => fit_cylinder_impl(points, normals, abandon),
+        SurfaceKind::Cone => fit_cone_impl(points, normals, abandon, cylinder),
+        SurfaceKind::Torus => fit_torus_impl(points, normals, abandon),
     }
 }
 
 /// The first kind of `kinds` (in order) whose fit has a max residual within `tolerance`.
 pub fn fit_first_within(
-    kinds: &[PrimitiveKind],
+    kinds: &[SurfaceKind],
     points: &[DVec3],
     normals: &[DVec3],
     tolerance: f64,
-) -> Option<PrimitiveFit> {
+) -> Option<SurfaceFit> {
     kinds
         .iter()
         .filter_map(|&k| fit_kind(k, points, normals))
@@ -824,7 +631,7 @@ mod tests {
             })
             .collect();
         let f = fit_plane(&pts).unwrap();
-        let Primitive::Plane { point, normal } = f.primitive else {
+        let AnalyticSurface::Plane { point, normal } = f.surface else {
             panic!()
         };
         assert!(normal.dot(n).abs() > 1.0 - 1e-8);
@@ -848,7 +655,7 @@ mod tests {
             })
             .collect();
         let f = fit_sphere(&pts).unwrap();
-        let Primitive::Sphere { center, radius } = f.primitive else {
+        let AnalyticSurface::Sphere { center, radius } = f.surface else {
             panic!()
         };
         assert!((center - c).length() < 2e-3, "{center}");
@@ -874,7 +681,7 @@ mod tests {
                 .collect(),
         );
         let f = fit_cylinder(&pts, &ns).unwrap();
-        let Primitive::Cylinder { axis, radius } = f.primitive else {
+        let AnalyticSurface::Cylinder { axis, radius } = f.surface else {
             panic!()
         };
         assert!(axis.direction.dot(a).abs() > 1.0 - 1e-8);
@@ -885,7 +692,7 @@ mod tests {
         // Normals are required.
         assert!(fit_cylinder(&pts, &[]).is_none());
         // Refining from a perturbed start recovers the same cylinder.
-        let start = Primitive::Cylinder {
+        let start = AnalyticSurface::Cylinder {
             axis: Axis {
                 origin: o + DVec3::new(0.05, -0.03, 0.02),
                 direction: (a + 0.05 * e1).normalize(),
@@ -915,7 +722,7 @@ mod tests {
                 .collect(),
         );
         let f = fit_cone(&pts, &ns).unwrap();
-        let Primitive::Cone { axis, half_angle } = f.primitive else {
+        let AnalyticSurface::Cone { axis, half_angle } = f.surface else {
             panic!()
         };
         assert!(axis.direction.dot(a) > 1.0 - 1e-7, "{}", axis.direction);
@@ -945,11 +752,11 @@ mod tests {
                 .collect(),
         );
         let f = fit_torus(&pts, &ns).unwrap();
-        let Primitive::Torus {
+        let AnalyticSurface::Torus {
             axis,
             major_radius,
             minor_radius,
-        } = f.primitive
+        } = f.surface
         else {
             panic!()
         };
@@ -972,11 +779,11 @@ mod tests {
                 })
                 .collect(),
         );
-        let f = fit_first_within(&PrimitiveKind::ALL, &pts, &ns, 1e-6).unwrap();
-        assert_eq!(f.primitive.kind(), PrimitiveKind::Cylinder);
+        let f = fit_first_within(&SurfaceKind::ALL, &pts, &ns, 1e-6).unwrap();
+        assert_eq!(f.surface.kind(), SurfaceKind::Cylinder);
         // Distances of the primitive agree with geometry.
         let p = DVec3::new(3.0, 0.0, 0.5);
-        assert!((f.primitive.distance(p) - 1.0).abs() < 1e-6);
-        assert!(f.primitive.normal_at(p).dot(DVec3::X) > 1.0 - 1e-6);
+        assert!((f.surface.distance(p) - 1.0).abs() < 1e-6);
+        assert!(f.surface.normal_at(p).dot(DVec3::X) > 1.0 - 1e-6);
     }
 }

@@ -33,10 +33,9 @@ use std::collections::{BTreeMap, VecDeque};
 use glam::DVec3;
 
 use super::adjacency::{face_normals_and_areas, EdgeTable};
-use super::primitives::{
-    fit_kind_within, refine, Primitive, PrimitiveFit, PrimitiveKind, Residuals,
-};
+use super::primitives::{fit_kind_within, refine, SurfaceFit};
 use crate::error::{Error, Result};
+use crate::mesh::{AnalyticSurface, Residuals, SurfaceKind};
 use crate::mesh::{Axis, BoundarySurface, ControlMesh, Group, PatchKind};
 
 /// Parameters of [`segment`].
@@ -53,11 +52,11 @@ pub struct SegmentOptions {
     /// Max angle between a face normal and the primitive normal for the face to join a
     /// growing region.
     pub normal_angle_deg: f64,
-    /// Primitive kinds to classify whole smooth components with, simplest first.
-    pub kinds: Vec<PrimitiveKind>,
-    /// Primitive kinds allowed when splitting a smooth component (the torus is left out by
+    /// AnalyticSurface kinds to classify whole smooth components with, simplest first.
+    pub kinds: Vec<SurfaceKind>,
+    /// AnalyticSurface kinds allowed when splitting a smooth component (the torus is left out by
     /// default: it fits many small pieces of freeform surfaces).
-    pub split_kinds: Vec<PrimitiveKind>,
+    pub split_kinds: Vec<SurfaceKind>,
     /// At most this many vertices are used per fit (deterministic stride subsampling); the
     /// tolerance is then checked on all vertices.
     pub max_fit_points: usize,
@@ -83,12 +82,12 @@ impl Default for SegmentOptions {
             tolerance: None,
             min_region_triangles: 12,
             normal_angle_deg: 20.0,
-            kinds: PrimitiveKind::ALL.to_vec(),
+            kinds: SurfaceKind::ALL.to_vec(),
             split_kinds: vec![
-                PrimitiveKind::Plane,
-                PrimitiveKind::Cylinder,
-                PrimitiveKind::Cone,
-                PrimitiveKind::Sphere,
+                SurfaceKind::Plane,
+                SurfaceKind::Cylinder,
+                SurfaceKind::Cone,
+                SurfaceKind::Sphere,
             ],
             max_fit_points: 400,
             max_refits: 6,
@@ -101,7 +100,7 @@ impl Default for SegmentOptions {
 /// What a region is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum RegionKind {
-    Primitive(PrimitiveKind),
+    Analytic(SurfaceKind),
     Freeform,
 }
 
@@ -111,9 +110,9 @@ pub struct RegionInfo {
     pub kind: RegionKind,
     pub triangles: usize,
     pub area: f64,
-    /// The fitted primitive (None for freeform regions).
-    pub primitive: Option<Primitive>,
-    /// Residuals of all the region's vertices to `primitive`.
+    /// The fitted surface (None for freeform regions).
+    pub surface: Option<AnalyticSurface>,
+    /// Residuals of all the region's vertices to `surface`.
     pub residuals: Option<Residuals>,
 }
 
@@ -146,7 +145,7 @@ impl SegmentReport {
             .counts()
             .iter()
             .map(|(k, n)| match k {
-                RegionKind::Primitive(p) => format!("{p:?} {n}"),
+                RegionKind::Analytic(p) => format!("{p:?} {n}"),
                 RegionKind::Freeform => format!("Freeform {n}"),
             })
             .collect();
@@ -178,7 +177,7 @@ struct Front {
 
 struct Region {
     faces: Vec<u32>,
-    fit: Option<PrimitiveFit>,
+    fit: Option<SurfaceFit>,
     /// Made by splitting a smooth component (small ones are merged away).
     from_split: bool,
 }
@@ -265,15 +264,15 @@ impl<'a> Segmenter<'a> {
 
     /// Refits `model` (same kind, started from it) to `faces`; `Some` if every vertex is
     /// within the tolerance.
-    fn refine_faces(&mut self, faces: &[u32], model: &Primitive) -> Option<PrimitiveFit> {
+    fn refine_faces(&mut self, faces: &[u32], model: &AnalyticSurface) -> Option<SurfaceFit> {
         let (pts, sub_p, _) = self.fit_input(faces);
         let fit = refine(model, &sub_p)?;
         if fit.residuals.max > self.tol {
             return None;
         }
-        let full = fit.primitive.residuals(&pts);
-        (full.max <= self.tol).then_some(PrimitiveFit {
-            primitive: fit.primitive,
+        let full = fit.surface.residuals(&pts);
+        (full.max <= self.tol).then_some(SurfaceFit {
+            surface: fit.surface,
             residuals: full,
         })
     }
@@ -283,24 +282,24 @@ impl<'a> Segmenter<'a> {
     /// `max(2 * best, 0.05 * tolerance)`. Choosing by "first within tolerance" alone would
     /// call a small piece of a coarse cone a plane; choosing the best residual alone would
     /// call a plane a huge cylinder.
-    fn fit_faces(&mut self, faces: &[u32], kinds: &[PrimitiveKind]) -> Option<PrimitiveFit> {
+    fn fit_faces(&mut self, faces: &[u32], kinds: &[SurfaceKind]) -> Option<SurfaceFit> {
         let (pts, sub_p, sub_n) = self.fit_input(faces);
-        let mut fits: Vec<PrimitiveFit> = Vec::new();
-        let mut cylinder: Option<PrimitiveFit> = None;
+        let mut fits: Vec<SurfaceFit> = Vec::new();
+        let mut cylinder: Option<SurfaceFit> = None;
         for &k in kinds {
             let Some(fit) = fit_kind_within(k, &sub_p, &sub_n, self.tol, cylinder) else {
                 continue;
             };
-            if k == PrimitiveKind::Cylinder {
+            if k == SurfaceKind::Cylinder {
                 cylinder = Some(fit);
             }
             if fit.residuals.max > self.tol {
                 continue;
             }
-            let full = fit.primitive.residuals(&pts);
+            let full = fit.surface.residuals(&pts);
             if full.max <= self.tol {
-                let fit = PrimitiveFit {
-                    primitive: fit.primitive,
+                let fit = SurfaceFit {
+                    surface: fit.surface,
                     residuals: full,
                 };
                 // Within 5 % of the tolerance: no more general kind could be preferred
@@ -320,7 +319,7 @@ impl<'a> Segmenter<'a> {
         fits.into_iter().find(|f| f.residuals.max <= accept)
     }
 
-    fn face_fits(&self, model: &Primitive, f: u32) -> bool {
+    fn face_fits(&self, model: &AnalyticSurface, f: u32) -> bool {
         let face = self.mesh.face(f as usize);
         let mut centroid = DVec3::ZERO;
         for &v in face {
@@ -342,7 +341,7 @@ impl<'a> Segmenter<'a> {
     /// their neighbours; faces that do not fit are collected once in `front.rejected`.
     fn flood(
         &mut self,
-        primitive: &Primitive,
+        primitive: &AnalyticSurface,
         state: &[FaceState],
         in_region: u32,
         front: &mut Front,
@@ -376,7 +375,7 @@ impl<'a> Segmenter<'a> {
         &mut self,
         seed: u32,
         state: &[FaceState],
-    ) -> std::result::Result<(Vec<u32>, PrimitiveFit), Vec<u32>> {
+    ) -> std::result::Result<(Vec<u32>, SurfaceFit), Vec<u32>> {
         // Initial model: fit growing BFS rings around the seed and stop at the first ring
         // whose best primitive is confident. Small patches first, so that a seed near a
         // curvature change (plane next to a fillet) picks the surface it lies on.
@@ -385,7 +384,7 @@ impl<'a> Segmenter<'a> {
         self.face_stamp[seed as usize] = gen;
         let mut ring_start = 0;
         let split_kinds = self.opts.split_kinds.clone();
-        let mut model: Option<PrimitiveFit> = None;
+        let mut model: Option<SurfaceFit> = None;
         for _ring in 0..4 {
             let ring_end = patch.len();
             for i in ring_start..ring_end {
@@ -431,7 +430,7 @@ impl<'a> Segmenter<'a> {
         // ring is empty or a flood adds nothing.
         for round in 0..=64 {
             let before = front.region.len();
-            self.flood(&model.primitive, state, in_region, &mut front);
+            self.flood(&model.surface, state, in_region, &mut front);
             if round > 0 && front.region.len() == before {
                 break;
             }
@@ -440,11 +439,11 @@ impl<'a> Segmenter<'a> {
             }
             // Try to absorb the rejected ring with a refit (maybe of a more general kind
             // while the region is young).
-            let kinds: Vec<PrimitiveKind> = if front.region.len() <= upgrade_limit {
+            let kinds: Vec<SurfaceKind> = if front.region.len() <= upgrade_limit {
                 split_kinds
                     .iter()
                     .copied()
-                    .filter(|&k| k > model.primitive.kind())
+                    .filter(|&k| k > model.surface.kind())
                     .collect()
             } else {
                 Vec::new()
@@ -452,7 +451,7 @@ impl<'a> Segmenter<'a> {
             let mut candidates = front.region.clone();
             candidates.extend_from_slice(&front.rejected);
             let absorbed = self
-                .refine_faces(&candidates, &model.primitive)
+                .refine_faces(&candidates, &model.surface)
                 .or_else(|| self.fit_faces(&candidates, &kinds));
             if let Some(m) = absorbed {
                 // A true primitive is found in a few refits; a model that keeps drifting
@@ -466,7 +465,7 @@ impl<'a> Segmenter<'a> {
                 // Cannot absorb the ring: sharpen the model on the region alone once it
                 // has grown, then re-test the ring.
                 last_fit = front.region.len();
-                match self.refine_faces(&front.region.clone(), &model.primitive) {
+                match self.refine_faces(&front.region.clone(), &model.surface) {
                     Some(m) => model = m,
                     None => break,
                 }
@@ -480,11 +479,11 @@ impl<'a> Segmenter<'a> {
         let region = front.region;
         // Final residuals over the region.
         let (pts, _) = self.points_and_normals(&region);
-        model.residuals = model.primitive.residuals(&pts);
+        model.residuals = model.surface.residuals(&pts);
         Ok((region, model))
     }
 
-    fn is_confident(&self, fit: &Option<PrimitiveFit>) -> bool {
+    fn is_confident(&self, fit: &Option<SurfaceFit>) -> bool {
         fit.is_some_and(|f| f.residuals.max <= self.opts.confident_fraction * self.tol)
     }
 
@@ -537,7 +536,7 @@ impl<'a> Segmenter<'a> {
                 if regions[first + i]
                     .faces
                     .iter()
-                    .all(|&f| self.face_fits(&fit.primitive, f))
+                    .all(|&f| self.face_fits(&fit.surface, f))
                 {
                     let moved = std::mem::take(&mut regions[first + i].faces);
                     for &f in &moved {
@@ -556,7 +555,7 @@ impl<'a> Segmenter<'a> {
                 faces.sort_unstable();
                 if let Some(fit) = regions[first + j].fit.as_mut() {
                     let (pts, _) = self.points_and_normals(&faces);
-                    fit.residuals = fit.primitive.residuals(&pts);
+                    fit.residuals = fit.surface.residuals(&pts);
                 }
                 regions[first + j].faces = faces;
             }
@@ -774,13 +773,13 @@ fn smooth_adjacency(
 
 /// The boundary patch a region's primitive gives its group; everything but planes,
 /// cylinders and cones is a closed patch.
-fn patch_kind(primitive: Option<Primitive>) -> PatchKind {
+fn patch_kind(primitive: Option<AnalyticSurface>) -> PatchKind {
     match primitive {
-        Some(Primitive::Plane { .. }) => PatchKind::Boundary(BoundarySurface::Plane),
-        Some(Primitive::Cylinder { axis, .. }) => {
+        Some(AnalyticSurface::Plane { .. }) => PatchKind::Boundary(BoundarySurface::Plane),
+        Some(AnalyticSurface::Cylinder { axis, .. }) => {
             PatchKind::Boundary(BoundarySurface::Cylinder { axis })
         }
-        Some(Primitive::Cone { axis, .. }) => PatchKind::Boundary(BoundarySurface::Cone {
+        Some(AnalyticSurface::Cone { axis, .. }) => PatchKind::Boundary(BoundarySurface::Cone {
             axis: Axis {
                 origin: axis.origin,
                 direction: axis.direction,
@@ -907,7 +906,7 @@ impl<'a> Segmenter<'a> {
             for (t, _) in self.regions_across_edges(&regions[s].faces, s as u32, label) {
                 let t = t as usize;
                 let Some(fit) = regions[t].fit else { continue };
-                if self.lies_on(&regions[s].faces, &fit.primitive) {
+                if self.lies_on(&regions[s].faces, &fit.surface) {
                     let moved = std::mem::take(&mut regions[s].faces);
                     for &f in &moved {
                         label[f as usize] = t as u32;
@@ -943,7 +942,7 @@ impl<'a> Segmenter<'a> {
 
     /// True when every vertex of `faces` is within the tolerance of `primitive` (normals
     /// are not checked).
-    fn lies_on(&self, faces: &[u32], primitive: &Primitive) -> bool {
+    fn lies_on(&self, faces: &[u32], primitive: &AnalyticSurface) -> bool {
         faces.iter().all(|&f| {
             self.mesh
                 .face(f as usize)
@@ -1015,7 +1014,7 @@ impl<'a> Segmenter<'a> {
                 regions[s]
                     .faces
                     .iter()
-                    .all(|&f| self.face_fits(&fit.primitive, f))
+                    .all(|&f| self.face_fits(&fit.surface, f))
             })
         };
         let best = |want_fit: bool| {
@@ -1038,12 +1037,12 @@ impl<'a> Segmenter<'a> {
             }
             let mut faces = std::mem::take(&mut regions[t].faces);
             faces.sort_unstable();
-            let old = regions[t].fit.map(|f| f.primitive);
+            let old = regions[t].fit.map(|f| f.surface);
             regions[t].fit = match old {
                 Some(p) if !refit[t] => {
                     let (pts, _) = self.points_and_normals(&faces);
-                    Some(PrimitiveFit {
-                        primitive: p,
+                    Some(SurfaceFit {
+                        surface: p,
                         residuals: p.residuals(&pts),
                     })
                 }
@@ -1131,23 +1130,22 @@ impl<'a> Segmenter<'a> {
         let (Some(fa), Some(fb)) = (regions[a].fit, regions[b].fit) else {
             return false;
         };
-        let kind = fa.primitive.kind();
-        if kind == PrimitiveKind::Plane || fb.primitive.kind() != kind {
+        let kind = fa.surface.kind();
+        if kind == SurfaceKind::Plane || fb.surface.kind() != kind {
             return false;
         }
         let mut faces = regions[a].faces.clone();
         faces.extend_from_slice(&regions[b].faces);
         faces.sort_unstable();
         let start = if regions[a].faces.len() >= regions[b].faces.len() {
-            fa.primitive
+            fa.surface
         } else {
-            fb.primitive
+            fb.surface
         };
         let Some(fit) = self.refine_faces(&faces, &start) else {
             return false;
         };
-        if !self.is_confident(&Some(fit))
-            || !faces.iter().all(|&f| self.face_fits(&fit.primitive, f))
+        if !self.is_confident(&Some(fit)) || !faces.iter().all(|&f| self.face_fits(&fit.surface, f))
         {
             return false;
         }
@@ -1166,7 +1164,7 @@ impl<'a> Segmenter<'a> {
         for (i, r) in regions.iter().enumerate() {
             out.groups.push(Group {
                 name: format!("face_{i}"),
-                patch: patch_kind(r.fit.map(|f| f.primitive)),
+                patch: patch_kind(r.fit.map(|f| f.surface)),
             });
             for &f in &r.faces {
                 out.face_groups[f as usize] = i as u32;
@@ -1182,11 +1180,11 @@ impl<'a> Segmenter<'a> {
         RegionInfo {
             kind: r
                 .fit
-                .map(|f| RegionKind::Primitive(f.primitive.kind()))
+                .map(|f| RegionKind::Analytic(f.surface.kind()))
                 .unwrap_or(RegionKind::Freeform),
             triangles: r.faces.len(),
             area: r.faces.iter().map(|&f| self.areas[f as usize]).sum(),
-            primitive: r.fit.map(|f| f.primitive),
+            surface: r.fit.map(|f| f.surface),
             residuals: r.fit.map(|f| f.residuals),
         }
     }
@@ -1289,17 +1287,17 @@ mod tests {
             rep.regions.iter().map(|r| (r.kind, r.triangles)).collect();
         got.sort();
         let mut want = vec![
-            (RegionKind::Primitive(PrimitiveKind::Plane), counts[0]),
-            (RegionKind::Primitive(PrimitiveKind::Plane), counts[2]),
-            (RegionKind::Primitive(PrimitiveKind::Cylinder), counts[1]),
+            (RegionKind::Analytic(SurfaceKind::Plane), counts[0]),
+            (RegionKind::Analytic(SurfaceKind::Plane), counts[2]),
+            (RegionKind::Analytic(SurfaceKind::Cylinder), counts[1]),
         ];
         want.sort();
         assert_eq!(got, want, "{}", rep.summary());
         let cyl = rep
             .regions
             .iter()
-            .find_map(|r| match r.primitive {
-                Some(Primitive::Cylinder { axis, radius }) => Some((axis, radius)),
+            .find_map(|r| match r.surface {
+                Some(AnalyticSurface::Cylinder { axis, radius }) => Some((axis, radius)),
                 _ => None,
             })
             .unwrap();
@@ -1369,8 +1367,8 @@ mod tests {
 
     #[test]
     fn corpus_models_with_exact_answers() {
-        use PrimitiveKind::*;
-        let p = RegionKind::Primitive;
+        use SurfaceKind::*;
+        let p = RegionKind::Analytic;
         check_exact(
             "abc/abc_00000006.obj",
             &[(p(Plane), 8), (p(Cone), 6), (p(Cylinder), 1)],
@@ -1394,10 +1392,10 @@ mod tests {
         let n = rep.regions.len();
         assert!((15..=35).contains(&n), "{}", rep.summary());
         assert!(counts
-            .get(&RegionKind::Primitive(PrimitiveKind::Plane))
+            .get(&RegionKind::Analytic(SurfaceKind::Plane))
             .is_some_and(|&c| c >= 5));
         assert!(counts
-            .get(&RegionKind::Primitive(PrimitiveKind::Cylinder))
+            .get(&RegionKind::Analytic(SurfaceKind::Cylinder))
             .is_some_and(|&c| c >= 3));
         // Every primitive region is within the tolerance.
         for r in &rep.regions {

@@ -1,12 +1,15 @@
 //! Polygon mesh with CAD-face groups, sharp edges and corner vertices.
 //!
 //! [`ControlMesh`] is the contract between the encoder and the decoder: everything the
-//! decoder needs to rebuild the surface and nothing else. The same type also carries input tessellations (raw mode stores the input mesh
-//! itself as the control mesh), so readers, the codec, subdivision and fitting all speak it.
+//! decoder needs to rebuild the surface and nothing else. The same type also carries input
+//! tessellations (raw mode stores the input mesh itself as the control mesh), so readers,
+//! the codec, subdivision and fitting all speak it.
 
+mod analytic;
 mod tolerance;
 pub mod topology;
 
+pub use analytic::{AnalyticSurface, Residuals, SurfaceKind};
 pub use tolerance::Tolerance;
 
 use std::collections::BTreeSet;

@@ -7,9 +7,9 @@ use std::path::Path;
 use crate::codec::{self, Content, EncodeOptions, Limits};
 use crate::error::Result;
 use crate::fit::encoder::{fit_model, ExactSurface, FitOptions, FitReport, SurfaceHint};
-#[cfg(feature = "step")]
-use crate::fit::primitives::Primitive;
 use crate::io::faces_json::{self, SurfaceType};
+#[cfg(feature = "step")]
+use crate::mesh::AnalyticSurface;
 use crate::mesh::{ControlMesh, Tolerance};
 use glam::DVec3;
 
@@ -90,23 +90,23 @@ pub fn step_exact_surfaces(model: &crate::io::step::StepModel) -> Vec<Option<Exa
         .map(|f| {
             let axis = f.axis?;
             let s = match f.surface {
-                SurfaceType::Plane => Primitive::Plane {
+                SurfaceType::Plane => AnalyticSurface::Plane {
                     point: axis.origin,
                     normal: axis.direction,
                 },
-                SurfaceType::Cylinder => Primitive::Cylinder {
+                SurfaceType::Cylinder => AnalyticSurface::Cylinder {
                     axis,
                     radius: f.radius?,
                 },
-                SurfaceType::Cone => Primitive::Cone {
+                SurfaceType::Cone => AnalyticSurface::Cone {
                     axis,
                     half_angle: f.half_angle?,
                 },
-                SurfaceType::Sphere => Primitive::Sphere {
+                SurfaceType::Sphere => AnalyticSurface::Sphere {
                     center: axis.origin,
                     radius: f.radius?,
                 },
-                SurfaceType::Torus => Primitive::Torus {
+                SurfaceType::Torus => AnalyticSurface::Torus {
                     axis,
                     major_radius: f.radius?,
                     minor_radius: f.minor_radius?,
