@@ -383,231 +383,21 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
         return whole_surface(surface, tol);
     }
     let periods = surface.periods();
-    let ranges = surface.ranges();
     let mut out = ConformingMesh::default();
     // 1. Project every loop, unwrapping periodic parameters along it.
     let mut closed: Vec<Vec<UvPoint>> = Vec::new();
-    // Open loops (closed in 3D, not in (u, v)): the points with the first repeated at the
-    // end, shifted by the period; and the axis and sign of the shift.
-    let mut open: Vec<(Vec<UvPoint>, usize, f64)> = Vec::new();
+    let mut open: Vec<OpenLoop> = Vec::new();
     for lp in loops {
-        if lp.len() < 2 {
-            return Err(format!("a boundary loop has {} points", lp.len()));
-        }
-        let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
-        // Distance of each point from the surface at its parameters.
-        let mut offs: Vec<f64> = Vec::with_capacity(lp.len());
-        let mut prev: Option<[f64; 2]> = None;
-        for &(id, p) in lp {
-            let Some(mut uv) = surface.project(p, prev) else {
-                return Err("a boundary point could not be projected onto the surface".into());
-            };
-            let mut off = surface.point(uv[0], uv[1]).distance(p);
-            if off > 10.0 * tol {
-                // The search can stop in a local minimum (tori): restart it from a grid.
-                if let Some((best, d)) = surface.project_globally(p) {
-                    if d < off {
-                        uv = best;
-                        off = d;
-                    }
-                }
-            }
-            if off > 10.0 * tol {
-                return Err(format!(
-                    "the surface{} passes {off:.3e} from the face's edges",
-                    surface.source()
-                ));
-            }
-            if let Some(q) = prev {
-                for k in 0..2 {
-                    uv[k] = nearest_rep(uv[k], q[k], periods[k]);
-                }
-            }
-            prev = Some(uv);
-            offs.push(off);
-            pts.push(UvPoint {
-                uv,
-                vertex: FaceVertex::Pool(id),
-            });
-        }
-        reproject_between_neighbours(surface, lp, &mut pts, &mut offs, tol);
-        let (mut pts, poles) = split_singular(surface, pts);
-        let first = pts[0].uv;
-        let last = pts[pts.len() - 1].uv;
-        let mut shift = [0.0; 2];
-        for k in 0..2 {
-            shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
-        }
-        let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
-        // A loop that goes round the period and through a pole (a cap bounded by a circle
-        // and a seam edge up to the pole and back): it is closed in (u, v) along the pole
-        // line, so from the pole on its points lie one period back.
-        if let [k] = open_axes.as_slice() {
-            if let Some(&(i, _)) = poles.iter().find(|p| p.1 == *k) {
-                let pole = pts[i];
-                let second_copy = pts
-                    .get(i + 1)
-                    .is_some_and(|q| q.vertex == pole.vertex && q.uv[1 - k] == pole.uv[1 - k]);
-                if !second_copy {
-                    pts.insert(i + 1, pole);
-                }
-                for p in &mut pts[i + 1..] {
-                    p.uv[*k] -= shift[*k];
-                }
-                closed.push(pts);
-                continue;
-            }
-        }
-        match open_axes.as_slice() {
-            [] => closed.push(pts),
-            [k] => {
-                let mut pts = pts;
-                let mut end = pts[0];
-                end.uv[*k] += shift[*k];
-                pts.push(end);
-                open.push((pts, *k, shift[*k].signum()));
-            }
-            _ => return Err("a boundary loop wraps around both periods".into()),
+        match project_loop(surface, lp, tol)? {
+            ProjectedLoop::Closed(pts) => closed.push(pts),
+            ProjectedLoop::Open(o) => open.push(o),
         }
     }
     // 2. Close open loops along a cut seam (two loops) or the domain's edge (one loop).
-    let grid_range = {
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
-        for p in closed
-            .iter()
-            .flatten()
-            .chain(open.iter().flat_map(|o| o.0.iter()))
-        {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p.uv[k]);
-                hi[k] = hi[k].max(p.uv[k]);
-            }
-        }
-        ((lo[0], hi[0]), (lo[1], hi[1]))
-    };
-    let division = checked_division(surface, grid_range, tol)?;
-    match open.len() {
-        0 => {}
-        2 => {
-            let (c1, k1, s1) = open.pop().unwrap_or_default();
-            let (c0, k0, s0) = open.pop().unwrap_or_default();
-            if k0 != k1 || s0 == s1 {
-                return Err("two open boundary loops that do not bound a band".into());
-            }
-            let (mut c0, mut c1) = if s0 > 0.0 { (c0, c1) } else { (c1, c0) };
-            let k = k0;
-            let period = periods[k].unwrap_or(0.0);
-            // Bring c1's start next to c0's end.
-            let target = c0[c0.len() - 1].uv[k];
-            let d = nearest_rep(c1[0].uv[k], target, Some(period)) - c1[0].uv[k];
-            for p in &mut c1 {
-                p.uv[k] += d;
-            }
-            let a = c0[c0.len() - 1].uv;
-            let b = c1[0].uv;
-            let seam = seam_points(surface, a, b, &division, &mut out);
-            let mut lp: Vec<UvPoint> = Vec::new();
-            lp.append(&mut c0);
-            lp.extend(seam.iter().copied());
-            lp.extend(c1.iter().copied());
-            // The other copy of the seam: reversed, one period back.
-            for p in seam.iter().rev() {
-                let mut q = *p;
-                q.uv[k] -= period;
-                lp.push(q);
-            }
-            closed.push(lp);
-        }
-        1 => {
-            let (mut c0, k, s) = open.pop().unwrap_or_default();
-            let other = 1 - k;
-            let Some((b0, b1)) = ranges[other] else {
-                return Err("an open boundary loop on a surface without a domain edge".into());
-            };
-            let period = periods[k].unwrap_or(0.0);
-            // Counter-clockwise: going +u the face lies towards +v, going +v towards -u.
-            let towards_max = (k == 0) == (s > 0.0);
-            let edge = if towards_max { b1 } else { b0 };
-            let start = c0[0].uv;
-            let end = c0[c0.len() - 1].uv;
-            let mut corner_end = end;
-            corner_end[other] = edge;
-            let mut corner_start = start;
-            corner_start[other] = edge;
-            // end -> corner_end (a seam), corner_end -> corner_start (the domain edge),
-            // corner_start -> start (the seam's other copy).
-            let seam = seam_points(surface, end, corner_end, &division, &mut out);
-            let (along, corner_vertex) = edge_points(
-                surface,
-                corner_end,
-                corner_start,
-                &division,
-                k,
-                tol,
-                &mut out,
-            );
-            let mut lp: Vec<UvPoint> = Vec::new();
-            lp.append(&mut c0);
-            lp.extend(seam.iter().copied());
-            lp.push(UvPoint {
-                uv: corner_end,
-                vertex: corner_vertex,
-            });
-            lp.extend(along.iter().copied());
-            lp.push(UvPoint {
-                uv: corner_start,
-                vertex: corner_vertex,
-            });
-            for p in seam.iter().rev() {
-                let mut q = *p;
-                q.uv[k] -= s * period;
-                lp.push(q);
-            }
-            closed.push(lp);
-        }
-        n => return Err(format!("{n} open boundary loops")),
-    }
-    // 3. Loops of a periodic surface must lie in one period: bring each to the first's.
-    if closed.len() > 1 {
-        let centre = |lp: &[UvPoint], k: usize| {
-            let (lo, hi) = lp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
-                (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
-            });
-            0.5 * (lo + hi)
-        };
-        // The widest loop is the reference (the outer loop on a periodic band).
-        let widest = (0..closed.len())
-            .max_by(|&a, &b| {
-                let w = |i: usize| {
-                    let l: &Vec<UvPoint> = &closed[i];
-                    (0..2)
-                        .map(|k| {
-                            let (lo, hi) =
-                                l.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
-                                    (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
-                                });
-                            hi - lo
-                        })
-                        .sum::<f64>()
-                };
-                w(a).total_cmp(&w(b))
-            })
-            .unwrap_or(0);
-        for (k, period) in periods.iter().enumerate() {
-            let Some(period) = *period else { continue };
-            let reference = centre(&closed[widest], k);
-            for lp in closed.iter_mut() {
-                let c = centre(lp, k);
-                let d = nearest_rep(c, reference, Some(period)) - c;
-                if d != 0.0 {
-                    for p in lp.iter_mut() {
-                        p.uv[k] += d;
-                    }
-                }
-            }
-        }
-    }
+    let division = checked_division(surface, uv_range(&closed, &open), tol)?;
+    close_open_loops(surface, &mut closed, open, &division, tol, &mut out)?;
+    // 3. Loops of a periodic surface must lie in one period.
+    bring_into_one_period(&mut closed, periods);
     // The inside test is even-odd, so loop orientation does not matter past this point
     // (some files' loops run clockwise in truck's parameters; the caller orients faces).
     let pool_xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
@@ -633,6 +423,309 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
             periods
         )
     })
+}
+
+/// A boundary loop that is closed in 3D but not in (u, v): it goes once round a period.
+#[derive(Default)]
+struct OpenLoop {
+    /// Its points, with the first repeated at the end, shifted by the period.
+    points: Vec<UvPoint>,
+    /// The parameter whose period it goes round.
+    axis: usize,
+    /// The sign of the shift.
+    sign: f64,
+}
+
+/// A boundary loop in the parameter plane.
+enum ProjectedLoop {
+    Closed(Vec<UvPoint>),
+    Open(OpenLoop),
+}
+
+/// Projects a loop of pool vertices into the parameter plane, unwrapping periodic
+/// parameters along it, and tells whether it closes there. An error when a point cannot be
+/// projected or the loop wraps round both periods.
+fn project_loop<S: UvSurface>(
+    surface: &S,
+    lp: &[(u32, DVec3)],
+    tol: f64,
+) -> Result<ProjectedLoop, String> {
+    if lp.len() < 2 {
+        return Err(format!("a boundary loop has {} points", lp.len()));
+    }
+    let periods = surface.periods();
+    let pts = project_points(surface, lp, tol)?;
+    let (mut pts, poles) = split_singular(surface, pts);
+    let first = pts[0].uv;
+    let last = pts[pts.len() - 1].uv;
+    let mut shift = [0.0; 2];
+    for k in 0..2 {
+        shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
+    }
+    let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
+    // A loop that goes round the period and through a pole (a cap bounded by a circle and a
+    // seam edge up to the pole and back): it is closed in (u, v) along the pole line, so
+    // from the pole on its points lie one period back.
+    if let [k] = open_axes.as_slice() {
+        if let Some(&(i, _)) = poles.iter().find(|p| p.1 == *k) {
+            let pole = pts[i];
+            let second_copy = pts
+                .get(i + 1)
+                .is_some_and(|q| q.vertex == pole.vertex && q.uv[1 - k] == pole.uv[1 - k]);
+            if !second_copy {
+                pts.insert(i + 1, pole);
+            }
+            for p in &mut pts[i + 1..] {
+                p.uv[*k] -= shift[*k];
+            }
+            return Ok(ProjectedLoop::Closed(pts));
+        }
+    }
+    match open_axes.as_slice() {
+        [] => Ok(ProjectedLoop::Closed(pts)),
+        [k] => {
+            let mut end = pts[0];
+            end.uv[*k] += shift[*k];
+            pts.push(end);
+            Ok(ProjectedLoop::Open(OpenLoop {
+                points: pts,
+                axis: *k,
+                sign: shift[*k].signum(),
+            }))
+        }
+        _ => Err("a boundary loop wraps around both periods".into()),
+    }
+}
+
+/// The parameters of each point of a loop, each searched from the previous point's and
+/// unwrapped next to them. An error when a point cannot be projected or the surface passes
+/// more than 10 tolerances from it.
+fn project_points<S: UvSurface>(
+    surface: &S,
+    lp: &[(u32, DVec3)],
+    tol: f64,
+) -> Result<Vec<UvPoint>, String> {
+    let periods = surface.periods();
+    let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
+    // Distance of each point from the surface at its parameters.
+    let mut offs: Vec<f64> = Vec::with_capacity(lp.len());
+    let mut prev: Option<[f64; 2]> = None;
+    for &(id, p) in lp {
+        let Some(mut uv) = surface.project(p, prev) else {
+            return Err("a boundary point could not be projected onto the surface".into());
+        };
+        let mut off = surface.point(uv[0], uv[1]).distance(p);
+        if off > 10.0 * tol {
+            // The search can stop in a local minimum (tori): restart it from a grid.
+            if let Some((best, d)) = surface.project_globally(p) {
+                if d < off {
+                    uv = best;
+                    off = d;
+                }
+            }
+        }
+        if off > 10.0 * tol {
+            return Err(format!(
+                "the surface{} passes {off:.3e} from the face's edges",
+                surface.source()
+            ));
+        }
+        if let Some(q) = prev {
+            for k in 0..2 {
+                uv[k] = nearest_rep(uv[k], q[k], periods[k]);
+            }
+        }
+        prev = Some(uv);
+        offs.push(off);
+        pts.push(UvPoint {
+            uv,
+            vertex: FaceVertex::Pool(id),
+        });
+    }
+    reproject_between_neighbours(surface, lp, &mut pts, &mut offs, tol);
+    Ok(pts)
+}
+
+/// The (u, v) range of all points of the closed and the open loops.
+fn uv_range(closed: &[Vec<UvPoint>], open: &[OpenLoop]) -> ((f64, f64), (f64, f64)) {
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for p in closed
+        .iter()
+        .flatten()
+        .chain(open.iter().flat_map(|o| o.points.iter()))
+    {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p.uv[k]);
+            hi[k] = hi[k].max(p.uv[k]);
+        }
+    }
+    ((lo[0], hi[0]), (lo[1], hi[1]))
+}
+
+/// Closes the open loops into `closed`: two that bound a band along a seam cut across it
+/// ([`band_loop`]), one along the domain's edge ([`domain_edge_loop`]). Points on the seam
+/// and the edge are new points of `out`. An error for open loops that cannot be closed so.
+fn close_open_loops<S: UvSurface>(
+    surface: &S,
+    closed: &mut Vec<Vec<UvPoint>>,
+    mut open: Vec<OpenLoop>,
+    division: &(Vec<f64>, Vec<f64>),
+    tol: f64,
+    out: &mut ConformingMesh,
+) -> Result<(), String> {
+    match open.len() {
+        0 => {}
+        2 => {
+            let o1 = open.pop().unwrap_or_default();
+            let o0 = open.pop().unwrap_or_default();
+            closed.push(band_loop(surface, o0, o1, division, out)?);
+        }
+        1 => {
+            let o = open.pop().unwrap_or_default();
+            closed.push(domain_edge_loop(surface, o, division, tol, out)?);
+        }
+        n => return Err(format!("{n} open boundary loops")),
+    }
+    Ok(())
+}
+
+/// Two open loops that bound a band round a period, as one closed loop: the one going the
+/// positive way, a seam from its end to the other's start, the other, and the seam's other
+/// copy (reversed, one period back).
+fn band_loop<S: UvSurface>(
+    surface: &S,
+    o0: OpenLoop,
+    o1: OpenLoop,
+    division: &(Vec<f64>, Vec<f64>),
+    out: &mut ConformingMesh,
+) -> Result<Vec<UvPoint>, String> {
+    if o0.axis != o1.axis || o0.sign == o1.sign {
+        return Err("two open boundary loops that do not bound a band".into());
+    }
+    let (mut c0, mut c1) = if o0.sign > 0.0 {
+        (o0.points, o1.points)
+    } else {
+        (o1.points, o0.points)
+    };
+    let k = o0.axis;
+    let period = surface.periods()[k].unwrap_or(0.0);
+    // Bring c1's start next to c0's end.
+    let target = c0[c0.len() - 1].uv[k];
+    let d = nearest_rep(c1[0].uv[k], target, Some(period)) - c1[0].uv[k];
+    for p in &mut c1 {
+        p.uv[k] += d;
+    }
+    let a = c0[c0.len() - 1].uv;
+    let b = c1[0].uv;
+    let seam = seam_points(surface, a, b, division, out);
+    let mut lp: Vec<UvPoint> = Vec::new();
+    lp.append(&mut c0);
+    lp.extend(seam.iter().copied());
+    lp.extend(c1.iter().copied());
+    for p in seam.iter().rev() {
+        let mut q = *p;
+        q.uv[k] -= period;
+        lp.push(q);
+    }
+    Ok(lp)
+}
+
+/// One open loop closed along the edge of the domain on the side where the face lies: the
+/// loop, a seam from its end to that edge, the edge back to the seam, and the seam's other
+/// copy. An error when the other parameter has no range to give the edge.
+fn domain_edge_loop<S: UvSurface>(
+    surface: &S,
+    o: OpenLoop,
+    division: &(Vec<f64>, Vec<f64>),
+    tol: f64,
+    out: &mut ConformingMesh,
+) -> Result<Vec<UvPoint>, String> {
+    let OpenLoop {
+        points: mut c0,
+        axis: k,
+        sign: s,
+    } = o;
+    let other = 1 - k;
+    let Some((b0, b1)) = surface.ranges()[other] else {
+        return Err("an open boundary loop on a surface without a domain edge".into());
+    };
+    let period = surface.periods()[k].unwrap_or(0.0);
+    // Counter-clockwise: going +u the face lies towards +v, going +v towards -u.
+    let towards_max = (k == 0) == (s > 0.0);
+    let edge = if towards_max { b1 } else { b0 };
+    let start = c0[0].uv;
+    let end = c0[c0.len() - 1].uv;
+    let mut corner_end = end;
+    corner_end[other] = edge;
+    let mut corner_start = start;
+    corner_start[other] = edge;
+    // end -> corner_end (a seam), corner_end -> corner_start (the domain edge),
+    // corner_start -> start (the seam's other copy).
+    let seam = seam_points(surface, end, corner_end, division, out);
+    let (along, corner_vertex) =
+        edge_points(surface, corner_end, corner_start, division, k, tol, out);
+    let mut lp: Vec<UvPoint> = Vec::new();
+    lp.append(&mut c0);
+    lp.extend(seam.iter().copied());
+    lp.push(UvPoint {
+        uv: corner_end,
+        vertex: corner_vertex,
+    });
+    lp.extend(along.iter().copied());
+    lp.push(UvPoint {
+        uv: corner_start,
+        vertex: corner_vertex,
+    });
+    for p in seam.iter().rev() {
+        let mut q = *p;
+        q.uv[k] -= s * period;
+        lp.push(q);
+    }
+    Ok(lp)
+}
+
+/// Lowest and highest value of parameter `k` over a loop's points.
+fn loop_extent(lp: &[UvPoint], k: usize) -> (f64, f64) {
+    lp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
+        (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
+    })
+}
+
+/// Shifts each loop by whole periods so that all lie in the period of the widest one (the
+/// outer loop on a periodic band).
+fn bring_into_one_period(closed: &mut [Vec<UvPoint>], periods: [Option<f64>; 2]) {
+    if closed.len() < 2 {
+        return;
+    }
+    let centre = |lp: &[UvPoint], k: usize| {
+        let (lo, hi) = loop_extent(lp, k);
+        0.5 * (lo + hi)
+    };
+    let width = |lp: &[UvPoint]| {
+        (0..2)
+            .map(|k| {
+                let (lo, hi) = loop_extent(lp, k);
+                hi - lo
+            })
+            .sum::<f64>()
+    };
+    let widest = (0..closed.len())
+        .max_by(|&a, &b| width(&closed[a]).total_cmp(&width(&closed[b])))
+        .unwrap_or(0);
+    for (k, period) in periods.iter().enumerate() {
+        let Some(period) = *period else { continue };
+        let reference = centre(&closed[widest], k);
+        for lp in closed.iter_mut() {
+            let c = centre(lp, k);
+            let d = nearest_rep(c, reference, Some(period)) - c;
+            if d != 0.0 {
+                for p in lp.iter_mut() {
+                    p.uv[k] += d;
+                }
+            }
+        }
+    }
 }
 
 /// The whole of a closed surface, for a face bounded only by a VERTEX_LOOP or by nothing (a
