@@ -396,49 +396,97 @@ fn convert_face(
     radians_per_angle_unit: f64,
 ) -> std::result::Result<FaceOut, FaceError> {
     let face_id = entity_ref(face).unwrap_or(0);
-    let here = |id: u64| format!("{} #{id}", records.name_of(id));
-    let (orientation, real_id, holder): (bool, u64, FaceSurfaceHolder) =
-        if let Some(of) = table.oriented_face.get(&face_id) {
-            let inner = entity_ref(&of.face_element).unwrap_or(face_id);
-            let h = match &of.face_element {
-                PlaceHolder::Owned(h) => Some(h.clone()),
-                PlaceHolder::Ref(_) => table.face_surface.get(&inner).cloned(),
-            };
-            match h {
-                Some(h) => (of.orientation, inner, h),
-                None => {
-                    return Err((
-                        here(inner),
-                        "face entity is not supported by the STEP reader".into(),
-                    ))
-                }
-            }
-        } else if let Some(h) = table.face_surface.get(&face_id) {
-            (true, face_id, h.clone())
-        } else {
-            return Err((
-                here(face_id),
-                "face entity is not supported by the STEP reader".into(),
-            ));
+    let (orientation, real_id, holder) = face_surface_of(table, records, face_id)?;
+    let (surface, info, exact) =
+        convert_surface(table, records, &holder, real_id, radians_per_angle_unit)?;
+    let mut bounds = BoundReader {
+        table,
+        records,
+        maps,
+        n_vertices,
+        n_edges,
+        new_vertices: Vec::new(),
+        new_edges: Vec::new(),
+    };
+    let mut boundaries = Vec::new();
+    for bound in &holder.bounds {
+        if let Some(wire) = bounds.wire(bound, real_id)? {
+            boundaries.push(wire);
+        }
+    }
+    Ok(FaceOut {
+        real_id,
+        face: CompressedFace {
+            surface,
+            boundaries,
+            orientation,
+        },
+        info,
+        exact,
+        same_sense: holder.same_sense,
+        new_vertices: bounds.new_vertices,
+        new_edges: bounds.new_edges,
+    })
+}
+
+/// `ENTITY #id`, naming an entity in an error.
+fn entity_name(records: &Records, id: u64) -> String {
+    format!("{} #{id}", records.name_of(id))
+}
+
+/// The FACE_SURFACE under face `face_id` (itself, or the face of an ORIENTED_FACE), with
+/// the face's orientation and the FACE_SURFACE's id.
+fn face_surface_of(
+    table: &Table,
+    records: &Records,
+    face_id: u64,
+) -> std::result::Result<(bool, u64, FaceSurfaceHolder), FaceError> {
+    let unsupported = |id: u64| {
+        (
+            entity_name(records, id),
+            "face entity is not supported by the STEP reader".to_string(),
+        )
+    };
+    if let Some(of) = table.oriented_face.get(&face_id) {
+        let inner = entity_ref(&of.face_element).unwrap_or(face_id);
+        let h = match &of.face_element {
+            PlaceHolder::Owned(h) => Some(h.clone()),
+            PlaceHolder::Ref(_) => table.face_surface.get(&inner).cloned(),
         };
-    // Surface.
+        match h {
+            Some(h) => Ok((of.orientation, inner, h)),
+            None => Err(unsupported(inner)),
+        }
+    } else if let Some(h) = table.face_surface.get(&face_id) {
+        Ok((true, face_id, h.clone()))
+    } else {
+        Err(unsupported(face_id))
+    }
+}
+
+/// truck's surface of a face (turned round when the face's `same_sense` is false), its
+/// description (from the exact surface where the record gives one) and the exact surface.
+fn convert_surface(
+    table: &Table,
+    records: &Records,
+    holder: &FaceSurfaceHolder,
+    real_id: u64,
+    radians_per_angle_unit: f64,
+) -> std::result::Result<(Surface, FaceSurface, Option<Analytic>), FaceError> {
     let surface_id = entity_ref(&holder.face_geometry).unwrap_or(real_id);
+    let here = || entity_name(records, surface_id);
     let owned = holder
         .face_geometry
         .clone()
         .into_owned(table)
         .map_err(|e| {
             (
-                here(surface_id),
+                here(),
                 format!("surface entity is not supported by the STEP reader ({e})"),
             )
         })?;
-    let mut surface = Surface::try_from(&owned).map_err(|e| {
-        (
-            here(surface_id),
-            format!("surface cannot be converted: {e}"),
-        )
-    })?;
+    let mut surface = Surface::try_from(&owned)
+        .map_err(|e| (here(), format!("surface cannot be converted: {e}")))?;
     let mut info = surface_info(&surface, records.name_of(surface_id), real_id);
     info.surface_id = surface_id;
     // The exact surface from the record; an unreadable record leaves truck's surface.
@@ -456,11 +504,36 @@ fn convert_face(
     if !holder.same_sense {
         surface.invert();
     }
-    // Boundaries.
-    let mut new_vertices: Vec<(u64, Point3)> = Vec::new();
-    let mut new_edges: Vec<(u64, usize, usize, Curve3D)> = Vec::new();
-    let mut boundaries = Vec::new();
-    for bound in &holder.bounds {
+    Ok((surface, info, exact))
+}
+
+/// Reads a face's bounds as wires of body edge indices. Edges and vertices the body does
+/// not have yet are collected here, numbered after the body's `n_edges` and `n_vertices`.
+struct BoundReader<'t> {
+    table: &'t Table,
+    records: &'t Records,
+    maps: &'t IdMaps,
+    n_vertices: usize,
+    n_edges: usize,
+    new_vertices: Vec<(u64, Point3)>,
+    /// (EDGE_CURVE id, start vertex, end vertex, curve).
+    new_edges: Vec<(u64, usize, usize, Curve3D)>,
+}
+
+impl BoundReader<'_> {
+    fn here(&self, id: u64) -> String {
+        entity_name(self.records, id)
+    }
+
+    /// The wire of one face bound (of face `real_id`), in the face's direction; `None`
+    /// for a VERTEX_LOOP (a cone apex or sphere pole carries no curve: truck ignores it
+    /// too).
+    fn wire(
+        &mut self,
+        bound: &PlaceHolder<FaceBoundHolder>,
+        real_id: u64,
+    ) -> std::result::Result<Option<Vec<CompressedEdgeIndex>>, FaceError> {
+        let table = self.table;
         let fb: Option<FaceBoundHolder> = match bound {
             PlaceHolder::Owned(h) => Some(h.clone()),
             PlaceHolder::Ref(Name::Entity(id)) => table.face_bound.get(id).cloned(),
@@ -468,7 +541,7 @@ fn convert_face(
         };
         let Some(fb) = fb else {
             let id = entity_ref(bound).unwrap_or(0);
-            return Err((here(id), "face bound is not supported".into()));
+            return Err((self.here(id), "face bound is not supported".into()));
         };
         let ori = fb.orientation;
         let loop_holder = match &fb.bound {
@@ -477,92 +550,93 @@ fn convert_face(
             _ => None,
         };
         let Some(edge_loop) = loop_holder else {
-            // A VERTEX_LOOP (cone apex, sphere pole) carries no curve: truck ignores it too.
             let id = entity_ref(&fb.bound).unwrap_or(0);
-            if records.get(id).is_some_and(|r| r.is("VERTEX_LOOP")) {
-                continue;
+            if self.records.get(id).is_some_and(|r| r.is("VERTEX_LOOP")) {
+                return Ok(None);
             }
-            return Err((here(id), "loop entity is not supported".into()));
+            return Err((self.here(id), "loop entity is not supported".into()));
         };
         let mut wire = Vec::new();
         for e in &edge_loop.edge_list {
             let Some(eid) = entity_ref(e) else {
-                return Err((here(real_id), "inline edge is not supported".into()));
+                return Err((self.here(real_id), "inline edge is not supported".into()));
             };
             let (curve_id, orientation) = if let Some(oe) = table.oriented_edge.get(&eid) {
                 let Some(inner) = entity_ref(&oe.edge_element) else {
-                    return Err((here(eid), "inline edge is not supported".into()));
+                    return Err((self.here(eid), "inline edge is not supported".into()));
                 };
                 (inner, oe.orientation == ori)
             } else if table.edge_curve.contains_key(&eid) {
                 (eid, ori)
             } else {
-                return Err((here(eid), "edge entity is not supported".into()));
+                return Err((self.here(eid), "edge entity is not supported".into()));
             };
-            let index = if let Some(&i) = maps.edge.get(&curve_id) {
-                i
-            } else if let Some(k) = new_edges.iter().position(|x| x.0 == curve_id) {
-                n_edges + k
-            } else {
-                let Some(ec) = table.edge_curve.get(&curve_id) else {
-                    return Err((here(curve_id), "edge entity is not supported".into()));
-                };
-                let geom_id = entity_ref(&ec.edge_geometry).unwrap_or(curve_id);
-                let owned = ec.clone().into_owned(table).map_err(|e| {
-                    (
-                        here(geom_id),
-                        format!(
-                            "curve of edge #{curve_id} is not supported by the STEP reader ({e})"
-                        ),
-                    )
-                })?;
-                let curve = owned.parse_curve3d().map_err(|e| {
-                    (
-                        here(geom_id),
-                        format!("curve of edge #{curve_id} cannot be converted: {e}"),
-                    )
-                })?;
-                let mut vertex_index =
-                    |p: &PlaceHolder<VertexPointHolder>| -> std::result::Result<usize, FaceError> {
-                        let vid = entity_ref(p).ok_or_else(|| {
-                            (here(curve_id), "inline vertex is not supported".to_string())
-                        })?;
-                        if let Some(&i) = maps.vertex.get(&vid) {
-                            return Ok(i);
-                        }
-                        if let Some(k) = new_vertices.iter().position(|x| x.0 == vid) {
-                            return Ok(n_vertices + k);
-                        }
-                        let vp = EntityTable::<VertexPointHolder>::get_owned(table, vid)
-                            .map_err(|e| (here(vid), format!("vertex cannot be read ({e})")))?;
-                        new_vertices.push((vid, Point3::from(&vp.vertex_geometry)));
-                        Ok(n_vertices + new_vertices.len() - 1)
-                    };
-                let a = vertex_index(&ec.edge_start)?;
-                let b = vertex_index(&ec.edge_end)?;
-                new_edges.push((curve_id, a, b, curve));
-                n_edges + new_edges.len() - 1
-            };
+            let index = self.edge_index(curve_id)?;
             wire.push(CompressedEdgeIndex { index, orientation });
         }
         if !ori {
             wire.reverse();
         }
-        boundaries.push(wire);
+        Ok(Some(wire))
     }
-    Ok(FaceOut {
-        real_id,
-        face: CompressedFace {
-            surface,
-            boundaries,
-            orientation,
-        },
-        info,
-        exact,
-        same_sense: holder.same_sense,
-        new_vertices,
-        new_edges,
-    })
+
+    /// Body index of EDGE_CURVE `curve_id`, converting it (and its vertices) when the body
+    /// does not have it yet.
+    fn edge_index(&mut self, curve_id: u64) -> std::result::Result<usize, FaceError> {
+        if let Some(&i) = self.maps.edge.get(&curve_id) {
+            return Ok(i);
+        }
+        if let Some(k) = self.new_edges.iter().position(|x| x.0 == curve_id) {
+            return Ok(self.n_edges + k);
+        }
+        let table = self.table;
+        let Some(ec) = table.edge_curve.get(&curve_id) else {
+            return Err((self.here(curve_id), "edge entity is not supported".into()));
+        };
+        let geom_id = entity_ref(&ec.edge_geometry).unwrap_or(curve_id);
+        let owned = ec.clone().into_owned(table).map_err(|e| {
+            (
+                self.here(geom_id),
+                format!("curve of edge #{curve_id} is not supported by the STEP reader ({e})"),
+            )
+        })?;
+        let curve = owned.parse_curve3d().map_err(|e| {
+            (
+                self.here(geom_id),
+                format!("curve of edge #{curve_id} cannot be converted: {e}"),
+            )
+        })?;
+        let a = self.vertex_index(&ec.edge_start, curve_id)?;
+        let b = self.vertex_index(&ec.edge_end, curve_id)?;
+        self.new_edges.push((curve_id, a, b, curve));
+        Ok(self.n_edges + self.new_edges.len() - 1)
+    }
+
+    /// Body index of a vertex of EDGE_CURVE `curve_id`, reading it when the body does not
+    /// have it yet.
+    fn vertex_index(
+        &mut self,
+        p: &PlaceHolder<VertexPointHolder>,
+        curve_id: u64,
+    ) -> std::result::Result<usize, FaceError> {
+        let vid = entity_ref(p).ok_or_else(|| {
+            (
+                self.here(curve_id),
+                "inline vertex is not supported".to_string(),
+            )
+        })?;
+        if let Some(&i) = self.maps.vertex.get(&vid) {
+            return Ok(i);
+        }
+        if let Some(k) = self.new_vertices.iter().position(|x| x.0 == vid) {
+            return Ok(self.n_vertices + k);
+        }
+        let vp = EntityTable::<VertexPointHolder>::get_owned(self.table, vid)
+            .map_err(|e| (self.here(vid), format!("vertex cannot be read ({e})")))?;
+        self.new_vertices
+            .push((vid, Point3::from(&vp.vertex_geometry)));
+        Ok(self.n_vertices + self.new_vertices.len() - 1)
+    }
 }
 
 /// A converted face with the vertices and edges it adds to its body.

@@ -16,6 +16,7 @@
 use std::collections::BTreeMap;
 
 use glam::DVec3;
+use spade::handles::FixedVertexHandle;
 use spade::{ConstrainedDelaunayTriangulation, Point2 as SPoint2, Triangulation};
 use truck_meshalgo::prelude::{
     ParameterDivision2D, ParametricSurface, Point3, SearchNearestParameter, SearchParameter, D2,
@@ -383,231 +384,21 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
         return whole_surface(surface, tol);
     }
     let periods = surface.periods();
-    let ranges = surface.ranges();
     let mut out = ConformingMesh::default();
     // 1. Project every loop, unwrapping periodic parameters along it.
     let mut closed: Vec<Vec<UvPoint>> = Vec::new();
-    // Open loops (closed in 3D, not in (u, v)): the points with the first repeated at the
-    // end, shifted by the period; and the axis and sign of the shift.
-    let mut open: Vec<(Vec<UvPoint>, usize, f64)> = Vec::new();
+    let mut open: Vec<OpenLoop> = Vec::new();
     for lp in loops {
-        if lp.len() < 2 {
-            return Err(format!("a boundary loop has {} points", lp.len()));
-        }
-        let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
-        // Distance of each point from the surface at its parameters.
-        let mut offs: Vec<f64> = Vec::with_capacity(lp.len());
-        let mut prev: Option<[f64; 2]> = None;
-        for &(id, p) in lp {
-            let Some(mut uv) = surface.project(p, prev) else {
-                return Err("a boundary point could not be projected onto the surface".into());
-            };
-            let mut off = surface.point(uv[0], uv[1]).distance(p);
-            if off > 10.0 * tol {
-                // The search can stop in a local minimum (tori): restart it from a grid.
-                if let Some((best, d)) = surface.project_globally(p) {
-                    if d < off {
-                        uv = best;
-                        off = d;
-                    }
-                }
-            }
-            if off > 10.0 * tol {
-                return Err(format!(
-                    "the surface{} passes {off:.3e} from the face's edges",
-                    surface.source()
-                ));
-            }
-            if let Some(q) = prev {
-                for k in 0..2 {
-                    uv[k] = nearest_rep(uv[k], q[k], periods[k]);
-                }
-            }
-            prev = Some(uv);
-            offs.push(off);
-            pts.push(UvPoint {
-                uv,
-                vertex: FaceVertex::Pool(id),
-            });
-        }
-        reproject_between_neighbours(surface, lp, &mut pts, &mut offs, tol);
-        let (mut pts, poles) = split_singular(surface, pts);
-        let first = pts[0].uv;
-        let last = pts[pts.len() - 1].uv;
-        let mut shift = [0.0; 2];
-        for k in 0..2 {
-            shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
-        }
-        let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
-        // A loop that goes round the period and through a pole (a cap bounded by a circle
-        // and a seam edge up to the pole and back): it is closed in (u, v) along the pole
-        // line, so from the pole on its points lie one period back.
-        if let [k] = open_axes.as_slice() {
-            if let Some(&(i, _)) = poles.iter().find(|p| p.1 == *k) {
-                let pole = pts[i];
-                let second_copy = pts
-                    .get(i + 1)
-                    .is_some_and(|q| q.vertex == pole.vertex && q.uv[1 - k] == pole.uv[1 - k]);
-                if !second_copy {
-                    pts.insert(i + 1, pole);
-                }
-                for p in &mut pts[i + 1..] {
-                    p.uv[*k] -= shift[*k];
-                }
-                closed.push(pts);
-                continue;
-            }
-        }
-        match open_axes.as_slice() {
-            [] => closed.push(pts),
-            [k] => {
-                let mut pts = pts;
-                let mut end = pts[0];
-                end.uv[*k] += shift[*k];
-                pts.push(end);
-                open.push((pts, *k, shift[*k].signum()));
-            }
-            _ => return Err("a boundary loop wraps around both periods".into()),
+        match project_loop(surface, lp, tol)? {
+            ProjectedLoop::Closed(pts) => closed.push(pts),
+            ProjectedLoop::Open(o) => open.push(o),
         }
     }
     // 2. Close open loops along a cut seam (two loops) or the domain's edge (one loop).
-    let grid_range = {
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
-        for p in closed
-            .iter()
-            .flatten()
-            .chain(open.iter().flat_map(|o| o.0.iter()))
-        {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p.uv[k]);
-                hi[k] = hi[k].max(p.uv[k]);
-            }
-        }
-        ((lo[0], hi[0]), (lo[1], hi[1]))
-    };
-    let division = checked_division(surface, grid_range, tol)?;
-    match open.len() {
-        0 => {}
-        2 => {
-            let (c1, k1, s1) = open.pop().unwrap_or_default();
-            let (c0, k0, s0) = open.pop().unwrap_or_default();
-            if k0 != k1 || s0 == s1 {
-                return Err("two open boundary loops that do not bound a band".into());
-            }
-            let (mut c0, mut c1) = if s0 > 0.0 { (c0, c1) } else { (c1, c0) };
-            let k = k0;
-            let period = periods[k].unwrap_or(0.0);
-            // Bring c1's start next to c0's end.
-            let target = c0[c0.len() - 1].uv[k];
-            let d = nearest_rep(c1[0].uv[k], target, Some(period)) - c1[0].uv[k];
-            for p in &mut c1 {
-                p.uv[k] += d;
-            }
-            let a = c0[c0.len() - 1].uv;
-            let b = c1[0].uv;
-            let seam = seam_points(surface, a, b, &division, &mut out);
-            let mut lp: Vec<UvPoint> = Vec::new();
-            lp.append(&mut c0);
-            lp.extend(seam.iter().copied());
-            lp.extend(c1.iter().copied());
-            // The other copy of the seam: reversed, one period back.
-            for p in seam.iter().rev() {
-                let mut q = *p;
-                q.uv[k] -= period;
-                lp.push(q);
-            }
-            closed.push(lp);
-        }
-        1 => {
-            let (mut c0, k, s) = open.pop().unwrap_or_default();
-            let other = 1 - k;
-            let Some((b0, b1)) = ranges[other] else {
-                return Err("an open boundary loop on a surface without a domain edge".into());
-            };
-            let period = periods[k].unwrap_or(0.0);
-            // Counter-clockwise: going +u the face lies towards +v, going +v towards -u.
-            let towards_max = (k == 0) == (s > 0.0);
-            let edge = if towards_max { b1 } else { b0 };
-            let start = c0[0].uv;
-            let end = c0[c0.len() - 1].uv;
-            let mut corner_end = end;
-            corner_end[other] = edge;
-            let mut corner_start = start;
-            corner_start[other] = edge;
-            // end -> corner_end (a seam), corner_end -> corner_start (the domain edge),
-            // corner_start -> start (the seam's other copy).
-            let seam = seam_points(surface, end, corner_end, &division, &mut out);
-            let (along, corner_vertex) = edge_points(
-                surface,
-                corner_end,
-                corner_start,
-                &division,
-                k,
-                tol,
-                &mut out,
-            );
-            let mut lp: Vec<UvPoint> = Vec::new();
-            lp.append(&mut c0);
-            lp.extend(seam.iter().copied());
-            lp.push(UvPoint {
-                uv: corner_end,
-                vertex: corner_vertex,
-            });
-            lp.extend(along.iter().copied());
-            lp.push(UvPoint {
-                uv: corner_start,
-                vertex: corner_vertex,
-            });
-            for p in seam.iter().rev() {
-                let mut q = *p;
-                q.uv[k] -= s * period;
-                lp.push(q);
-            }
-            closed.push(lp);
-        }
-        n => return Err(format!("{n} open boundary loops")),
-    }
-    // 3. Loops of a periodic surface must lie in one period: bring each to the first's.
-    if closed.len() > 1 {
-        let centre = |lp: &[UvPoint], k: usize| {
-            let (lo, hi) = lp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
-                (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
-            });
-            0.5 * (lo + hi)
-        };
-        // The widest loop is the reference (the outer loop on a periodic band).
-        let widest = (0..closed.len())
-            .max_by(|&a, &b| {
-                let w = |i: usize| {
-                    let l: &Vec<UvPoint> = &closed[i];
-                    (0..2)
-                        .map(|k| {
-                            let (lo, hi) =
-                                l.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
-                                    (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
-                                });
-                            hi - lo
-                        })
-                        .sum::<f64>()
-                };
-                w(a).total_cmp(&w(b))
-            })
-            .unwrap_or(0);
-        for (k, period) in periods.iter().enumerate() {
-            let Some(period) = *period else { continue };
-            let reference = centre(&closed[widest], k);
-            for lp in closed.iter_mut() {
-                let c = centre(lp, k);
-                let d = nearest_rep(c, reference, Some(period)) - c;
-                if d != 0.0 {
-                    for p in lp.iter_mut() {
-                        p.uv[k] += d;
-                    }
-                }
-            }
-        }
-    }
+    let division = checked_division(surface, uv_range(&closed, &open), tol)?;
+    close_open_loops(surface, &mut closed, open, &division, tol, &mut out)?;
+    // 3. Loops of a periodic surface must lie in one period.
+    bring_into_one_period(&mut closed, periods);
     // The inside test is even-odd, so loop orientation does not matter past this point
     // (some files' loops run clockwise in truck's parameters; the caller orients faces).
     let pool_xyz: BTreeMap<u32, DVec3> = loops.iter().flatten().copied().collect();
@@ -633,6 +424,309 @@ pub(super) fn conforming_tessellation<S: UvSurface>(
             periods
         )
     })
+}
+
+/// A boundary loop that is closed in 3D but not in (u, v): it goes once round a period.
+#[derive(Default)]
+struct OpenLoop {
+    /// Its points, with the first repeated at the end, shifted by the period.
+    points: Vec<UvPoint>,
+    /// The parameter whose period it goes round.
+    axis: usize,
+    /// The sign of the shift.
+    sign: f64,
+}
+
+/// A boundary loop in the parameter plane.
+enum ProjectedLoop {
+    Closed(Vec<UvPoint>),
+    Open(OpenLoop),
+}
+
+/// Projects a loop of pool vertices into the parameter plane, unwrapping periodic
+/// parameters along it, and tells whether it closes there. An error when a point cannot be
+/// projected or the loop wraps round both periods.
+fn project_loop<S: UvSurface>(
+    surface: &S,
+    lp: &[(u32, DVec3)],
+    tol: f64,
+) -> Result<ProjectedLoop, String> {
+    if lp.len() < 2 {
+        return Err(format!("a boundary loop has {} points", lp.len()));
+    }
+    let periods = surface.periods();
+    let pts = project_points(surface, lp, tol)?;
+    let (mut pts, poles) = split_singular(surface, pts);
+    let first = pts[0].uv;
+    let last = pts[pts.len() - 1].uv;
+    let mut shift = [0.0; 2];
+    for k in 0..2 {
+        shift[k] = nearest_rep(first[k], last[k], periods[k]) - first[k];
+    }
+    let open_axes: Vec<usize> = (0..2).filter(|&k| shift[k].abs() > 1e-9).collect();
+    // A loop that goes round the period and through a pole (a cap bounded by a circle and a
+    // seam edge up to the pole and back): it is closed in (u, v) along the pole line, so
+    // from the pole on its points lie one period back.
+    if let [k] = open_axes.as_slice() {
+        if let Some(&(i, _)) = poles.iter().find(|p| p.1 == *k) {
+            let pole = pts[i];
+            let second_copy = pts
+                .get(i + 1)
+                .is_some_and(|q| q.vertex == pole.vertex && q.uv[1 - k] == pole.uv[1 - k]);
+            if !second_copy {
+                pts.insert(i + 1, pole);
+            }
+            for p in &mut pts[i + 1..] {
+                p.uv[*k] -= shift[*k];
+            }
+            return Ok(ProjectedLoop::Closed(pts));
+        }
+    }
+    match open_axes.as_slice() {
+        [] => Ok(ProjectedLoop::Closed(pts)),
+        [k] => {
+            let mut end = pts[0];
+            end.uv[*k] += shift[*k];
+            pts.push(end);
+            Ok(ProjectedLoop::Open(OpenLoop {
+                points: pts,
+                axis: *k,
+                sign: shift[*k].signum(),
+            }))
+        }
+        _ => Err("a boundary loop wraps around both periods".into()),
+    }
+}
+
+/// The parameters of each point of a loop, each searched from the previous point's and
+/// unwrapped next to them. An error when a point cannot be projected or the surface passes
+/// more than 10 tolerances from it.
+fn project_points<S: UvSurface>(
+    surface: &S,
+    lp: &[(u32, DVec3)],
+    tol: f64,
+) -> Result<Vec<UvPoint>, String> {
+    let periods = surface.periods();
+    let mut pts: Vec<UvPoint> = Vec::with_capacity(lp.len() + 1);
+    // Distance of each point from the surface at its parameters.
+    let mut offs: Vec<f64> = Vec::with_capacity(lp.len());
+    let mut prev: Option<[f64; 2]> = None;
+    for &(id, p) in lp {
+        let Some(mut uv) = surface.project(p, prev) else {
+            return Err("a boundary point could not be projected onto the surface".into());
+        };
+        let mut off = surface.point(uv[0], uv[1]).distance(p);
+        if off > 10.0 * tol {
+            // The search can stop in a local minimum (tori): restart it from a grid.
+            if let Some((best, d)) = surface.project_globally(p) {
+                if d < off {
+                    uv = best;
+                    off = d;
+                }
+            }
+        }
+        if off > 10.0 * tol {
+            return Err(format!(
+                "the surface{} passes {off:.3e} from the face's edges",
+                surface.source()
+            ));
+        }
+        if let Some(q) = prev {
+            for k in 0..2 {
+                uv[k] = nearest_rep(uv[k], q[k], periods[k]);
+            }
+        }
+        prev = Some(uv);
+        offs.push(off);
+        pts.push(UvPoint {
+            uv,
+            vertex: FaceVertex::Pool(id),
+        });
+    }
+    reproject_between_neighbours(surface, lp, &mut pts, &mut offs, tol);
+    Ok(pts)
+}
+
+/// The (u, v) range of all points of the closed and the open loops.
+fn uv_range(closed: &[Vec<UvPoint>], open: &[OpenLoop]) -> ((f64, f64), (f64, f64)) {
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for p in closed
+        .iter()
+        .flatten()
+        .chain(open.iter().flat_map(|o| o.points.iter()))
+    {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p.uv[k]);
+            hi[k] = hi[k].max(p.uv[k]);
+        }
+    }
+    ((lo[0], hi[0]), (lo[1], hi[1]))
+}
+
+/// Closes the open loops into `closed`: two that bound a band along a seam cut across it
+/// ([`band_loop`]), one along the domain's edge ([`domain_edge_loop`]). Points on the seam
+/// and the edge are new points of `out`. An error for open loops that cannot be closed so.
+fn close_open_loops<S: UvSurface>(
+    surface: &S,
+    closed: &mut Vec<Vec<UvPoint>>,
+    mut open: Vec<OpenLoop>,
+    division: &(Vec<f64>, Vec<f64>),
+    tol: f64,
+    out: &mut ConformingMesh,
+) -> Result<(), String> {
+    match open.len() {
+        0 => {}
+        2 => {
+            let o1 = open.pop().unwrap_or_default();
+            let o0 = open.pop().unwrap_or_default();
+            closed.push(band_loop(surface, o0, o1, division, out)?);
+        }
+        1 => {
+            let o = open.pop().unwrap_or_default();
+            closed.push(domain_edge_loop(surface, o, division, tol, out)?);
+        }
+        n => return Err(format!("{n} open boundary loops")),
+    }
+    Ok(())
+}
+
+/// Two open loops that bound a band round a period, as one closed loop: the one going the
+/// positive way, a seam from its end to the other's start, the other, and the seam's other
+/// copy (reversed, one period back).
+fn band_loop<S: UvSurface>(
+    surface: &S,
+    o0: OpenLoop,
+    o1: OpenLoop,
+    division: &(Vec<f64>, Vec<f64>),
+    out: &mut ConformingMesh,
+) -> Result<Vec<UvPoint>, String> {
+    if o0.axis != o1.axis || o0.sign == o1.sign {
+        return Err("two open boundary loops that do not bound a band".into());
+    }
+    let (mut c0, mut c1) = if o0.sign > 0.0 {
+        (o0.points, o1.points)
+    } else {
+        (o1.points, o0.points)
+    };
+    let k = o0.axis;
+    let period = surface.periods()[k].unwrap_or(0.0);
+    // Bring c1's start next to c0's end.
+    let target = c0[c0.len() - 1].uv[k];
+    let d = nearest_rep(c1[0].uv[k], target, Some(period)) - c1[0].uv[k];
+    for p in &mut c1 {
+        p.uv[k] += d;
+    }
+    let a = c0[c0.len() - 1].uv;
+    let b = c1[0].uv;
+    let seam = seam_points(surface, a, b, division, out);
+    let mut lp: Vec<UvPoint> = Vec::new();
+    lp.append(&mut c0);
+    lp.extend(seam.iter().copied());
+    lp.extend(c1.iter().copied());
+    for p in seam.iter().rev() {
+        let mut q = *p;
+        q.uv[k] -= period;
+        lp.push(q);
+    }
+    Ok(lp)
+}
+
+/// One open loop closed along the edge of the domain on the side where the face lies: the
+/// loop, a seam from its end to that edge, the edge back to the seam, and the seam's other
+/// copy. An error when the other parameter has no range to give the edge.
+fn domain_edge_loop<S: UvSurface>(
+    surface: &S,
+    o: OpenLoop,
+    division: &(Vec<f64>, Vec<f64>),
+    tol: f64,
+    out: &mut ConformingMesh,
+) -> Result<Vec<UvPoint>, String> {
+    let OpenLoop {
+        points: mut c0,
+        axis: k,
+        sign: s,
+    } = o;
+    let other = 1 - k;
+    let Some((b0, b1)) = surface.ranges()[other] else {
+        return Err("an open boundary loop on a surface without a domain edge".into());
+    };
+    let period = surface.periods()[k].unwrap_or(0.0);
+    // Counter-clockwise: going +u the face lies towards +v, going +v towards -u.
+    let towards_max = (k == 0) == (s > 0.0);
+    let edge = if towards_max { b1 } else { b0 };
+    let start = c0[0].uv;
+    let end = c0[c0.len() - 1].uv;
+    let mut corner_end = end;
+    corner_end[other] = edge;
+    let mut corner_start = start;
+    corner_start[other] = edge;
+    // end -> corner_end (a seam), corner_end -> corner_start (the domain edge),
+    // corner_start -> start (the seam's other copy).
+    let seam = seam_points(surface, end, corner_end, division, out);
+    let (along, corner_vertex) =
+        edge_points(surface, corner_end, corner_start, division, k, tol, out);
+    let mut lp: Vec<UvPoint> = Vec::new();
+    lp.append(&mut c0);
+    lp.extend(seam.iter().copied());
+    lp.push(UvPoint {
+        uv: corner_end,
+        vertex: corner_vertex,
+    });
+    lp.extend(along.iter().copied());
+    lp.push(UvPoint {
+        uv: corner_start,
+        vertex: corner_vertex,
+    });
+    for p in seam.iter().rev() {
+        let mut q = *p;
+        q.uv[k] -= s * period;
+        lp.push(q);
+    }
+    Ok(lp)
+}
+
+/// Lowest and highest value of parameter `k` over a loop's points.
+fn loop_extent(lp: &[UvPoint], k: usize) -> (f64, f64) {
+    lp.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
+        (a.0.min(p.uv[k]), a.1.max(p.uv[k]))
+    })
+}
+
+/// Shifts each loop by whole periods so that all lie in the period of the widest one (the
+/// outer loop on a periodic band).
+fn bring_into_one_period(closed: &mut [Vec<UvPoint>], periods: [Option<f64>; 2]) {
+    if closed.len() < 2 {
+        return;
+    }
+    let centre = |lp: &[UvPoint], k: usize| {
+        let (lo, hi) = loop_extent(lp, k);
+        0.5 * (lo + hi)
+    };
+    let width = |lp: &[UvPoint]| {
+        (0..2)
+            .map(|k| {
+                let (lo, hi) = loop_extent(lp, k);
+                hi - lo
+            })
+            .sum::<f64>()
+    };
+    let widest = (0..closed.len())
+        .max_by(|&a, &b| width(&closed[a]).total_cmp(&width(&closed[b])))
+        .unwrap_or(0);
+    for (k, period) in periods.iter().enumerate() {
+        let Some(period) = *period else { continue };
+        let reference = centre(&closed[widest], k);
+        for lp in closed.iter_mut() {
+            let c = centre(lp, k);
+            let d = nearest_rep(c, reference, Some(period)) - c;
+            if d != 0.0 {
+                for p in lp.iter_mut() {
+                    p.uv[k] += d;
+                }
+            }
+        }
+    }
 }
 
 /// The whole of a closed surface, for a face bounded only by a VERTEX_LOOP or by nothing (a
@@ -944,286 +1038,401 @@ fn scaled_segment_distance2(c: [f64; 2], p: [f64; 2], q: [f64; 2], s: [f64; 2]) 
     ex * ex + ey * ey
 }
 
+/// Triangulates the face bounded by `loops` (closed, in one period of the parameter plane)
+/// into `out`: the loops are the constraints of a CDT, interior grid points and refinement
+/// points bring its triangles within `tol` of the surface, and the triangles inside the
+/// loops are kept. `pool_xyz` gives the boundary vertices' positions. Errors say why the
+/// face cannot be done this way.
 fn triangulate<S: UvSurface>(
     surface: &S,
     loops: &[Vec<UvPoint>],
     pool_xyz: &BTreeMap<u32, DVec3>,
     tol: f64,
-    mut out: ConformingMesh,
+    out: ConformingMesh,
 ) -> Result<ConformingMesh, String> {
-    let mut cdt: ConstrainedDelaunayTriangulation<SPoint2<f64>> =
-        ConstrainedDelaunayTriangulation::new();
-    // Vertex of each CDT vertex (by handle index).
-    let mut vertex_of: Vec<Option<FaceVertex>> = Vec::new();
-    // New vertices found to coincide with an edge point.
-    let mut alias: BTreeMap<u32, FaceVertex> = BTreeMap::new();
-    let mut handles_of_loops = Vec::with_capacity(loops.len());
-    for lp in loops {
-        let mut handles = Vec::with_capacity(lp.len());
-        for p in lp {
-            if !(p.uv[0].is_finite() && p.uv[1].is_finite()) {
-                return Err("a boundary point has no finite parameters".into());
+    let mut face = FaceCdt::new(surface, loops, pool_xyz, tol, out);
+    let handles = face.insert_boundary()?;
+    face.constrain_loops(&handles)?;
+    let constraints = face.cdt.num_constraints();
+    face.insert_grid()?;
+    face.refine(constraints)?;
+    face.keep_inside_triangles()?;
+    if face.out.triangles.is_empty() {
+        return Err("no triangle inside the boundary".into());
+    }
+    Ok(face.out)
+}
+
+/// The constrained Delaunay triangulation of one face in its parameter plane, with the
+/// face vertex each CDT vertex stands for and the mesh it becomes.
+struct FaceCdt<'a, S: UvSurface> {
+    surface: &'a S,
+    loops: &'a [Vec<UvPoint>],
+    /// Positions of the boundary's pool vertices.
+    pool_xyz: &'a BTreeMap<u32, DVec3>,
+    tol: f64,
+    /// The loops' sides.
+    segments: Vec<([f64; 2], [f64; 2])>,
+    cdt: ConstrainedDelaunayTriangulation<SPoint2<f64>>,
+    /// Vertex of each CDT vertex (by handle index).
+    vertex_of: Vec<Option<FaceVertex>>,
+    /// New vertices found to coincide with an edge point.
+    alias: BTreeMap<u32, FaceVertex>,
+    out: ConformingMesh,
+}
+
+impl<'a, S: UvSurface> FaceCdt<'a, S> {
+    fn new(
+        surface: &'a S,
+        loops: &'a [Vec<UvPoint>],
+        pool_xyz: &'a BTreeMap<u32, DVec3>,
+        tol: f64,
+        out: ConformingMesh,
+    ) -> Self {
+        let segments = loops
+            .iter()
+            .flat_map(|lp| (0..lp.len()).map(move |i| (lp[i].uv, lp[(i + 1) % lp.len()].uv)))
+            .collect();
+        FaceCdt {
+            surface,
+            loops,
+            pool_xyz,
+            tol,
+            segments,
+            cdt: ConstrainedDelaunayTriangulation::new(),
+            vertex_of: Vec::new(),
+            alias: BTreeMap::new(),
+            out,
+        }
+    }
+
+    /// The vertex slot of the CDT vertex with handle index `index`.
+    fn vertex_slot(&mut self, index: usize) -> &mut Option<FaceVertex> {
+        if self.vertex_of.len() <= index {
+            self.vertex_of.resize(index + 1, None);
+        }
+        &mut self.vertex_of[index]
+    }
+
+    /// `v`, or the edge point it coincides with.
+    fn resolved(&self, v: FaceVertex) -> FaceVertex {
+        match v {
+            FaceVertex::New(k) => self.alias.get(&k).copied().unwrap_or(v),
+            _ => v,
+        }
+    }
+
+    /// Position of a face vertex in body coordinates.
+    fn position(&self, v: FaceVertex) -> Option<DVec3> {
+        match v {
+            FaceVertex::New(k) => match self.alias.get(&k) {
+                Some(FaceVertex::Pool(i)) => self.pool_xyz.get(i).copied(),
+                _ => self.out.new_points.get(k as usize).copied(),
+            },
+            FaceVertex::Pool(i) => self.pool_xyz.get(&i).copied(),
+        }
+    }
+
+    /// Inserts every loop's points; the CDT handles of each loop's points.
+    fn insert_boundary(&mut self) -> Result<Vec<Vec<FixedVertexHandle>>, String> {
+        let loops = self.loops;
+        let mut handles_of_loops = Vec::with_capacity(loops.len());
+        for lp in loops {
+            let mut handles = Vec::with_capacity(lp.len());
+            for p in lp {
+                handles.push(self.insert_boundary_point(p)?);
             }
-            let h = cdt
-                .insert(SPoint2::new(spade_round(p.uv[0]), spade_round(p.uv[1])))
-                .map_err(|e| format!("the CDT refused a boundary point: {e:?}"))?;
-            let i = h.index();
-            if vertex_of.len() <= i {
-                vertex_of.resize(i + 1, None);
+            handles_of_loops.push(handles);
+        }
+        Ok(handles_of_loops)
+    }
+
+    /// Inserts one boundary point and records the vertex it stands for. Where it lands on
+    /// a point already there, a point this face added (a pole or seam end) and an edge
+    /// point are one vertex, the edge point; two other vertices there are an error.
+    fn insert_boundary_point(&mut self, p: &UvPoint) -> Result<FixedVertexHandle, String> {
+        if !(p.uv[0].is_finite() && p.uv[1].is_finite()) {
+            return Err("a boundary point has no finite parameters".into());
+        }
+        let h = self
+            .cdt
+            .insert(SPoint2::new(spade_round(p.uv[0]), spade_round(p.uv[1])))
+            .map_err(|e| format!("the CDT refused a boundary point: {e:?}"))?;
+        let i = h.index();
+        let there = *self.vertex_slot(i);
+        match there.map(|v| (self.resolved(v), self.resolved(p.vertex))) {
+            Some((FaceVertex::New(k), w @ FaceVertex::Pool(_)))
+            | Some((w @ FaceVertex::Pool(_), FaceVertex::New(k))) => {
+                self.alias.insert(k, w);
+                self.vertex_of[i] = Some(w);
             }
-            let resolve = |v: FaceVertex, alias: &BTreeMap<u32, FaceVertex>| match v {
-                FaceVertex::New(k) => alias.get(&k).copied().unwrap_or(v),
-                _ => v,
-            };
-            match vertex_of[i].map(|v| (resolve(v, &alias), resolve(p.vertex, &alias))) {
-                // A point this face added (a pole or seam end) that is an edge point.
-                Some((FaceVertex::New(k), w @ FaceVertex::Pool(_)))
-                | Some((w @ FaceVertex::Pool(_), FaceVertex::New(k))) => {
-                    alias.insert(k, w);
-                    vertex_of[i] = Some(w);
+            Some((v, w)) if v != w => {
+                return Err(format!(
+                    "two boundary vertices ({v:?}, {:?}) at one parameter point {:?}",
+                    p.vertex, p.uv
+                ))
+            }
+            _ => self.vertex_of[i] = Some(p.vertex),
+        }
+        Ok(h)
+    }
+
+    /// Makes each loop's sides constraints. An error when loops cross or the CDT split a
+    /// side.
+    fn constrain_loops(
+        &mut self,
+        handles_of_loops: &[Vec<FixedVertexHandle>],
+    ) -> Result<(), String> {
+        for handles in handles_of_loops {
+            let n = handles.len();
+            for i in 0..n {
+                let (a, b) = (handles[i], handles[(i + 1) % n]);
+                if a == b || self.cdt.exists_constraint(a, b) {
+                    continue; // an edge used twice by its loop (a slit)
                 }
-                Some((v, w)) if v != w => {
-                    return Err(format!(
-                        "two boundary vertices ({v:?}, {:?}) at one parameter point {:?}",
-                        p.vertex, p.uv
-                    ))
+                if !self.cdt.can_add_constraint(a, b) {
+                    return Err("the boundary loops cross in the parameter plane".into());
                 }
-                _ => vertex_of[i] = Some(p.vertex),
+                self.cdt.add_constraint(a, b);
             }
-            handles.push(h);
         }
-        handles_of_loops.push(handles);
-    }
-    for handles in &handles_of_loops {
-        let n = handles.len();
-        for i in 0..n {
-            let (a, b) = (handles[i], handles[(i + 1) % n]);
-            if a == b || cdt.exists_constraint(a, b) {
-                continue; // an edge used twice by its loop (a slit)
-            }
-            if !cdt.can_add_constraint(a, b) {
-                return Err("the boundary loops cross in the parameter plane".into());
-            }
-            cdt.add_constraint(a, b);
+        if self.cdt.num_vertices() != self.vertex_of.iter().filter(|v| v.is_some()).count() {
+            return Err("the CDT split a boundary segment".into());
         }
+        Ok(())
     }
-    if cdt.num_vertices() != vertex_of.iter().filter(|v| v.is_some()).count() {
-        return Err("the CDT split a boundary segment".into());
-    }
-    let constraints = cdt.num_constraints();
-    // Interior grid points, away from the boundary so no constraint edge is split.
-    let (lo, hi) = parameter_box(loops);
-    let (udiv, vdiv) = checked_division(surface, ((lo[0], hi[0]), (lo[1], hi[1])), tol)?;
-    let segments: Vec<([f64; 2], [f64; 2])> = loops
-        .iter()
-        .flat_map(|lp| (0..lp.len()).map(move |i| (lp[i].uv, lp[(i + 1) % lp.len()].uv)))
-        .collect();
-    let step = |d: &[f64], i: usize| {
-        let a = if i > 0 {
-            d[i] - d[i - 1]
-        } else {
-            f64::INFINITY
-        };
-        let b = if i + 1 < d.len() {
-            d[i + 1] - d[i]
-        } else {
-            f64::INFINITY
-        };
-        let s = a.min(b);
-        if s.is_finite() && s > 0.0 {
-            s
-        } else {
-            (d[d.len() - 1] - d[0]).abs().max(1e-300)
+
+    /// Inserts the points of the surface's parameter grid that are inside the loops, away
+    /// from the boundary so no constraint edge is split.
+    fn insert_grid(&mut self) -> Result<(), String> {
+        let (lo, hi) = parameter_box(self.loops);
+        let (udiv, vdiv) =
+            checked_division(self.surface, ((lo[0], hi[0]), (lo[1], hi[1])), self.tol)?;
+        for (i, &u) in udiv.iter().enumerate() {
+            let su = grid_spacing(&udiv, i);
+            for (j, &v) in vdiv.iter().enumerate() {
+                let c = [u, v];
+                if !inside(self.loops, c) {
+                    continue;
+                }
+                let sv = grid_spacing(&vdiv, j);
+                if self.next_to_boundary(c, [su, sv]) {
+                    continue;
+                }
+                self.insert_interior_point(c, "grid point")?;
+            }
         }
-    };
-    for (i, &u) in udiv.iter().enumerate() {
-        let su = step(&udiv, i);
-        for (j, &v) in vdiv.iter().enumerate() {
-            let c = [u, v];
-            if !inside(loops, c) {
-                continue;
-            }
-            let sv = step(&vdiv, j);
-            let s = [1.0 / su, 1.0 / sv];
-            let near = segments.iter().any(|&(p, q)| {
-                // Cheap reject before the exact distance.
-                let (ulo, uhi) = (p[0].min(q[0]) - 0.4 * su, p[0].max(q[0]) + 0.4 * su);
-                let (vlo, vhi) = (p[1].min(q[1]) - 0.4 * sv, p[1].max(q[1]) + 0.4 * sv);
-                u >= ulo
-                    && u <= uhi
-                    && v >= vlo
-                    && v <= vhi
-                    && scaled_segment_distance2(c, p, q, s) < 0.35 * 0.35
-            });
-            if near {
-                continue;
-            }
-            let before = cdt.num_vertices();
-            let h = cdt
-                .insert(SPoint2::new(spade_round(u), spade_round(v)))
-                .map_err(|e| format!("the CDT refused a grid point: {e:?}"))?;
-            if cdt.num_vertices() == before {
-                continue; // coincides with an existing point
-            }
-            out.new_points.push(surface.point(u, v));
-            let idx = h.index();
-            if vertex_of.len() <= idx {
-                vertex_of.resize(idx + 1, None);
-            }
-            vertex_of[idx] = Some(FaceVertex::New(out.new_points.len() as u32 - 1));
-        }
+        Ok(())
     }
-    // Refine: a triangle whose middle (or the middle of an inner side) is more than `tol`
-    // from the surface gets a point at its centroid, until every triangle is within
-    // tolerance (the grid alone is not enough next to the boundary and on poles).
-    let xyz = |v: FaceVertex, alias: &BTreeMap<u32, FaceVertex>, out: &ConformingMesh| match v {
-        FaceVertex::New(k) => match alias.get(&k) {
-            Some(FaceVertex::Pool(i)) => pool_xyz.get(i).copied(),
-            _ => out.new_points.get(k as usize).copied(),
-        },
-        FaceVertex::Pool(i) => pool_xyz.get(&i).copied(),
-    };
-    for _round in 0..24 {
+
+    /// Whether grid point `c` is within 0.35 of the grid spacing (`spacing`, per
+    /// parameter) of a side of the loops.
+    fn next_to_boundary(&self, c: [f64; 2], spacing: [f64; 2]) -> bool {
+        let ([u, v], [su, sv]) = (c, spacing);
+        let s = [1.0 / su, 1.0 / sv];
+        self.segments.iter().any(|&(p, q)| {
+            // Cheap reject before the exact distance.
+            let (ulo, uhi) = (p[0].min(q[0]) - 0.4 * su, p[0].max(q[0]) + 0.4 * su);
+            let (vlo, vhi) = (p[1].min(q[1]) - 0.4 * sv, p[1].max(q[1]) + 0.4 * sv);
+            u >= ulo
+                && u <= uhi
+                && v >= vlo
+                && v <= vhi
+                && scaled_segment_distance2(c, p, q, s) < 0.35 * 0.35
+        })
+    }
+
+    /// Inserts an interior point (`what` names it in the error) as a new vertex of the
+    /// face, unless it coincides with a point already there.
+    fn insert_interior_point(&mut self, uv: [f64; 2], what: &str) -> Result<(), String> {
+        let before = self.cdt.num_vertices();
+        let h = self
+            .cdt
+            .insert(SPoint2::new(spade_round(uv[0]), spade_round(uv[1])))
+            .map_err(|e| format!("the CDT refused a {what}: {e:?}"))?;
+        if self.cdt.num_vertices() == before {
+            return Ok(()); // coincides with an existing point
+        }
+        self.out.new_points.push(self.surface.point(uv[0], uv[1]));
+        let vertex = FaceVertex::New(self.out.new_points.len() as u32 - 1);
+        *self.vertex_slot(h.index()) = Some(vertex);
+        Ok(())
+    }
+
+    /// Refines: a triangle whose middle (or the middle of an inner side) is more than `tol`
+    /// from the surface gets a point at its centroid, until every triangle is within
+    /// tolerance (the grid alone is not enough next to the boundary and on poles), for at
+    /// most 24 rounds. `constraints` is the number of boundary constraints, which no
+    /// refinement point may split.
+    fn refine(&mut self, constraints: usize) -> Result<(), String> {
+        for _round in 0..24 {
+            let add = self.refinement_points()?;
+            if add.is_empty() {
+                break;
+            }
+            if self.cdt.num_vertices() + add.len() > MAX_GRID_POINTS {
+                return Err("refining the face to the tolerance needs too many points".into());
+            }
+            for c in add {
+                self.insert_interior_point(c, "refinement point")?;
+            }
+            if self.cdt.num_constraints() != constraints {
+                return Err("refinement split a boundary segment".into());
+            }
+        }
+        Ok(())
+    }
+
+    /// The centroids of the triangles inside the loops that are off the surface by more
+    /// than the tolerance and clear of the boundary.
+    fn refinement_points(&self) -> Result<Vec<[f64; 2]>, String> {
         let mut add: Vec<[f64; 2]> = Vec::new();
-        for face in cdt.inner_faces() {
+        for face in self.cdt.inner_faces() {
             let vs = face.vertices();
             let uv: [[f64; 2]; 3] = std::array::from_fn(|k| {
                 let p = vs[k].position();
                 [p.x, p.y]
             });
-            let c = [
-                (uv[0][0] + uv[1][0] + uv[2][0]) / 3.0,
-                (uv[0][1] + uv[1][1] + uv[2][1]) / 3.0,
-            ];
-            if !inside(loops, c) {
+            let c = centroid(&uv);
+            if !inside(self.loops, c) {
                 continue;
             }
-            let mut corners = [DVec3::ZERO; 3];
-            for k in 0..3 {
-                let Some(Some(v)) = vertex_of.get(vs[k].fix().index()).copied() else {
-                    return Err("a triangle uses a point the CDT made up".into());
-                };
-                let Some(p) = xyz(v, &alias, &out) else {
-                    return Err("a boundary vertex has no position".into());
-                };
-                corners[k] = p;
-            }
-            let off = |w: [f64; 3]| {
-                let u = w[0] * uv[0][0] + w[1] * uv[1][0] + w[2] * uv[2][0];
-                let v = w[0] * uv[0][1] + w[1] * uv[1][1] + w[2] * uv[2][1];
-                let flat = w[0] * corners[0] + w[1] * corners[1] + w[2] * corners[2];
-                surface.point(u, v).distance(flat)
-            };
-            let third = 1.0 / 3.0;
-            let mut bad = off([third, third, third]) > tol;
-            if !bad {
-                for (k, e) in face.adjacent_edges().iter().enumerate() {
-                    if e.is_constraint_edge() {
-                        continue;
-                    }
-                    // adjacent_edges()[k] runs from vertex k to vertex k + 1.
-                    let mut w = [0.0; 3];
-                    w[k] = 0.5;
-                    w[(k + 1) % 3] = 0.5;
-                    if off(w) > tol {
-                        bad = true;
-                        break;
-                    }
-                }
-            }
-            // Never a point on or next to the boundary: spade would split a boundary
-            // segment (sliver triangles along the boundary have centroids almost on it).
-            let longest = (0..3)
-                .map(|k| {
-                    let (p, q) = (uv[k], uv[(k + 1) % 3]);
-                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
-                })
-                .fold(0.0, f64::max);
-            let area2 = ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
-                - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]))
-                .abs();
-            if bad && area2 > 1e-6 * longest * longest {
-                let near = segments.iter().any(|&(p, q)| {
-                    scaled_segment_distance2(c, p, q, [1.0, 1.0]) < (0.05 * longest).powi(2)
-                });
-                if !near {
-                    add.push(c);
-                }
+            let corners = self.corner_positions(vs.map(|v| v.fix().index()))?;
+            // adjacent_edges()[k] runs from vertex k to vertex k + 1.
+            let inner_sides = face.adjacent_edges().map(|e| !e.is_constraint_edge());
+            if self.sags(&uv, &corners, inner_sides) && self.clear_of_boundary(&uv, c) {
+                add.push(c);
             }
         }
-        if add.is_empty() {
-            break;
-        }
-        if cdt.num_vertices() + add.len() > MAX_GRID_POINTS {
-            return Err("refining the face to the tolerance needs too many points".into());
-        }
-        for c in add {
-            let before = cdt.num_vertices();
-            let h = cdt
-                .insert(SPoint2::new(spade_round(c[0]), spade_round(c[1])))
-                .map_err(|e| format!("the CDT refused a refinement point: {e:?}"))?;
-            if cdt.num_vertices() == before {
-                continue;
-            }
-            out.new_points.push(surface.point(c[0], c[1]));
-            let idx = h.index();
-            if vertex_of.len() <= idx {
-                vertex_of.resize(idx + 1, None);
-            }
-            vertex_of[idx] = Some(FaceVertex::New(out.new_points.len() as u32 - 1));
-        }
-        if cdt.num_constraints() != constraints {
-            return Err("refinement split a boundary segment".into());
-        }
+        Ok(add)
     }
-    let mut area_scale = (hi[0] - lo[0]) * (hi[1] - lo[1]);
-    if area_scale.is_nan() || area_scale <= 0.0 {
-        area_scale = 1.0;
-    }
-    for face in cdt.inner_faces() {
-        let vs = face.vertices();
-        let uv: Vec<[f64; 2]> = vs
-            .iter()
-            .map(|v| {
-                let p = v.position();
-                [p.x, p.y]
-            })
-            .collect();
-        let area = 0.5
-            * ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
-                - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]));
-        if area.abs() <= 1e-14 * area_scale {
-            continue;
-        }
-        let c = [
-            (uv[0][0] + uv[1][0] + uv[2][0]) / 3.0,
-            (uv[0][1] + uv[1][1] + uv[2][1]) / 3.0,
-        ];
-        if !inside(loops, c) {
-            continue;
-        }
-        let mut t = [FaceVertex::Pool(0); 3];
+
+    /// Positions of the corners of a triangle, given its CDT vertices' handle indices.
+    fn corner_positions(&self, handle_indices: [usize; 3]) -> Result<[DVec3; 3], String> {
+        let mut corners = [DVec3::ZERO; 3];
         for k in 0..3 {
-            let Some(Some(v)) = vertex_of.get(vs[k].fix().index()).copied() else {
+            let Some(Some(v)) = self.vertex_of.get(handle_indices[k]).copied() else {
                 return Err("a triangle uses a point the CDT made up".into());
             };
-            t[k] = match v {
-                FaceVertex::New(n) => alias.get(&n).copied().unwrap_or(v),
-                _ => v,
+            let Some(p) = self.position(v) else {
+                return Err("a boundary vertex has no position".into());
             };
+            corners[k] = p;
         }
-        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
-            continue; // collapsed at a pole
-        }
-        if area < 0.0 {
-            t.swap(1, 2);
-        }
-        out.triangles.push(t);
+        Ok(corners)
     }
-    if out.triangles.is_empty() {
-        return Err("no triangle inside the boundary".into());
+
+    /// Whether the flat triangle with parameters `uv` and corners `corners` is more than
+    /// the tolerance from the surface at its middle or at the middle of one of its
+    /// `inner_sides` (side k runs from corner k to corner k + 1).
+    fn sags(&self, uv: &[[f64; 2]; 3], corners: &[DVec3; 3], inner_sides: [bool; 3]) -> bool {
+        let off = |w: [f64; 3]| {
+            let u = w[0] * uv[0][0] + w[1] * uv[1][0] + w[2] * uv[2][0];
+            let v = w[0] * uv[0][1] + w[1] * uv[1][1] + w[2] * uv[2][1];
+            let flat = w[0] * corners[0] + w[1] * corners[1] + w[2] * corners[2];
+            self.surface.point(u, v).distance(flat)
+        };
+        let third = 1.0 / 3.0;
+        if off([third, third, third]) > self.tol {
+            return true;
+        }
+        (0..3).filter(|&k| inner_sides[k]).any(|k| {
+            let mut w = [0.0; 3];
+            w[k] = 0.5;
+            w[(k + 1) % 3] = 0.5;
+            off(w) > self.tol
+        })
     }
-    Ok(out)
+
+    /// Whether a refinement point at the centroid `c` of the triangle `uv` keeps clear of
+    /// the boundary. Never a point on or next to it: spade would split a boundary segment
+    /// (sliver triangles along the boundary have centroids almost on it).
+    fn clear_of_boundary(&self, uv: &[[f64; 2]; 3], c: [f64; 2]) -> bool {
+        let longest = (0..3)
+            .map(|k| {
+                let (p, q) = (uv[k], uv[(k + 1) % 3]);
+                ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
+            })
+            .fold(0.0, f64::max);
+        let area2 = ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+            - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]))
+            .abs();
+        area2 > 1e-6 * longest * longest
+            && !self.segments.iter().any(|&(p, q)| {
+                scaled_segment_distance2(c, p, q, [1.0, 1.0]) < (0.05 * longest).powi(2)
+            })
+    }
+
+    /// Adds the CDT's triangles inside the loops to the face's mesh, counter-clockwise in
+    /// the plane, over the vertices they stand for; triangles of no area (relative to the
+    /// loops' box) and triangles collapsed at a pole are left out.
+    fn keep_inside_triangles(&mut self) -> Result<(), String> {
+        let (lo, hi) = parameter_box(self.loops);
+        let mut area_scale = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        if area_scale.is_nan() || area_scale <= 0.0 {
+            area_scale = 1.0;
+        }
+        for face in self.cdt.inner_faces() {
+            let vs = face.vertices();
+            let uv: [[f64; 2]; 3] = std::array::from_fn(|k| {
+                let p = vs[k].position();
+                [p.x, p.y]
+            });
+            let area = 0.5
+                * ((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1])
+                    - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]));
+            if area.abs() <= 1e-14 * area_scale {
+                continue;
+            }
+            if !inside(self.loops, centroid(&uv)) {
+                continue;
+            }
+            let mut t = [FaceVertex::Pool(0); 3];
+            for k in 0..3 {
+                let Some(Some(v)) = self.vertex_of.get(vs[k].fix().index()).copied() else {
+                    return Err("a triangle uses a point the CDT made up".into());
+                };
+                t[k] = self.resolved(v);
+            }
+            if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+                continue; // collapsed at a pole
+            }
+            if area < 0.0 {
+                t.swap(1, 2);
+            }
+            self.out.triangles.push(t);
+        }
+        Ok(())
+    }
+}
+
+/// Centroid of a triangle in the parameter plane.
+fn centroid(uv: &[[f64; 2]; 3]) -> [f64; 2] {
+    [
+        (uv[0][0] + uv[1][0] + uv[2][0]) / 3.0,
+        (uv[0][1] + uv[1][1] + uv[2][1]) / 3.0,
+    ]
+}
+
+/// Spacing of grid line `i` of `d` from its nearer neighbour; the grid's whole span (or a
+/// tiny positive number) for a single line.
+fn grid_spacing(d: &[f64], i: usize) -> f64 {
+    let a = if i > 0 {
+        d[i] - d[i - 1]
+    } else {
+        f64::INFINITY
+    };
+    let b = if i + 1 < d.len() {
+        d[i + 1] - d[i]
+    } else {
+        f64::INFINITY
+    };
+    let s = a.min(b);
+    if s.is_finite() && s > 0.0 {
+        s
+    } else {
+        (d[d.len() - 1] - d[0]).abs().max(1e-300)
+    }
 }
 
 #[cfg(test)]

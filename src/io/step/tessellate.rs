@@ -8,15 +8,18 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use std::time::Instant;
 
 use glam::DVec3;
 use truck_meshalgo::prelude::{PolygonMesh, RobustMeshableShape};
-use truck_stepio::r#in::alias::{BoundedCurve, Curve3D, ParametricCurve, Point3, PolylineCurve};
+use truck_stepio::r#in::alias::{
+    BoundedCurve, Curve3D, ParametricCurve, Point3, PolylineCurve, Surface,
+};
 use truck_topology::compress::{
     CompressedEdge, CompressedEdgeIndex, CompressedFace, CompressedShell,
 };
 
-use super::brep::{Parsed, ParsedBody};
+use super::brep::{Parsed, ParsedBody, ParsedFace};
 use super::conform;
 use super::{
     run_with_timeout, Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions, Watched,
@@ -26,6 +29,8 @@ use crate::io::faces_json::SurfaceType;
 use crate::mesh::{Axis, BoundarySurface, ControlMesh, PatchKind};
 
 type MeshedShell = CompressedShell<Point3, PolylineCurve<Point3>, Option<PolygonMesh>>;
+/// One face as a shell of its own, for truck's tessellator.
+type FaceShell = CompressedShell<Point3, Curve3D, Surface>;
 
 fn dv(p: &Point3) -> DVec3 {
     DVec3::new(p.x, p.y, p.z)
@@ -67,12 +72,8 @@ fn brep_diagonal(parsed: &Parsed) -> f64 {
 /// index of each local edge.
 fn single_face_shell(
     body: &ParsedBody,
-    face: &CompressedFace<truck_stepio::r#in::alias::Surface>,
-) -> (
-    CompressedShell<Point3, truck_stepio::r#in::alias::Curve3D, truck_stepio::r#in::alias::Surface>,
-    Vec<usize>,
-    Vec<usize>,
-) {
+    face: &CompressedFace<Surface>,
+) -> (FaceShell, Vec<usize>, Vec<usize>) {
     let mut edge_local: BTreeMap<usize, usize> = BTreeMap::new();
     let mut vertex_local: BTreeMap<usize, usize> = BTreeMap::new();
     let mut edges_global = Vec::new();
@@ -172,597 +173,937 @@ impl Pool {
     }
 }
 
+/// Tessellates every face of `parsed` and welds the faces into one mesh, a group per face,
+/// in millimetres when the file gives its unit.
 pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Result<StepModel> {
     if parsed.bodies.iter().all(|b| b.faces.is_empty()) {
         return Err(no_face_error(path, &parsed.skipped));
     }
     let scale = parsed.millimetres_per_unit.unwrap_or(1.0);
-    let diag = brep_diagonal(&parsed);
-    let chord_mm = match opts.chordal_tolerance {
-        Some(t) => t,
-        None => opts.relative_chordal_tolerance * diag * scale,
-    };
-    let mut notes = parsed.notes.clone();
-    if !(chord_mm > 0.0 && chord_mm.is_finite()) {
-        return Err(Error::input(
-            path,
-            format!("cannot choose a chordal tolerance (model size {diag}, tolerance {chord_mm})"),
+    let tol = Tolerances::choose(path, brep_diagonal(&parsed), scale, opts)?;
+    let Parsed {
+        bodies,
+        skipped,
+        notes,
+        millimetres_per_unit,
+    } = parsed;
+    let mut model = WeldedModel::new(path, opts, tol, &bodies, skipped);
+    for (body_index, body) in bodies.iter().enumerate() {
+        model.add_body(body_index, body)?;
+    }
+    model.finish(&bodies, notes, millimetres_per_unit)
+}
+
+/// The tolerances of one tessellation, in file units.
+struct Tolerances {
+    /// Bounding-box diagonal of the B-rep.
+    diag: f64,
+    /// Chordal tolerance of truck's tessellation and of edges that a face without an exact
+    /// analytic surface uses.
+    chord: f64,
+    /// Faces with an exact analytic surface, and edges only they use, get `chord` times this.
+    analytic_factor: f64,
+    /// How far a vertex of truck's face tessellation may move to snap to an edge point.
+    snap: f64,
+    /// Polyline points closer than this to the previous one are the same point.
+    merge: f64,
+    /// Boundary points closer than this are one vertex (model coordinates).
+    weld: f64,
+}
+
+impl Tolerances {
+    /// The tolerances `opts` ask for on a model whose diagonal is `diag` file units of
+    /// `scale` millimetres; an error when they are not positive numbers.
+    fn choose(path: &Path, diag: f64, scale: f64, opts: &StepOptions) -> Result<Self> {
+        let chord_mm = match opts.chordal_tolerance {
+            Some(t) => t,
+            None => opts.relative_chordal_tolerance * diag * scale,
+        };
+        if !(chord_mm > 0.0 && chord_mm.is_finite()) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "cannot choose a chordal tolerance (model size {diag}, tolerance {chord_mm})"
+                ),
+            ));
+        }
+        // truck panics below its TOLERANCE (1e-6) in file units.
+        let chord = (chord_mm / scale).max(2e-6);
+        let analytic_factor = opts.analytic_chordal_factor;
+        if !(analytic_factor > 0.0 && analytic_factor.is_finite()) {
+            return Err(Error::Parameter(format!(
+                "the chordal factor of analytic faces must be positive, got {analytic_factor}"
+            )));
+        }
+        Ok(Self {
+            diag,
+            chord,
+            analytic_factor,
+            snap: 0.05 * chord,
+            merge: 1e-9 * diag.max(chord),
+            weld: 1e-3 * chord,
+        })
+    }
+}
+
+/// What the tessellation did that the notes report.
+#[derive(Default)]
+struct Tally {
+    /// Faces tessellated by `conform` (boundary = edge polylines by construction).
+    conforming: usize,
+    /// The faces that fell back to truck's tessellation, with the reason.
+    fallback: Vec<String>,
+    /// Edge polylines trimmed to their vertices.
+    trimmed_edges: usize,
+    /// Edge uses turned round to chain their loop.
+    reversed_in_loop: usize,
+    /// Triangles dropped because they overlapped others of their face.
+    overlapping: usize,
+    /// Boundary vertices of truck's face meshes that matched no edge point.
+    unsnapped: usize,
+    /// Largest move of a vertex of truck's face meshes onto an edge point (file units).
+    snap_max: f64,
+}
+
+impl Tally {
+    /// Appends the notes on these counts; `scale` turns file units into the model's.
+    fn push_notes(&self, notes: &mut Vec<String>, scale: f64) {
+        notes.push(format!(
+            "{} faces tessellated on their edge polylines; {} by truck's tessellator",
+            self.conforming,
+            self.fallback.len()
+        ));
+        if self.trimmed_edges > 0 {
+            notes.push(format!(
+                "{} edge polylines trimmed to their vertices (truck's curve ran past them)",
+                self.trimmed_edges
+            ));
+        }
+        if self.reversed_in_loop > 0 {
+            notes.push(format!(
+                "{} edge uses turned round to chain their loops",
+                self.reversed_in_loop
+            ));
+        }
+        for f in self.fallback.iter().take(20) {
+            notes.push(format!("truck tessellated {f}"));
+        }
+        if self.overlapping > 0 {
+            notes.push(format!(
+                "dropped {} triangles that overlapped others of their face (folded or doubled \
+                 tessellation)",
+                self.overlapping
+            ));
+        }
+        if self.unsnapped > 0 {
+            notes.push(format!(
+                "{} face-boundary vertices matched no edge point (possible cracks)",
+                self.unsnapped
+            ));
+        }
+        notes.push(format!(
+            "boundary vertices snapped to edge polylines (largest move {:.3e})",
+            self.snap_max * scale
         ));
     }
-    // truck panics below its TOLERANCE (1e-6) in file units.
-    let chord = (chord_mm / scale).max(2e-6);
-    let mut skipped = parsed.skipped;
-    let mut pool = Pool::default();
-    // (body, vertex) -> pool id; (body, edge) -> pool ids of its polyline.
-    let mut vertex_pool: BTreeMap<(usize, usize), u32> = BTreeMap::new();
-    let mut edge_pool: BTreeMap<(usize, usize), Vec<u32>> = BTreeMap::new();
-    let mut edge_groups: BTreeMap<(usize, usize), Vec<u32>> = BTreeMap::new();
-    let mut mesh = ControlMesh::new();
-    let mut faces_out: Vec<FaceSurface> = Vec::new();
-    let mut bodies_out = Vec::new();
-    let mut snap_max = 0.0f64;
-    let mut unsnapped = 0usize;
-    let mut overlapping = 0usize;
-    let snap_tol = 0.05 * chord;
-    // Polyline points closer than this to the previous one are the same point.
-    let merge_tol = 1e-9 * diag.max(chord);
-    // Boundary points closer than this are one vertex (model coordinates, file units).
-    let weld_tol = 1e-3 * chord;
-    // Faces tessellated by `conform` (boundary = edge polylines by construction), and the
-    // faces that fell back to truck's tessellation with the reason.
-    let mut conforming = 0usize;
-    let mut reversed_in_loop = 0usize;
-    // Edges whose curve does not pass through their vertices; faces using them are skipped.
-    let mut bad_edges: BTreeSet<(usize, usize)> = BTreeSet::new();
-    let mut trimmed_edges = 0usize;
-    let mut fallback: Vec<String> = Vec::new();
-    // Group names are stored in the file: the body prefix only when there are several.
-    let single_body = parsed.bodies.len() == 1;
-    let started = std::time::Instant::now();
-    let total_faces: usize = parsed.bodies.iter().map(|b| b.faces.len()).sum();
-    let mut faces_done = 0usize;
-    let analytic_factor = opts.analytic_chordal_factor;
-    if !(analytic_factor > 0.0 && analytic_factor.is_finite()) {
-        return Err(Error::Parameter(format!(
-            "the chordal factor of analytic faces must be positive, got {analytic_factor}"
-        )));
+}
+
+/// One face of a body on its way into the model, with what its steps share.
+struct FaceInBody<'b> {
+    body_index: usize,
+    body: &'b ParsedBody,
+    /// The face's position in its body (file order, skipped faces counted).
+    index: usize,
+    parsed: &'b ParsedFace,
+    /// `ENTITY #surface_id`, for messages.
+    name: String,
+    /// Body-level index of each edge the face uses.
+    edges: Vec<usize>,
+}
+
+impl FaceInBody<'_> {
+    /// This face, left out for `reason`.
+    fn skip(&self, reason: String) -> SkippedFace {
+        SkippedFace {
+            face_id: self.parsed.face_id,
+            body: self.body.name.clone(),
+            entity: self.name.clone(),
+            reason,
+        }
     }
-    for (bi, body) in parsed.bodies.iter().enumerate() {
-        let first_group = mesh.groups.len() as u32;
-        let place = body.placement;
-        let unplace = place.inverse();
-        // Edges of this body used only by faces with an exact analytic surface: those get
-        // the analytic faces' (coarser) chord, the others the finer one.
-        let mut analytic_only: BTreeMap<usize, bool> = BTreeMap::new();
-        for f in &body.faces {
-            for ei in f.face.boundaries.iter().flatten() {
-                let e = analytic_only.entry(ei.index).or_insert(true);
-                *e &= f.exact.is_some();
+}
+
+/// How an edge's polyline meets the edge's vertices.
+enum VertexFit {
+    /// It runs from one vertex to the other.
+    Whole,
+    /// It ran past a vertex or stopped short of it and was trimmed to the vertices.
+    Trimmed,
+    /// It misses a vertex: the edge's curve does not pass through it.
+    Missed,
+}
+
+/// The model under construction: the welded vertex pool, the mesh with a group per face,
+/// what each face and body became, and the faces left out.
+struct WeldedModel<'a> {
+    path: &'a Path,
+    opts: &'a StepOptions,
+    tol: Tolerances,
+    pool: Pool,
+    /// (body, vertex) -> pool id.
+    vertex_pool: BTreeMap<(usize, usize), u32>,
+    /// (body, edge) -> pool ids of its polyline.
+    edge_pool: BTreeMap<(usize, usize), Vec<u32>>,
+    /// (body, edge) -> groups of the faces using it.
+    edge_groups: BTreeMap<(usize, usize), Vec<u32>>,
+    /// Edges whose curve does not pass through their vertices; faces using them are skipped.
+    bad_edges: BTreeSet<(usize, usize)>,
+    mesh: ControlMesh,
+    /// The surface of each group's face.
+    faces: Vec<FaceSurface>,
+    bodies: Vec<Body>,
+    skipped: Vec<SkippedFace>,
+    tally: Tally,
+    /// Group names are stored in the file: the body prefix only when there are several.
+    single_body: bool,
+    started: Instant,
+    total_faces: usize,
+    faces_done: usize,
+}
+
+impl<'a> WeldedModel<'a> {
+    fn new(
+        path: &'a Path,
+        opts: &'a StepOptions,
+        tol: Tolerances,
+        bodies: &[ParsedBody],
+        skipped: Vec<SkippedFace>,
+    ) -> Self {
+        WeldedModel {
+            path,
+            opts,
+            tol,
+            pool: Pool::default(),
+            vertex_pool: BTreeMap::new(),
+            edge_pool: BTreeMap::new(),
+            edge_groups: BTreeMap::new(),
+            bad_edges: BTreeSet::new(),
+            mesh: ControlMesh::new(),
+            faces: Vec::new(),
+            bodies: Vec::new(),
+            skipped,
+            tally: Tally::default(),
+            single_body: bodies.len() == 1,
+            started: Instant::now(),
+            total_faces: bodies.iter().map(|b| b.faces.len()).sum(),
+            faces_done: 0,
+        }
+    }
+
+    /// Adds the body's faces, each as a group or as a skipped face, then the body. An
+    /// error only when the total timeout runs out.
+    fn add_body(&mut self, body_index: usize, body: &ParsedBody) -> Result<()> {
+        let first_group = self.mesh.groups.len() as u32;
+        let analytic_only = analytic_only_edges(body);
+        for (index, parsed) in body.faces.iter().enumerate() {
+            self.check_total_time(body, parsed)?;
+            self.faces_done += 1;
+            let (shell, edges, _) = single_face_shell(body, &parsed.face);
+            let face = FaceInBody {
+                body_index,
+                body,
+                index,
+                parsed,
+                name: format!("{} #{}", parsed.info.entity, parsed.info.surface_id),
+                edges,
+            };
+            if let Err(skipped) = self.add_face(&face, shell, &analytic_only) {
+                self.skipped.push(skipped);
             }
         }
-        let edge_chord = |ge: usize| {
-            if analytic_only.get(&ge).copied().unwrap_or(false) {
-                chord * analytic_factor
-            } else {
-                chord
-            }
-        };
-        for (face_index, pf) in body.faces.iter().enumerate() {
-            if started.elapsed() > opts.total_timeout {
-                return Err(Error::input(
-                    path,
-                    format!(
-                        "tessellating the faces did not finish within {:.0} s ({faces_done} of \
-                         {total_faces} faces done; next: face #{} of {}); giving up",
-                        opts.total_timeout.as_secs_f64(),
-                        pf.face_id,
-                        body.name
-                    ),
-                ));
-            }
-            faces_done += 1;
-            let (shell, edges_global, _) = single_face_shell(body, &pf.face);
-            let face_name = format!("{} #{}", pf.info.entity, pf.info.surface_id);
-            let skip = |reason: String| SkippedFace {
-                face_id: pf.face_id,
-                body: body.name.clone(),
-                entity: face_name.clone(),
-                reason,
-            };
-            // a. Edge polylines (truck's polylining of the edge curve): the first face that
-            // uses an edge fixes its polyline in the pool; later faces reuse those points.
-            let need: Vec<(usize, Curve3D, f64)> = edges_global
-                .iter()
-                .filter(|&&ge| !edge_pool.contains_key(&(bi, ge)))
-                .map(|&ge| (ge, body.edges[ge].curve.clone(), edge_chord(ge)))
-                .collect();
-            if !need.is_empty() {
-                let watched = run_with_timeout("scode-step-edges", opts.face_timeout, move || {
-                    need.into_iter()
-                        .map(|(ge, c, chord)| {
-                            let range = c.range_tuple();
-                            (ge, PolylineCurve::from_curve(&c, range, chord).0)
-                        })
-                        .collect::<Vec<(usize, Vec<Point3>)>>()
-                });
-                let polylines =
-                    match watched.or_why("polylining its edges (truck)", opts.face_timeout) {
-                        Ok(p) => p,
-                        Err(why) => {
-                            skipped.push(skip(why));
-                            continue;
-                        }
-                    };
-                for (ge, mut pts) in polylines {
-                    let (va, vb) = body.edges[ge].vertices;
-                    // The polyline runs from the edge's start vertex to its end; a curve
-                    // parametrised the other way is turned round.
-                    if let (Some(f), Some(l)) = (pts.first(), pts.last()) {
-                        let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
-                        let (f, l) = (dv(f), dv(l));
-                        if f.distance(b) + l.distance(a) < f.distance(a) + l.distance(b) {
-                            pts.reverse();
-                        }
-                    }
-                    // truck sometimes trims an edge's curve to the wrong range (the curve
-                    // runs past a vertex or stops short of it, or is the whole B-spline of
-                    // which the edge uses a part): keep the stretch between the vertices'
-                    // nearest points on the polyline, and refuse an edge whose curve misses a
-                    // vertex. Nearest points on its segments, not its points: a nearly
-                    // straight curve has few points, and a vertex in the middle of a long
-                    // segment is on the curve (corpus trj6 has 48 faces with such edges).
-                    if va != vb && pts.len() > 2 {
-                        let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
-                        let (mut sa, da) = nearest_on_polyline(&pts, a);
-                        let (mut sb, db) = nearest_on_polyline(&pts, b);
-                        let last = (pts.len() - 1) as f64;
-                        // A closed curve (a whole B-spline circle of which the edge is a
-                        // part) runs the edge's way (truck turns it round for `same_sense`
-                        // false), and its closing point is both ends: there the edge
-                        // starts at the first point and ends at the last, and an edge
-                        // whose end comes before its start runs through the closing point
-                        // (corpus trj3: taken as the start, the edge ending at the closing
-                        // point would be the complementary arc, and two faces would fail).
-                        let closing = dv(&pts[0]);
-                        let closed = closing.distance(dv(&pts[pts.len() - 1])) <= 1e-6 * diag;
-                        if closed {
-                            if closing.distance(a) <= da + 1e-6 * diag {
-                                sa = 0.0;
-                            }
-                            if closing.distance(b) <= db + 1e-6 * diag {
-                                sb = last;
-                            }
-                        }
-                        if da.max(db) > 10.0 * chord + 1e-6 * diag {
-                            bad_edges.insert((bi, ge));
-                        } else if sa > 0.0 || sb < last {
-                            trimmed_edges += 1;
-                            // The vertices stand for the ends (only the points between
-                            // them are used below).
-                            let inner: Vec<Point3> = if closed && sa > sb {
-                                // Through the closing point (the last point is the first).
-                                (0..pts.len())
-                                    .filter(|&k| k as f64 > sa)
-                                    .chain((1..pts.len()).filter(|&k| (k as f64) < sb))
-                                    .map(|k| pts[k])
-                                    .collect()
-                            } else {
-                                let between = |k: usize| {
-                                    let k = k as f64;
-                                    k > sa.min(sb) && k < sa.max(sb)
-                                };
-                                let mut inner: Vec<Point3> = (0..pts.len())
-                                    .filter(|&k| between(k))
-                                    .map(|k| pts[k])
-                                    .collect();
-                                if sa > sb {
-                                    inner.reverse();
-                                }
-                                inner
-                            };
-                            let point = |p: DVec3| Point3::new(p.x, p.y, p.z);
-                            pts = std::iter::once(point(a))
-                                .chain(inner)
-                                .chain(std::iter::once(point(b)))
-                                .collect();
-                        }
-                    }
-                    let ends = [va, vb].map(|v| {
-                        *vertex_pool.entry((bi, v)).or_insert_with(|| {
-                            pool.push_welded(
-                                bi,
-                                place.transform_point3(dv(&body.vertices[v])),
-                                weld_tol,
-                            )
-                        })
-                    });
-                    let mut ids = vec![ends[0]];
-                    let mut last = dv(&body.vertices[va]);
-                    let end = dv(&body.vertices[vb]);
-                    let n = pts.len();
-                    for p in pts.iter().take(n.saturating_sub(1)).skip(1) {
-                        let p = dv(p);
-                        // Degenerate edges (a pole) and doubled points add no vertex.
-                        if p.distance(last) <= merge_tol || p.distance(end) <= merge_tol {
-                            continue;
-                        }
-                        ids.push(pool.push_welded(bi, place.transform_point3(p), weld_tol));
-                        last = p;
-                    }
-                    ids.push(ends[1]);
-                    ids.dedup();
-                    edge_pool.insert((bi, ge), ids);
-                }
-            }
-            if let Some(&ge) = edges_global
-                .iter()
-                .find(|&&ge| bad_edges.contains(&(bi, ge)))
-            {
-                skipped.push(SkippedFace {
-                    face_id: pf.face_id,
-                    body: body.name.clone(),
-                    entity: format!("EDGE_CURVE #{}", body.edge_ids[ge]),
-                    reason: "the edge's curve (as truck converts it) does not pass through \
-                             its vertices"
-                        .into(),
-                });
-                continue;
-            }
-            // b. The face's loops over pool vertices, in body coordinates.
-            let loops: Vec<Vec<(u32, DVec3)>> = pf
-                .face
-                .boundaries
-                .iter()
-                .map(|wire| {
-                    let mut ids: Vec<u32> = Vec::new();
-                    let n = wire.len();
-                    for (k, ei) in wire.iter().enumerate() {
-                        let mut chain = edge_pool[&(bi, ei.index)].clone();
-                        if !ei.orientation {
-                            chain.reverse();
-                        }
-                        // An edge whose orientation in the loop is wrong (it does not start
-                        // where the previous one ended, but ends there) is turned round.
-                        let joins = |c: &[u32], prev: Option<u32>| prev.is_none_or(|p| c[0] == p);
-                        let prev = ids.last().copied().or_else(|| {
-                            // The first edge: check it against the next one.
-                            let next = &edge_pool[&(bi, wire[(k + 1) % n].index)];
-                            let c = &chain;
-                            let last = *c.last().unwrap_or(&u32::MAX);
-                            let (n0, n1) = (next[0], *next.last().unwrap_or(&u32::MAX));
-                            if n > 1 && last != n0 && last != n1 && (c[0] == n0 || c[0] == n1) {
-                                Some(u32::MAX)
-                            } else {
-                                None
-                            }
-                        });
-                        let turned_first = prev == Some(u32::MAX);
-                        let turned_later =
-                            !turned_first && !joins(&chain, prev) && chain.last() == prev.as_ref();
-                        if turned_first || turned_later {
-                            chain.reverse();
-                            reversed_in_loop += 1;
-                        }
-                        // The joint point is the previous edge's end.
-                        if !ids.is_empty() {
-                            ids.pop();
-                        }
-                        ids.extend(chain);
-                    }
-                    if ids.len() > 1 && ids.first() == ids.last() {
-                        ids.pop();
-                    }
-                    ids.dedup();
-                    while ids.len() > 1 && ids.first() == ids.last() {
-                        ids.pop();
-                    }
-                    ids.iter()
-                        .map(|&id| (id, unplace.transform_point3(pool.positions[id as usize])))
-                        .collect()
-                })
-                .collect();
-            let mut segments: BTreeSet<(u32, u32)> = BTreeSet::new();
-            for &ge in &edges_global {
-                for w in edge_pool[&(bi, ge)].windows(2).filter(|w| w[0] != w[1]) {
-                    segments.insert(crate::mesh::edge_key(w[0], w[1]));
-                }
-            }
-            // c. Our conforming tessellation; truck's own when it cannot be done.
-            // The exact surface where the STEP record gives one (its normal is the
-            // record's: turned round when the face's `same_sense` is false, as truck's
-            // surface was), else truck's.
-            let surface = pf.face.surface.clone();
-            let (exact, same_sense) = (pf.exact, pf.same_sense);
-            let face_chord = chord * analytic_factor;
-            let stretch = opts.stretch_parameter_plane;
-            let watched =
-                run_with_timeout("scode-step-face", opts.face_timeout, move || match exact {
-                    Some(a) => conform::conforming_tessellation(&a, &loops, face_chord, stretch)
-                        .map(|mut cm| {
-                            if !same_sense {
-                                for t in &mut cm.triangles {
-                                    t.swap(1, 2);
-                                }
-                            }
-                            cm
-                        }),
-                    None => conform::conforming_tessellation(&surface, &loops, chord, stretch),
-                });
-            let mut face_tris: Vec<[u32; 3]> = Vec::new();
-            let why_not = match watched {
-                Watched::Done(Ok(cm)) => {
-                    if follows_edges(&cm.triangles, &segments) {
-                        let ids: Vec<u32> = cm
-                            .new_points
-                            .iter()
-                            .map(|&p| pool.push(place.transform_point3(p)))
-                            .collect();
-                        let id = |v: conform::FaceVertex| match v {
-                            conform::FaceVertex::Pool(i) => i,
-                            conform::FaceVertex::New(k) => ids[k as usize],
-                        };
-                        face_tris = cm.triangles.iter().map(|t| t.map(id)).collect();
-                        conforming += 1;
-                        None
-                    } else {
-                        Some("its triangles do not follow its edge polylines".to_string())
-                    }
-                }
-                Watched::Done(Err(msg)) => Some(msg),
-                Watched::Panicked(msg) => Some(format!("panicked: {msg}")),
-                Watched::TimedOut => Some(format!(
-                    "did not finish within {:.0} s",
-                    opts.face_timeout.as_secs_f64()
-                )),
-            };
-            if let Some(why) = why_not {
-                fallback.push(format!("face #{} ({face_name}): {why}", pf.face_id));
-                let watched = run_with_timeout("scode-step-face", opts.face_timeout, move || {
-                    shell.robust_triangulation(chord)
-                });
-                let meshed: MeshedShell =
-                    match watched.or_why("the tessellator (truck)", opts.face_timeout) {
-                        Ok(m) => m,
-                        Err(why) => {
-                            skipped.push(skip(why));
-                            continue;
-                        }
-                    };
-                let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
-                    skipped.push(skip(
-                        "the tessellator (truck) could not triangulate the face".into(),
-                    ));
-                    continue;
-                };
-                let mut candidates: Vec<(DVec3, u32)> = Vec::new();
-                for &ge in &edges_global {
-                    for &id in &edge_pool[&(bi, ge)] {
-                        candidates.push((pool.positions[id as usize], id));
-                    }
-                }
-                candidates.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.1.cmp(&b.1)));
-                candidates.dedup_by_key(|c| c.1);
-                // Map the face mesh's vertices: snap to edge points, else new pool vertices.
-                let positions = poly.positions();
-                let boundary = mesh_boundary_vertices(poly);
-                let mut map = Vec::with_capacity(positions.len());
-                for (i, p) in positions.iter().enumerate() {
-                    let p = place.transform_point3(dv(p));
-                    match nearest(&candidates, p, snap_tol) {
-                        Some((id, d)) => {
-                            snap_max = snap_max.max(d);
-                            map.push(id);
-                        }
-                        None => {
-                            if boundary[i] {
-                                unsnapped += 1;
-                            }
-                            map.push(pool.push(p));
-                        }
-                    }
-                }
-                face_tris = poly
-                    .faces()
-                    .triangle_iter()
-                    .map(|tri| [map[tri[0].pos], map[tri[1].pos], map[tri[2].pos]])
-                    .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
-                    .collect();
-                // A face whose triangles leave its edges would crack or fold the welded
-                // model: leave it out (named) so the rest is a clean surface.
-                let as_pool: Vec<[conform::FaceVertex; 3]> = face_tris
-                    .iter()
-                    .map(|t| t.map(conform::FaceVertex::Pool))
-                    .collect();
-                if !follows_edges(&as_pool, &segments) {
-                    skipped.push(skip(format!(
-                        "neither our tessellation ({why}) nor truck's follows the face's \
-                         edges"
-                    )));
-                    continue;
-                }
-            }
-            let group = mesh.push_group(
-                // `face_<k>` for the body's k-th face (1-based, in file order, skipped faces
-                // counted), as the corpus tessellations number CAD faces: the bitstream stores
-                // every name, and a run of numbers costs about a byte a face where STEP
-                // instance ids (`#157`, irregular gaps) cost two or three. `scode info
-                // part.step` lists each group with its ADVANCED_FACE id.
-                if single_body {
-                    format!("face_{}", face_index + 1)
-                } else {
-                    format!("{}/face_{}", body.name, face_index + 1)
-                },
-                patch_kind(&pf.info),
-            );
-            let mut triangles = 0;
-            // Each face must be an oriented 2-manifold for the fit: a triangle that would use
-            // a directed edge twice, or an edge a third time (truck overlaps on some periodic
-            // and trimmed faces, or welding folded a sliver), is dropped and counted.
-            let mut directed: std::collections::BTreeSet<(u32, u32)> = Default::default();
-            let mut uses: BTreeMap<(u32, u32), u8> = BTreeMap::new();
-            for &tri in &face_tris {
-                let mut t = tri;
-                if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
-                    continue;
-                }
-                if !pf.face.orientation {
-                    t.swap(1, 2);
-                }
-                let es = [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
-                let clash = es.iter().any(|&(a, b)| {
-                    directed.contains(&(a, b))
-                        || uses
-                            .get(&crate::mesh::edge_key(a, b))
-                            .is_some_and(|&n| n >= 2)
-                });
-                if clash {
-                    overlapping += 1;
-                    continue;
-                }
-                for &(a, b) in &es {
-                    directed.insert((a, b));
-                    *uses.entry(crate::mesh::edge_key(a, b)).or_insert(0) += 1;
-                }
-                mesh.push_face(&t, group);
-                triangles += 1;
-            }
-            if triangles == 0 {
-                mesh.groups.pop();
-                skipped.push(skip("the tessellation has no triangles".into()));
-                continue;
-            }
-            for &ge in &edges_global {
-                edge_groups.entry((bi, ge)).or_default().push(group);
-            }
-            let mut info = pf.info.clone();
-            info.body = bodies_out.len() as u32;
-            if let Some(a) = &mut info.axis {
-                a.origin = place.transform_point3(a.origin);
-                a.direction = place.transform_vector3(a.direction).normalize_or_zero();
-            }
-            faces_out.push(info);
-        }
-        let group_count = mesh.groups.len() as u32 - first_group;
-        bodies_out.push(Body {
+        let group_count = self.mesh.groups.len() as u32 - first_group;
+        self.bodies.push(Body {
             name: body.name.clone(),
             step_id: body.step_id,
             entity: body.entity.clone(),
             first_group,
             group_count,
         });
+        Ok(())
     }
-    if mesh.face_count() == 0 {
-        return Err(no_face_error(path, &skipped));
-    }
-    let closed: Vec<bool> = faces_out
-        .iter()
-        .map(|f| matches!(patch_kind(f), PatchKind::Closed))
-        .collect();
-    let split = split_doubled_ears(&mut mesh, &mut pool.positions, &closed);
-    if split > 0 {
-        notes.push(format!(
-            "{split} triangles that two faces both closed on their shared edge (a knife \
-             edge) split in one of them"
-        ));
-    }
-    // Compact the pool to the vertices the faces use, in order of first use.
-    let mut new_id = vec![u32::MAX; pool.positions.len()];
-    let mut positions = Vec::new();
-    for v in mesh.face_vertices.iter_mut() {
-        let old = *v as usize;
-        if new_id[old] == u32::MAX {
-            new_id[old] = positions.len() as u32;
-            positions.push(pool.positions[old] * scale);
+
+    /// The error that ends the tessellation when it has run past the total timeout before
+    /// the next face.
+    fn check_total_time(&self, body: &ParsedBody, next: &ParsedFace) -> Result<()> {
+        if self.started.elapsed() <= self.opts.total_timeout {
+            return Ok(());
         }
-        *v = new_id[old];
+        Err(Error::input(
+            self.path,
+            format!(
+                "tessellating the faces did not finish within {:.0} s ({} of {} faces done; \
+                 next: face #{} of {}); giving up",
+                self.opts.total_timeout.as_secs_f64(),
+                self.faces_done,
+                self.total_faces,
+                next.face_id,
+                body.name
+            ),
+        ))
     }
-    mesh.positions = positions;
-    let flipped = orient_faces(&mut mesh, &bodies_out);
-    if flipped > 0 {
-        notes.push(format!(
-            "{flipped} faces flipped to agree with their neighbours' orientation"
-        ));
-    }
-    for (&(_, _), &id) in &vertex_pool {
-        let n = new_id[id as usize];
-        if n != u32::MAX {
-            mesh.corners.insert(n);
+
+    /// The chord for polylining edge `ge`: the analytic faces' (coarser) one when only
+    /// faces with an exact analytic surface use the edge, else the finer one.
+    fn edge_chord(&self, analytic_only: &BTreeMap<usize, bool>, ge: usize) -> f64 {
+        if analytic_only.get(&ge).copied().unwrap_or(false) {
+            self.tol.chord * self.tol.analytic_factor
+        } else {
+            self.tol.chord
         }
     }
-    mesh.sharpen_group_boundaries();
-    let mut edges = Vec::new();
-    for (key, ids) in &edge_pool {
-        let Some(groups) = edge_groups.get(key) else {
-            continue;
+
+    /// Adds one face as a group: pools its edge polylines, tessellates it on them (ours,
+    /// or truck's where ours cannot be done) and keeps its triangles. The error is the
+    /// face left out, with why.
+    fn add_face(
+        &mut self,
+        face: &FaceInBody,
+        shell: FaceShell,
+        analytic_only: &BTreeMap<usize, bool>,
+    ) -> Result<(), SkippedFace> {
+        self.polyline_new_edges(face, analytic_only)
+            .map_err(|why| face.skip(why))?;
+        self.refuse_bad_edges(face)?;
+        let loops = self.face_loops(face);
+        let segments = self.edge_segments(face);
+        let triangles = match self.conforming_triangles(face, loops, &segments) {
+            Ok(triangles) => triangles,
+            Err(why) => self
+                .truck_triangles(face, shell, &segments, why)
+                .map_err(|why| face.skip(why))?,
         };
-        let mut groups = groups.clone();
-        groups.sort_unstable();
-        groups.dedup();
-        let vertices: Vec<u32> = ids.iter().map(|&i| new_id[i as usize]).collect();
-        if vertices.contains(&u32::MAX) {
-            continue;
+        self.push_face(face, &triangles)
+            .map_err(|why| face.skip(why))
+    }
+
+    /// Polylines the face's edges that no earlier face used (truck's polylining of the edge
+    /// curve) and pools them: the first face that uses an edge fixes its polyline, later
+    /// faces reuse those points. The error says why truck could not polyline them.
+    fn polyline_new_edges(
+        &mut self,
+        face: &FaceInBody,
+        analytic_only: &BTreeMap<usize, bool>,
+    ) -> Result<(), String> {
+        let need: Vec<(usize, Curve3D, f64)> = face
+            .edges
+            .iter()
+            .filter(|&&ge| !self.edge_pool.contains_key(&(face.body_index, ge)))
+            .map(|&ge| {
+                let curve = face.body.edges[ge].curve.clone();
+                (ge, curve, self.edge_chord(analytic_only, ge))
+            })
+            .collect();
+        if need.is_empty() {
+            return Ok(());
         }
-        edges.push(BrepEdge {
-            step_id: parsed.bodies[key.0].edge_ids[key.1],
-            vertices,
-            groups,
+        let watched = run_with_timeout("scode-step-edges", self.opts.face_timeout, move || {
+            need.into_iter()
+                .map(|(ge, c, chord)| {
+                    let range = c.range_tuple();
+                    (ge, PolylineCurve::from_curve(&c, range, chord).0)
+                })
+                .collect::<Vec<(usize, Vec<Point3>)>>()
         });
+        let polylines = watched.or_why("polylining its edges (truck)", self.opts.face_timeout)?;
+        for (ge, pts) in polylines {
+            self.add_edge_polyline(face.body_index, face.body, ge, pts);
+        }
+        Ok(())
     }
-    for f in &mut faces_out {
-        scale_surface(f, scale);
+
+    /// Pools the polyline of edge `ge` of body `bi`, turned to run from the edge's start
+    /// vertex to its end and trimmed to the vertices. An edge whose curve misses a vertex
+    /// is pooled too, and marked bad.
+    fn add_edge_polyline(&mut self, bi: usize, body: &ParsedBody, ge: usize, mut pts: Vec<Point3>) {
+        let (va, vb) = body.edges[ge].vertices;
+        let (a, b) = (dv(&body.vertices[va]), dv(&body.vertices[vb]));
+        // A curve parametrised the other way is turned round.
+        if let (Some(f), Some(l)) = (pts.first(), pts.last()) {
+            let (f, l) = (dv(f), dv(l));
+            if f.distance(b) + l.distance(a) < f.distance(a) + l.distance(b) {
+                pts.reverse();
+            }
+        }
+        if va != vb && pts.len() > 2 {
+            match trim_to_vertices(&mut pts, a, b, &self.tol) {
+                VertexFit::Whole => {}
+                VertexFit::Trimmed => self.tally.trimmed_edges += 1,
+                VertexFit::Missed => {
+                    self.bad_edges.insert((bi, ge));
+                }
+            }
+        }
+        let ids = self.pool_polyline(bi, body, (va, vb), &pts);
+        self.edge_pool.insert((bi, ge), ids);
     }
-    for (group, face) in mesh.groups.iter_mut().zip(&faces_out) {
-        group.patch = patch_kind(face);
+
+    /// Pool ids of an edge polyline that runs from vertex `va` to `vb` of body `bi`: the
+    /// vertices' ids at its ends, welded points between them.
+    fn pool_polyline(
+        &mut self,
+        bi: usize,
+        body: &ParsedBody,
+        (va, vb): (usize, usize),
+        pts: &[Point3],
+    ) -> Vec<u32> {
+        let ends = [va, vb].map(|v| self.pool_vertex(bi, body, v));
+        let mut ids = vec![ends[0]];
+        let mut last = dv(&body.vertices[va]);
+        let end = dv(&body.vertices[vb]);
+        let n = pts.len();
+        for p in pts.iter().take(n.saturating_sub(1)).skip(1) {
+            let p = dv(p);
+            // Degenerate edges (a pole) and doubled points add no vertex.
+            if p.distance(last) <= self.tol.merge || p.distance(end) <= self.tol.merge {
+                continue;
+            }
+            let at = body.placement.transform_point3(p);
+            ids.push(self.pool.push_welded(bi, at, self.tol.weld));
+            last = p;
+        }
+        ids.push(ends[1]);
+        ids.dedup();
+        ids
     }
-    notes.push(format!(
-        "{conforming} faces tessellated on their edge polylines; {} by truck's tessellator",
-        fallback.len()
-    ));
-    if trimmed_edges > 0 {
-        notes.push(format!(
-            "{trimmed_edges} edge polylines trimmed to their vertices (truck's curve ran past them)"
-        ));
+
+    /// Pool id of vertex `v` of body `bi`, pooled (welded) on first use.
+    fn pool_vertex(&mut self, bi: usize, body: &ParsedBody, v: usize) -> u32 {
+        let pool = &mut self.pool;
+        let weld = self.tol.weld;
+        *self.vertex_pool.entry((bi, v)).or_insert_with(|| {
+            pool.push_welded(
+                bi,
+                body.placement.transform_point3(dv(&body.vertices[v])),
+                weld,
+            )
+        })
     }
-    if reversed_in_loop > 0 {
-        notes.push(format!(
-            "{reversed_in_loop} edge uses turned round to chain their loops"
-        ));
+
+    /// Leaves the face out when the curve of one of its edges misses the edge's vertices.
+    fn refuse_bad_edges(&self, face: &FaceInBody) -> Result<(), SkippedFace> {
+        let bi = face.body_index;
+        let Some(&ge) = face
+            .edges
+            .iter()
+            .find(|&&ge| self.bad_edges.contains(&(bi, ge)))
+        else {
+            return Ok(());
+        };
+        Err(SkippedFace {
+            face_id: face.parsed.face_id,
+            body: face.body.name.clone(),
+            entity: format!("EDGE_CURVE #{}", face.body.edge_ids[ge]),
+            reason: "the edge's curve (as truck converts it) does not pass through its vertices"
+                .into(),
+        })
     }
-    for f in fallback.iter().take(20) {
-        notes.push(format!("truck tessellated {f}"));
+
+    /// The face's loops over pool vertices, with their positions in body coordinates.
+    fn face_loops(&mut self, face: &FaceInBody) -> Vec<Vec<(u32, DVec3)>> {
+        let unplace = face.body.placement.inverse();
+        let mut loops = Vec::new();
+        for wire in &face.parsed.face.boundaries {
+            let ids = self.chain_wire(face.body_index, wire);
+            let positions = &self.pool.positions;
+            loops.push(
+                ids.iter()
+                    .map(|&id| (id, unplace.transform_point3(positions[id as usize])))
+                    .collect(),
+            );
+        }
+        loops
     }
-    if overlapping > 0 {
-        notes.push(format!(
-            "dropped {overlapping} triangles that overlapped others of their face (folded \
-             or doubled tessellation)"
-        ));
+
+    /// One loop of a face of body `bi` as a cycle of pool ids: its edges' polylines joined
+    /// end to start, each joint once.
+    fn chain_wire(&mut self, bi: usize, wire: &[CompressedEdgeIndex]) -> Vec<u32> {
+        let mut ids: Vec<u32> = Vec::new();
+        let n = wire.len();
+        for (k, ei) in wire.iter().enumerate() {
+            let mut chain = self.edge_pool[&(bi, ei.index)].clone();
+            if !ei.orientation {
+                chain.reverse();
+            }
+            // An edge whose orientation in the loop is wrong (it does not start where the
+            // previous one ended, but ends there) is turned round.
+            let joins = |c: &[u32], prev: Option<u32>| prev.is_none_or(|p| c[0] == p);
+            let prev = ids.last().copied().or_else(|| {
+                // The first edge: check it against the next one.
+                let next = &self.edge_pool[&(bi, wire[(k + 1) % n].index)];
+                let c = &chain;
+                let last = *c.last().unwrap_or(&u32::MAX);
+                let (n0, n1) = (next[0], *next.last().unwrap_or(&u32::MAX));
+                if n > 1 && last != n0 && last != n1 && (c[0] == n0 || c[0] == n1) {
+                    Some(u32::MAX)
+                } else {
+                    None
+                }
+            });
+            let turned_first = prev == Some(u32::MAX);
+            let turned_later =
+                !turned_first && !joins(&chain, prev) && chain.last() == prev.as_ref();
+            if turned_first || turned_later {
+                chain.reverse();
+                self.tally.reversed_in_loop += 1;
+            }
+            // The joint point is the previous edge's end.
+            if !ids.is_empty() {
+                ids.pop();
+            }
+            ids.extend(chain);
+        }
+        if ids.len() > 1 && ids.first() == ids.last() {
+            ids.pop();
+        }
+        ids.dedup();
+        while ids.len() > 1 && ids.first() == ids.last() {
+            ids.pop();
+        }
+        ids
     }
-    if unsnapped > 0 {
-        notes.push(format!(
-            "{unsnapped} face-boundary vertices matched no edge point (possible cracks)"
-        ));
+
+    /// The segments of the face's edge polylines, as undirected pairs of pool ids.
+    fn edge_segments(&self, face: &FaceInBody) -> BTreeSet<(u32, u32)> {
+        let mut segments = BTreeSet::new();
+        for &ge in &face.edges {
+            let polyline = &self.edge_pool[&(face.body_index, ge)];
+            for w in polyline.windows(2).filter(|w| w[0] != w[1]) {
+                segments.insert(crate::mesh::edge_key(w[0], w[1]));
+            }
+        }
+        segments
     }
-    notes.push(format!(
-        "boundary vertices snapped to edge polylines (largest move {:.3e})",
-        snap_max * scale
-    ));
-    let open = open_edge_count(&mesh);
-    if open > 0 {
-        notes.push(format!(
-            "{open} mesh edges are open (bounded by one triangle): open shells or skipped faces"
-        ));
+
+    /// Our conforming tessellation of the face on its `loops`, over pool ids (its new
+    /// points join the pool). The error says why it cannot be used.
+    fn conforming_triangles(
+        &mut self,
+        face: &FaceInBody,
+        loops: Vec<Vec<(u32, DVec3)>>,
+        segments: &BTreeSet<(u32, u32)>,
+    ) -> Result<Vec<[u32; 3]>, String> {
+        match self.run_conforming(face.parsed, loops) {
+            Watched::Done(Ok(cm)) => {
+                if !follows_edges(&cm.triangles, segments) {
+                    return Err("its triangles do not follow its edge polylines".to_string());
+                }
+                let place = face.body.placement;
+                let ids: Vec<u32> = cm
+                    .new_points
+                    .iter()
+                    .map(|&p| self.pool.push(place.transform_point3(p)))
+                    .collect();
+                let id = |v: conform::FaceVertex| match v {
+                    conform::FaceVertex::Pool(i) => i,
+                    conform::FaceVertex::New(k) => ids[k as usize],
+                };
+                self.tally.conforming += 1;
+                Ok(cm.triangles.iter().map(|t| t.map(id)).collect())
+            }
+            Watched::Done(Err(msg)) => Err(msg),
+            Watched::Panicked(msg) => Err(format!("panicked: {msg}")),
+            Watched::TimedOut => Err(format!(
+                "did not finish within {:.0} s",
+                self.opts.face_timeout.as_secs_f64()
+            )),
+        }
     }
-    mesh.validate()?;
-    Ok(StepModel {
-        mesh,
-        faces: faces_out,
-        bodies: bodies_out,
-        edges,
-        skipped,
-        chordal_tolerance: chord * scale,
-        millimetres_per_unit: parsed.millimetres_per_unit,
-        notes,
-    })
+
+    /// Runs the conforming tessellation of a face in a thread under the face timeout. It
+    /// uses the exact surface where the STEP record gives one (its normal is the record's:
+    /// triangles are turned round when the face's `same_sense` is false, as truck's surface
+    /// was), else truck's.
+    fn run_conforming(
+        &self,
+        parsed: &ParsedFace,
+        loops: Vec<Vec<(u32, DVec3)>>,
+    ) -> Watched<Result<conform::ConformingMesh, String>> {
+        let surface = parsed.face.surface.clone();
+        let (exact, same_sense) = (parsed.exact, parsed.same_sense);
+        let chord = self.tol.chord;
+        let face_chord = chord * self.tol.analytic_factor;
+        let stretch = self.opts.stretch_parameter_plane;
+        run_with_timeout(
+            "scode-step-face",
+            self.opts.face_timeout,
+            move || match exact {
+                Some(a) => conform::conforming_tessellation(&a, &loops, face_chord, stretch).map(
+                    |mut cm| {
+                        if !same_sense {
+                            for t in &mut cm.triangles {
+                                t.swap(1, 2);
+                            }
+                        }
+                        cm
+                    },
+                ),
+                None => conform::conforming_tessellation(&surface, &loops, chord, stretch),
+            },
+        )
+    }
+
+    /// truck's tessellation of the face's one-face `shell`, its vertices snapped to the
+    /// face's edge points, for a face ours could not do (`why`). The error says why truck's
+    /// cannot be used either.
+    fn truck_triangles(
+        &mut self,
+        face: &FaceInBody,
+        shell: FaceShell,
+        segments: &BTreeSet<(u32, u32)>,
+        why: String,
+    ) -> Result<Vec<[u32; 3]>, String> {
+        let fell_back = format!("face #{} ({}): {why}", face.parsed.face_id, face.name);
+        self.tally.fallback.push(fell_back);
+        let chord = self.tol.chord;
+        let watched = run_with_timeout("scode-step-face", self.opts.face_timeout, move || {
+            shell.robust_triangulation(chord)
+        });
+        let meshed: MeshedShell =
+            watched.or_why("the tessellator (truck)", self.opts.face_timeout)?;
+        let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
+            return Err("the tessellator (truck) could not triangulate the face".into());
+        };
+        let map = self.snap_to_edge_points(face, poly);
+        let triangles: Vec<[u32; 3]> = poly
+            .faces()
+            .triangle_iter()
+            .map(|tri| [map[tri[0].pos], map[tri[1].pos], map[tri[2].pos]])
+            .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+            .collect();
+        // A face whose triangles leave its edges would crack or fold the welded model:
+        // leave it out (named) so the rest is a clean surface.
+        let as_pool: Vec<[conform::FaceVertex; 3]> = triangles
+            .iter()
+            .map(|t| t.map(conform::FaceVertex::Pool))
+            .collect();
+        if !follows_edges(&as_pool, segments) {
+            return Err(format!(
+                "neither our tessellation ({why}) nor truck's follows the face's edges"
+            ));
+        }
+        Ok(triangles)
+    }
+
+    /// Pool ids for the vertices of truck's mesh of the face: the nearest of the face's
+    /// edge points within the snap tolerance, else a new pool vertex.
+    fn snap_to_edge_points(&mut self, face: &FaceInBody, poly: &PolygonMesh) -> Vec<u32> {
+        let mut candidates: Vec<(DVec3, u32)> = Vec::new();
+        for &ge in &face.edges {
+            for &id in &self.edge_pool[&(face.body_index, ge)] {
+                candidates.push((self.pool.positions[id as usize], id));
+            }
+        }
+        candidates.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.1.cmp(&b.1)));
+        candidates.dedup_by_key(|c| c.1);
+        let positions = poly.positions();
+        let boundary = mesh_boundary_vertices(poly);
+        let mut map = Vec::with_capacity(positions.len());
+        for (i, p) in positions.iter().enumerate() {
+            let p = face.body.placement.transform_point3(dv(p));
+            match nearest(&candidates, p, self.tol.snap) {
+                Some((id, d)) => {
+                    self.tally.snap_max = self.tally.snap_max.max(d);
+                    map.push(id);
+                }
+                None => {
+                    if boundary[i] {
+                        self.tally.unsnapped += 1;
+                    }
+                    map.push(self.pool.push(p));
+                }
+            }
+        }
+        map
+    }
+
+    /// Adds the face's triangles to the mesh as a group of its own and records the face's
+    /// surface (axis in model coordinates) and the group of each of its edges. The error
+    /// when no triangle is left.
+    fn push_face(&mut self, face: &FaceInBody, triangles: &[[u32; 3]]) -> Result<(), String> {
+        let name = self.group_name(face);
+        let group = self.mesh.push_group(name, patch_kind(&face.parsed.info));
+        let orientation = face.parsed.face.orientation;
+        if self.push_manifold_triangles(triangles, orientation, group) == 0 {
+            self.mesh.groups.pop();
+            return Err("the tessellation has no triangles".into());
+        }
+        for &ge in &face.edges {
+            let groups = self.edge_groups.entry((face.body_index, ge)).or_default();
+            groups.push(group);
+        }
+        let place = face.body.placement;
+        let mut info = face.parsed.info.clone();
+        info.body = self.bodies.len() as u32;
+        if let Some(a) = &mut info.axis {
+            a.origin = place.transform_point3(a.origin);
+            a.direction = place.transform_vector3(a.direction).normalize_or_zero();
+        }
+        self.faces.push(info);
+        Ok(())
+    }
+
+    /// `face_<k>` for the body's k-th face (1-based, in file order, skipped faces counted),
+    /// as the corpus tessellations number CAD faces: the bitstream stores every name, and a
+    /// run of numbers costs about a byte a face where STEP instance ids (`#157`, irregular
+    /// gaps) cost two or three. `scode info part.step` lists each group with its
+    /// ADVANCED_FACE id.
+    fn group_name(&self, face: &FaceInBody) -> String {
+        if self.single_body {
+            format!("face_{}", face.index + 1)
+        } else {
+            format!("{}/face_{}", face.body.name, face.index + 1)
+        }
+    }
+
+    /// Adds the triangles to `group` (turned round when the face's `orientation` is
+    /// false) and returns how many were added. Each face must be an oriented 2-manifold
+    /// for the fit: a triangle that would use a directed edge twice, or an edge a third
+    /// time (truck overlaps on some periodic and trimmed faces, or welding folded a
+    /// sliver), is dropped and counted.
+    fn push_manifold_triangles(
+        &mut self,
+        triangles: &[[u32; 3]],
+        orientation: bool,
+        group: u32,
+    ) -> usize {
+        let mut added = 0;
+        let mut directed: BTreeSet<(u32, u32)> = BTreeSet::new();
+        let mut uses: BTreeMap<(u32, u32), u8> = BTreeMap::new();
+        for &tri in triangles {
+            let mut t = tri;
+            if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+                continue;
+            }
+            if !orientation {
+                t.swap(1, 2);
+            }
+            let es = [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
+            let clash = es.iter().any(|&(a, b)| {
+                directed.contains(&(a, b))
+                    || uses
+                        .get(&crate::mesh::edge_key(a, b))
+                        .is_some_and(|&n| n >= 2)
+            });
+            if clash {
+                self.tally.overlapping += 1;
+                continue;
+            }
+            for &(a, b) in &es {
+                directed.insert((a, b));
+                *uses.entry(crate::mesh::edge_key(a, b)).or_insert(0) += 1;
+            }
+            self.mesh.push_face(&t, group);
+            added += 1;
+        }
+        added
+    }
+
+    /// The finished model: knife-edge ears split, the pool compacted to the vertices the
+    /// faces use (in millimetres when the file gives its unit), faces oriented, corners and
+    /// sharp group boundaries marked, the B-rep edges over the mesh's vertices, and the
+    /// notes. An error when no face made it.
+    fn finish(
+        mut self,
+        bodies: &[ParsedBody],
+        mut notes: Vec<String>,
+        millimetres_per_unit: Option<f64>,
+    ) -> Result<StepModel> {
+        if self.mesh.face_count() == 0 {
+            return Err(no_face_error(self.path, &self.skipped));
+        }
+        let scale = millimetres_per_unit.unwrap_or(1.0);
+        let closed: Vec<bool> = self
+            .faces
+            .iter()
+            .map(|f| matches!(patch_kind(f), PatchKind::Closed))
+            .collect();
+        let split = split_doubled_ears(&mut self.mesh, &mut self.pool.positions, &closed);
+        if split > 0 {
+            notes.push(format!(
+                "{split} triangles that two faces both closed on their shared edge (a knife \
+                 edge) split in one of them"
+            ));
+        }
+        let new_id = self.compact_pool(scale);
+        let flipped = orient_faces(&mut self.mesh, &self.bodies);
+        if flipped > 0 {
+            notes.push(format!(
+                "{flipped} faces flipped to agree with their neighbours' orientation"
+            ));
+        }
+        self.mark_vertex_corners(&new_id);
+        self.mesh.sharpen_group_boundaries();
+        let edges = self.brep_edges(bodies, &new_id);
+        for f in &mut self.faces {
+            scale_surface(f, scale);
+        }
+        for (group, face) in self.mesh.groups.iter_mut().zip(&self.faces) {
+            group.patch = patch_kind(face);
+        }
+        self.tally.push_notes(&mut notes, scale);
+        let open = open_edge_count(&self.mesh);
+        if open > 0 {
+            notes.push(format!(
+                "{open} mesh edges are open (bounded by one triangle): open shells or skipped \
+                 faces"
+            ));
+        }
+        self.mesh.validate()?;
+        Ok(StepModel {
+            mesh: self.mesh,
+            faces: self.faces,
+            bodies: self.bodies,
+            edges,
+            skipped: self.skipped,
+            chordal_tolerance: self.tol.chord * scale,
+            millimetres_per_unit,
+            notes,
+        })
+    }
+
+    /// Keeps the pool vertices the faces use, numbered in order of first use, as the mesh's
+    /// positions times `scale`. Returns each pool vertex's new id (`u32::MAX` if unused).
+    fn compact_pool(&mut self, scale: f64) -> Vec<u32> {
+        let mut new_id = vec![u32::MAX; self.pool.positions.len()];
+        let mut positions = Vec::new();
+        for v in self.mesh.face_vertices.iter_mut() {
+            let old = *v as usize;
+            if new_id[old] == u32::MAX {
+                new_id[old] = positions.len() as u32;
+                positions.push(self.pool.positions[old] * scale);
+            }
+            *v = new_id[old];
+        }
+        self.mesh.positions = positions;
+        new_id
+    }
+
+    /// Marks the mesh vertices that are B-rep vertices as corners.
+    fn mark_vertex_corners(&mut self, new_id: &[u32]) {
+        for &id in self.vertex_pool.values() {
+            let n = new_id[id as usize];
+            if n != u32::MAX {
+                self.mesh.corners.insert(n);
+            }
+        }
+    }
+
+    /// The B-rep edges that faces in the mesh use, as polylines over the mesh's vertices
+    /// with the groups on either side.
+    fn brep_edges(&self, bodies: &[ParsedBody], new_id: &[u32]) -> Vec<BrepEdge> {
+        let mut edges = Vec::new();
+        for (key, ids) in &self.edge_pool {
+            let Some(groups) = self.edge_groups.get(key) else {
+                continue;
+            };
+            let mut groups = groups.clone();
+            groups.sort_unstable();
+            groups.dedup();
+            let vertices: Vec<u32> = ids.iter().map(|&i| new_id[i as usize]).collect();
+            if vertices.contains(&u32::MAX) {
+                continue;
+            }
+            edges.push(BrepEdge {
+                step_id: bodies[key.0].edge_ids[key.1],
+                vertices,
+                groups,
+            });
+        }
+        edges
+    }
+}
+
+/// For each edge of the body: whether only faces with an exact analytic surface use it
+/// (those edges get the analytic faces' coarser chord).
+fn analytic_only_edges(body: &ParsedBody) -> BTreeMap<usize, bool> {
+    let mut analytic_only: BTreeMap<usize, bool> = BTreeMap::new();
+    for f in &body.faces {
+        for ei in f.face.boundaries.iter().flatten() {
+            let e = analytic_only.entry(ei.index).or_insert(true);
+            *e &= f.exact.is_some();
+        }
+    }
+    analytic_only
+}
+
+/// Trims an edge polyline to its vertices `a` (start) and `b` (end). truck sometimes trims
+/// an edge's curve to the wrong range (the curve runs past a vertex or stops short of it,
+/// or is the whole B-spline of which the edge uses a part): keep the stretch between the
+/// vertices' nearest points on the polyline, and refuse an edge whose curve misses a
+/// vertex. Nearest points on its segments, not its points: a nearly straight curve has few
+/// points, and a vertex in the middle of a long segment is on the curve (corpus trj6 has
+/// 48 faces with such edges).
+fn trim_to_vertices(pts: &mut Vec<Point3>, a: DVec3, b: DVec3, tol: &Tolerances) -> VertexFit {
+    let diag = tol.diag;
+    let (mut sa, da) = nearest_on_polyline(pts, a);
+    let (mut sb, db) = nearest_on_polyline(pts, b);
+    let last = (pts.len() - 1) as f64;
+    // A closed curve (a whole B-spline circle of which the edge is a part) runs the edge's
+    // way (truck turns it round for `same_sense` false), and its closing point is both
+    // ends: there the edge starts at the first point and ends at the last, and an edge
+    // whose end comes before its start runs through the closing point (corpus trj3: taken
+    // as the start, the edge ending at the closing point would be the complementary arc,
+    // and two faces would fail).
+    let closing = dv(&pts[0]);
+    let closed = closing.distance(dv(&pts[pts.len() - 1])) <= 1e-6 * diag;
+    if closed {
+        if closing.distance(a) <= da + 1e-6 * diag {
+            sa = 0.0;
+        }
+        if closing.distance(b) <= db + 1e-6 * diag {
+            sb = last;
+        }
+    }
+    if da.max(db) > 10.0 * tol.chord + 1e-6 * diag {
+        return VertexFit::Missed;
+    }
+    if sa > 0.0 || sb < last {
+        // The vertices stand for the ends (only the points between them are used below).
+        let inner = polyline_between(pts, sa, sb, closed);
+        let point = |p: DVec3| Point3::new(p.x, p.y, p.z);
+        *pts = std::iter::once(point(a))
+            .chain(inner)
+            .chain(std::iter::once(point(b)))
+            .collect();
+        return VertexFit::Trimmed;
+    }
+    VertexFit::Whole
+}
+
+/// The points of a polyline strictly between positions `sa` and `sb` along it (as from
+/// [`nearest_on_polyline`]), in the order from `sa` to `sb`. On a `closed` polyline with
+/// `sa` after `sb` the stretch runs through the closing point.
+fn polyline_between(pts: &[Point3], sa: f64, sb: f64, closed: bool) -> Vec<Point3> {
+    if closed && sa > sb {
+        // Through the closing point (the last point is the first).
+        return (0..pts.len())
+            .filter(|&k| k as f64 > sa)
+            .chain((1..pts.len()).filter(|&k| (k as f64) < sb))
+            .map(|k| pts[k])
+            .collect();
+    }
+    let between = |k: usize| {
+        let k = k as f64;
+        k > sa.min(sb) && k < sa.max(sb)
+    };
+    let mut inner: Vec<Point3> = (0..pts.len())
+        .filter(|&k| between(k))
+        .map(|k| pts[k])
+        .collect();
+    if sa > sb {
+        inner.reverse();
+    }
+    inner
 }
 
 /// Two faces meeting at a knife edge (the solid's angle along their B-rep edge near zero)

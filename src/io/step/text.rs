@@ -470,7 +470,24 @@ pub fn parabolas_to_bsplines(text: &str, records: &Records) -> (String, usize) {
     if parabolas.is_empty() {
         return (text.to_string(), 0);
     }
-    // Curve id -> vertex ids of the edges on it.
+    let vertices = edge_vertices_by_curve(records);
+    let mut next_id = records.by_id.keys().next_back().copied().unwrap_or(0) + 1;
+    // Statement id -> its replacement text.
+    let mut replace: BTreeMap<u64, String> = BTreeMap::new();
+    for id in parabolas {
+        if let Some(t) = parabola_as_bspline(records, id, &vertices, &mut next_id) {
+            replace.insert(id, t);
+        }
+    }
+    if replace.is_empty() {
+        return (text.to_string(), 0);
+    }
+    replace_statements(text, &replace)
+}
+
+/// Curve id -> vertex ids of the EDGE_CURVEs on it (directly or through a SURFACE_CURVE /
+/// SEAM_CURVE).
+fn edge_vertices_by_curve(records: &Records) -> BTreeMap<u64, Vec<u64>> {
     let mut vertices: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
     for edge in records.ids_named("EDGE_CURVE") {
         let Some(r) = records.get(edge) else { continue };
@@ -488,80 +505,89 @@ pub fn parabolas_to_bsplines(text: &str, records: &Records) -> (String, usize) {
         }
         vertices.entry(curve).or_default().extend([start, end]);
     }
-    let point_of_vertex = |v: u64| -> Option<DVec3> {
-        let r = records.get(v)?;
-        if !r.is("VERTEX_POINT") {
-            return None;
-        }
-        records.triple(*r.refs.first()?)
+    vertices
+}
+
+/// The position of a VERTEX_POINT.
+fn vertex_point(records: &Records, v: u64) -> Option<DVec3> {
+    let r = records.get(v)?;
+    if !r.is("VERTEX_POINT") {
+        return None;
+    }
+    records.triple(*r.refs.first()?)
+}
+
+/// The statements that replace PARABOLA `id`: the B-spline over the span of its edges'
+/// vertices (`vertices`: curve id -> vertex ids) and its three control points, numbered
+/// from `next_id` on (which moves past them). `None` when the parabola's placement, focal
+/// distance or edges cannot be read.
+fn parabola_as_bspline(
+    records: &Records,
+    id: u64,
+    vertices: &BTreeMap<u64, Vec<u64>>,
+    next_id: &mut u64,
+) -> Option<String> {
+    let a = records.args(id)?;
+    let (Some(frame), Some(focal)) = (
+        a.get(1)
+            .and_then(|x| records.reference(x))
+            .and_then(|p| records.placement(p)),
+        a.get(2).and_then(|x| x.trim().parse::<f64>().ok()),
+    ) else {
+        return None;
     };
-    let mut next_id = records.by_id.keys().next_back().copied().unwrap_or(0) + 1;
-    // Statement id -> its replacement text.
-    let mut replace: BTreeMap<u64, String> = BTreeMap::new();
-    for id in parabolas {
-        let Some(a) = records.args(id) else { continue };
-        let (Some(frame), Some(focal)) = (
-            a.get(1)
-                .and_then(|x| records.reference(x))
-                .and_then(|p| records.placement(p)),
-            a.get(2).and_then(|x| x.trim().parse::<f64>().ok()),
-        ) else {
-            continue;
-        };
-        let (x, y, c) = (
-            frame.x_axis.truncate(),
-            frame.y_axis.truncate(),
-            frame.w_axis.truncate(),
-        );
-        if !(focal.is_finite() && focal.abs() > 0.0) {
-            continue;
-        }
-        let us: Option<Vec<f64>> = vertices
-            .get(&id)
-            .map(|vs| {
-                vs.iter()
-                    .map(|&v| point_of_vertex(v).map(|p| (p - c).dot(y) / (2.0 * focal)))
-                    .collect()
-            })
-            .unwrap_or(None);
-        let Some(us) = us.filter(|u| !u.is_empty()) else {
-            continue;
-        };
-        let u0 = us.iter().copied().fold(f64::INFINITY, f64::min);
-        let u1 = us.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if !(u1 > u0 && u0.is_finite() && u1.is_finite()) {
-            continue;
-        }
-        let at = |u: f64| c + focal * (u * u * x + 2.0 * u * y);
-        let tangent = |u: f64| 2.0 * focal * (u * x + y);
-        let points = [at(u0), at(u0) + 0.5 * (u1 - u0) * tangent(u0), at(u1)];
-        let real = |v: f64| format!("{v:.17E}");
-        let ids = [next_id, next_id + 1, next_id + 2];
-        next_id += 3;
-        let mut t = format!(
-            "#{id}=B_SPLINE_CURVE_WITH_KNOTS('',2,(#{},#{},#{}),.UNSPECIFIED.,.F.,.F.,(3,3),\
-             ({},{}),.UNSPECIFIED.);",
-            ids[0],
-            ids[1],
-            ids[2],
-            real(u0),
-            real(u1)
-        );
-        for (pid, p) in ids.iter().zip(points) {
-            t.push_str(&format!(
-                "\n#{pid}=CARTESIAN_POINT('',({},{},{}));",
-                real(p.x),
-                real(p.y),
-                real(p.z)
-            ));
-        }
-        replace.insert(id, t);
+    let (x, y, c) = (
+        frame.x_axis.truncate(),
+        frame.y_axis.truncate(),
+        frame.w_axis.truncate(),
+    );
+    if !(focal.is_finite() && focal.abs() > 0.0) {
+        return None;
     }
-    if replace.is_empty() {
-        return (text.to_string(), 0);
+    let us: Option<Vec<f64>> = vertices
+        .get(&id)
+        .map(|vs| {
+            vs.iter()
+                .map(|&v| vertex_point(records, v).map(|p| (p - c).dot(y) / (2.0 * focal)))
+                .collect()
+        })
+        .unwrap_or(None);
+    let us = us.filter(|u| !u.is_empty())?;
+    let u0 = us.iter().copied().fold(f64::INFINITY, f64::min);
+    let u1 = us.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !(u1 > u0 && u0.is_finite() && u1.is_finite()) {
+        return None;
     }
-    // Find each statement `#id = ...;` (a definition: `#id` at a statement start followed
-    // by `=`; strings and comments skipped) and put its replacement there.
+    let at = |u: f64| c + focal * (u * u * x + 2.0 * u * y);
+    let tangent = |u: f64| 2.0 * focal * (u * x + y);
+    let points = [at(u0), at(u0) + 0.5 * (u1 - u0) * tangent(u0), at(u1)];
+    let real = |v: f64| format!("{v:.17E}");
+    let ids = [*next_id, *next_id + 1, *next_id + 2];
+    *next_id += 3;
+    let mut t = format!(
+        "#{id}=B_SPLINE_CURVE_WITH_KNOTS('',2,(#{},#{},#{}),.UNSPECIFIED.,.F.,.F.,(3,3),\
+         ({},{}),.UNSPECIFIED.);",
+        ids[0],
+        ids[1],
+        ids[2],
+        real(u0),
+        real(u1)
+    );
+    for (pid, p) in ids.iter().zip(points) {
+        t.push_str(&format!(
+            "\n#{pid}=CARTESIAN_POINT('',({},{},{}));",
+            real(p.x),
+            real(p.y),
+            real(p.z)
+        ));
+    }
+    Some(t)
+}
+
+/// Puts each replacement in `replace` (statement id -> text) where the statement `#id =
+/// ...;` stands: a definition is `#id` at a statement start followed by `=`; strings and
+/// comments are skipped. Returns the new text and how many statements were replaced.
+fn replace_statements(text: &str, replace: &BTreeMap<u64, String>) -> (String, usize) {
     let bytes = text.as_bytes();
     let mut out = String::with_capacity(text.len() + 256 * replace.len());
     let mut copied = 0;
