@@ -83,7 +83,12 @@ fn model_carries_brep_knowledge() {
             panic!("face {} is not a boundary patch", f.face_id);
         };
         if let scode::mesh::BoundarySurface::Cone { axis } = kind {
-            let half = f.half_angle.unwrap();
+            let Some(scode::mesh::AnalyticSurface::Cone {
+                half_angle: half, ..
+            }) = f.exact
+            else {
+                panic!("face {} has no exact cone", f.face_id);
+            };
             for (fi, &fg) in model.mesh.face_groups.iter().enumerate() {
                 if fg as usize != g {
                     continue;

@@ -388,27 +388,16 @@ fn step_info(args: &InfoArgs) -> Result<()> {
             triangles[g as usize] += 1;
         }
         for (g, f) in model.faces.iter().enumerate() {
-            let axis = f
-                .axis
-                .map(|a| {
-                    format!(
-                        " axis ({:.4}, {:.4}, {:.4}) dir ({:.4}, {:.4}, {:.4})",
-                        a.origin.x,
-                        a.origin.y,
-                        a.origin.z,
-                        a.direction.x,
-                        a.direction.y,
-                        a.direction.z
-                    )
-                })
-                .unwrap_or_default();
-            let radius = f.radius.map(|r| format!(" r {r:.4}")).unwrap_or_default();
-            let angle = f
-                .half_angle
-                .map(|a| format!(" half-angle {:.3} deg", a.to_degrees()))
-                .unwrap_or_default();
+            let exact = match (f.exact, f.revolution_axis) {
+                (Some(e), _) => format!(" {e}"),
+                (None, Some(a)) => format!(
+                    " axis ({:.4}, {:.4}, {:.4}) dir ({:.4}, {:.4}, {:.4})",
+                    a.origin.x, a.origin.y, a.origin.z, a.direction.x, a.direction.y, a.direction.z
+                ),
+                (None, None) => String::new(),
+            };
             println!(
-                "  group {g} {} (face #{}): {} triangles, {} ({}){axis}{radius}{angle} -> {}",
+                "  group {g} {} (face #{}): {} triangles, {} ({}){exact} -> {}",
                 model.mesh.groups[g].name,
                 f.face_id,
                 triangles[g],

@@ -18,7 +18,7 @@ use glam::DVec3;
 use serde::Deserialize;
 
 use crate::error::{Error, Result};
-use crate::mesh::{Axis, BoundarySurface, ControlMesh};
+use crate::mesh::{AnalyticSurface, Axis, ControlMesh};
 
 /// Surface type of a CAD face, from the sidecar's type names.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -92,23 +92,6 @@ impl SurfaceType {
     }
 }
 
-/// Analytic parameters of a face, where the sidecar gives them (ABC models).
-#[derive(Clone, Debug, PartialEq, Default)]
-pub struct AnalyticParams {
-    /// Origin of the surface's local frame (a point on the plane / axis).
-    pub location: Option<DVec3>,
-    /// Unit `z_axis` of the local frame: plane normal, cylinder/cone axis.
-    pub axis: Option<DVec3>,
-    /// Unit `x_axis` of the local frame.
-    pub x_axis: Option<DVec3>,
-    /// Cylinder radius, or cone radius at `location`.
-    pub radius: Option<f64>,
-    /// Cone half-angle in radians.
-    pub half_angle: Option<f64>,
-    /// Cone apex, computed from the above.
-    pub apex: Option<DVec3>,
-}
-
 /// One CAD face of a sidecar.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FaceInfo {
@@ -124,39 +107,10 @@ pub struct FaceInfo {
     pub occ_type: Option<String>,
     /// Tags of bounding curves (gmsh sidecars; empty otherwise).
     pub curves: Vec<i64>,
-    /// Analytic parameters (ABC sidecars); `None` when the sidecar has none.
-    pub analytic: Option<AnalyticParams>,
-}
-
-impl FaceInfo {
-    /// The boundary surface for a boundary patch, when type and parameters determine it:
-    /// planes always; cylinders with location and axis; cones with apex and axis (axis
-    /// pointing from the apex into the cone).
-    pub fn boundary_surface(&self) -> Option<BoundarySurface> {
-        let a = self.analytic.as_ref();
-        match self.surface {
-            SurfaceType::Plane => Some(BoundarySurface::Plane),
-            SurfaceType::Cylinder => {
-                let a = a?;
-                Some(BoundarySurface::Cylinder {
-                    axis: Axis {
-                        origin: a.location?,
-                        direction: a.axis?,
-                    },
-                })
-            }
-            SurfaceType::Cone => {
-                let a = a?;
-                Some(BoundarySurface::Cone {
-                    axis: Axis {
-                        origin: a.apex?,
-                        direction: a.axis?,
-                    },
-                })
-            }
-            _ => None,
-        }
-    }
+    /// The exact plane, cylinder or cone where the sidecar gives its parameters (ABC
+    /// sidecars: location and axis, plus the radius of a cylinder and the radius and half
+    /// angle of a cone); `None` otherwise.
+    pub analytic: Option<AnalyticSurface>,
 }
 
 /// JSON shape of a sidecar (only the fields used; others are ignored).
@@ -222,17 +176,29 @@ pub fn parse_faces_json(bytes: &[u8], path: &Path) -> Result<Vec<FaceInfo>> {
         };
         let location = vec(f.location, "location")?;
         let axis = unit(vec(f.z_axis, "z_axis")?, "z_axis")?;
-        let x_axis = unit(vec(f.x_axis, "x_axis")?, "x_axis")?;
-        let has_params = location.is_some() || axis.is_some() || f.radius.is_some();
-        let apex = match (
-            surface == SurfaceType::Cone,
-            location,
-            axis,
-            f.radius,
-            f.angle,
-        ) {
-            (true, Some(loc), Some(dir), Some(r), Some(angle)) if angle.tan().abs() > 1e-12 => {
-                Some(loc - dir * (r / angle.tan()))
+        // The frame's x axis is checked but not kept: no surface here needs its seam.
+        unit(vec(f.x_axis, "x_axis")?, "x_axis")?;
+        let analytic = match (&surface, location, axis, f.radius, f.angle) {
+            (SurfaceType::Plane, Some(point), Some(normal), _, _) => {
+                Some(AnalyticSurface::Plane { point, normal })
+            }
+            (SurfaceType::Cylinder, Some(origin), Some(direction), Some(radius), _) => {
+                Some(AnalyticSurface::Cylinder {
+                    axis: Axis { origin, direction },
+                    radius,
+                })
+            }
+            // `radius` is the cone's at `location`; its apex is back along the axis.
+            (SurfaceType::Cone, Some(loc), Some(direction), Some(r), Some(angle))
+                if angle.tan().abs() > 1e-12 =>
+            {
+                Some(AnalyticSurface::Cone {
+                    axis: Axis {
+                        origin: loc - direction * (r / angle.tan()),
+                        direction,
+                    },
+                    half_angle: angle,
+                })
             }
             _ => None,
         };
@@ -243,14 +209,7 @@ pub fn parse_faces_json(bytes: &[u8], path: &Path) -> Result<Vec<FaceInfo>> {
             source_type,
             occ_type: f.occ_type,
             curves: f.curves,
-            analytic: has_params.then_some(AnalyticParams {
-                location,
-                axis,
-                x_axis,
-                radius: f.radius,
-                half_angle: f.angle,
-                apex,
-            }),
+            analytic,
         });
     }
     Ok(faces)
@@ -322,11 +281,13 @@ mod tests {
         assert_eq!(faces[0].group_name, "face_3");
         assert_eq!(faces[1].surface, SurfaceType::Cylinder);
         assert!(faces[1].analytic.is_none());
-        assert_eq!(faces[1].boundary_surface(), None);
-        let apex = faces[2].analytic.as_ref().unwrap().apex.unwrap();
-        assert!((apex - DVec3::new(0.0, 0.0, 1.5875 + 2.38125)).length() < 1e-12);
-        match faces[2].boundary_surface() {
-            Some(BoundarySurface::Cone { axis }) => assert_eq!(axis.direction, -DVec3::Z),
+        match faces[2].analytic {
+            Some(AnalyticSurface::Cone { axis, half_angle }) => {
+                let apex = DVec3::new(0.0, 0.0, 1.5875 + 2.38125);
+                assert!((axis.origin - apex).length() < 1e-12);
+                assert_eq!(axis.direction, -DVec3::Z);
+                assert_eq!(half_angle, std::f64::consts::FRAC_PI_4);
+            }
             other => panic!("{other:?}"),
         }
         assert_eq!(faces[3].surface, SurfaceType::Unknown);
@@ -382,8 +343,8 @@ mod tests {
             assert_eq!(mesh.groups.len(), faces.len(), "{mesh_file}");
             if mesh_file.starts_with("abc/") {
                 for f in &faces {
-                    let b = f.boundary_surface();
-                    assert!(b.is_some(), "{mesh_file} face {}: {:?}", f.tag, f.surface);
+                    let a = f.analytic;
+                    assert!(a.is_some(), "{mesh_file} face {}: {:?}", f.tag, f.surface);
                 }
             }
         }

@@ -53,7 +53,7 @@ pub mod stl;
 pub mod weld;
 
 pub use faces_json::{
-    face_info_for_groups, read_faces_json, sidecar_path_for, AnalyticParams, FaceInfo, SurfaceType,
+    face_info_for_groups, read_faces_json, sidecar_path_for, FaceInfo, SurfaceType,
 };
 
 /// The mesh file formats scode reads and writes, chosen by file extension.

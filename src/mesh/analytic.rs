@@ -2,6 +2,8 @@
 //! model coordinates: what the STEP reader and the face sidecar read, what the fit fits and
 //! classifies with, and what the error is measured against.
 
+use std::fmt;
+
 use glam::DVec3;
 
 use super::Axis;
@@ -79,6 +81,83 @@ fn axial(axis: &Axis, p: DVec3) -> (f64, f64, DVec3) {
 }
 
 impl AnalyticSurface {
+    /// The surface moved by a rigid placement: `point` maps positions, `vector` directions
+    /// (renormalised); sizes are unchanged.
+    pub fn placed(self, point: impl Fn(DVec3) -> DVec3, vector: impl Fn(DVec3) -> DVec3) -> Self {
+        let axis = |a: Axis| Axis {
+            origin: point(a.origin),
+            direction: vector(a.direction).normalize_or_zero(),
+        };
+        match self {
+            AnalyticSurface::Plane { point: p, normal } => AnalyticSurface::Plane {
+                point: point(p),
+                normal: vector(normal).normalize_or_zero(),
+            },
+            AnalyticSurface::Sphere { center, radius } => AnalyticSurface::Sphere {
+                center: point(center),
+                radius,
+            },
+            AnalyticSurface::Cylinder { axis: a, radius } => AnalyticSurface::Cylinder {
+                axis: axis(a),
+                radius,
+            },
+            AnalyticSurface::Cone {
+                axis: a,
+                half_angle,
+            } => AnalyticSurface::Cone {
+                axis: axis(a),
+                half_angle,
+            },
+            AnalyticSurface::Torus {
+                axis: a,
+                major_radius,
+                minor_radius,
+            } => AnalyticSurface::Torus {
+                axis: axis(a),
+                major_radius,
+                minor_radius,
+            },
+        }
+    }
+
+    /// The surface with every length times `s` (a change of unit about the origin).
+    pub fn scaled(self, s: f64) -> Self {
+        let axis = |a: Axis| Axis {
+            origin: a.origin * s,
+            direction: a.direction,
+        };
+        match self {
+            AnalyticSurface::Plane { point, normal } => AnalyticSurface::Plane {
+                point: point * s,
+                normal,
+            },
+            AnalyticSurface::Sphere { center, radius } => AnalyticSurface::Sphere {
+                center: center * s,
+                radius: radius * s,
+            },
+            AnalyticSurface::Cylinder { axis: a, radius } => AnalyticSurface::Cylinder {
+                axis: axis(a),
+                radius: radius * s,
+            },
+            AnalyticSurface::Cone {
+                axis: a,
+                half_angle,
+            } => AnalyticSurface::Cone {
+                axis: axis(a),
+                half_angle,
+            },
+            AnalyticSurface::Torus {
+                axis: a,
+                major_radius,
+                minor_radius,
+            } => AnalyticSurface::Torus {
+                axis: axis(a),
+                major_radius: major_radius * s,
+                minor_radius: minor_radius * s,
+            },
+        }
+    }
+
     pub fn kind(&self) -> SurfaceKind {
         match self {
             AnalyticSurface::Plane { .. } => SurfaceKind::Plane,
@@ -196,5 +275,43 @@ impl AnalyticSurface {
             r.rms = (s2 / points.len() as f64).sqrt();
         }
         r
+    }
+}
+
+impl fmt::Display for AnalyticSurface {
+    /// The kind and its parameters, for listings (`scode info --groups`).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let v = |p: DVec3| format!("({:.4}, {:.4}, {:.4})", p.x, p.y, p.z);
+        match *self {
+            AnalyticSurface::Plane { point, normal } => {
+                write!(f, "plane through {} normal {}", v(point), v(normal))
+            }
+            AnalyticSurface::Sphere { center, radius } => {
+                write!(f, "sphere centre {} r {radius:.4}", v(center))
+            }
+            AnalyticSurface::Cylinder { axis, radius } => write!(
+                f,
+                "cylinder axis {} dir {} r {radius:.4}",
+                v(axis.origin),
+                v(axis.direction)
+            ),
+            AnalyticSurface::Cone { axis, half_angle } => write!(
+                f,
+                "cone apex {} dir {} half-angle {:.3} deg",
+                v(axis.origin),
+                v(axis.direction),
+                half_angle.to_degrees()
+            ),
+            AnalyticSurface::Torus {
+                axis,
+                major_radius,
+                minor_radius,
+            } => write!(
+                f,
+                "torus centre {} dir {} r {major_radius:.4} / {minor_radius:.4}",
+                v(axis.origin),
+                v(axis.direction)
+            ),
+        }
     }
 }

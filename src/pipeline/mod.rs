@@ -9,7 +9,6 @@ use crate::error::Result;
 use crate::fit::encoder::{fit_model, ExactSurface, FitOptions, FitReport, SurfaceHint};
 use crate::io::faces_json::{self, SurfaceType};
 #[cfg(feature = "step")]
-use crate::mesh::AnalyticSurface;
 use crate::mesh::{ControlMesh, Tolerance};
 use glam::DVec3;
 
@@ -87,34 +86,7 @@ pub fn step_exact_surfaces(model: &crate::io::step::StepModel) -> Vec<Option<Exa
     model
         .faces
         .iter()
-        .map(|f| {
-            let axis = f.axis?;
-            let s = match f.surface {
-                SurfaceType::Plane => AnalyticSurface::Plane {
-                    point: axis.origin,
-                    normal: axis.direction,
-                },
-                SurfaceType::Cylinder => AnalyticSurface::Cylinder {
-                    axis,
-                    radius: f.radius?,
-                },
-                SurfaceType::Cone => AnalyticSurface::Cone {
-                    axis,
-                    half_angle: f.half_angle?,
-                },
-                SurfaceType::Sphere => AnalyticSurface::Sphere {
-                    center: axis.origin,
-                    radius: f.radius?,
-                },
-                SurfaceType::Torus => AnalyticSurface::Torus {
-                    axis,
-                    major_radius: f.radius?,
-                    minor_radius: f.minor_radius?,
-                },
-                _ => return None,
-            };
-            ExactSurface::new(s)
-        })
+        .map(|f| f.exact.and_then(ExactSurface::new))
         .collect()
 }
 

@@ -22,7 +22,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use super::text::Records;
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::Axis;
+use crate::mesh::{AnalyticSurface, Axis};
 
 /// Which elementary surface, with its sizes (file units; angle in radians).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -295,28 +295,48 @@ impl Analytic {
         }
     }
 
-    /// Type, axis and radii in the vocabulary of [`super::FaceSurface`] (file units).
-    pub fn describe(&self) -> (SurfaceType, Axis, Option<f64>, Option<f64>, Option<f64>) {
+    /// The surface type and the exact surface in model coordinates (file units).
+    pub fn describe(&self) -> (SurfaceType, AnalyticSurface) {
         let axis = Axis {
             origin: self.origin,
             direction: self.z,
         };
         match self.kind {
-            Kind::Plane => (SurfaceType::Plane, axis, None, None, None),
-            Kind::Cylinder { radius } => (SurfaceType::Cylinder, axis, Some(radius), None, None),
-            Kind::Sphere { radius } => (SurfaceType::Sphere, axis, Some(radius), None, None),
-            Kind::Torus { major, minor } => {
-                (SurfaceType::Torus, axis, Some(major), Some(minor), None)
-            }
+            Kind::Plane => (
+                SurfaceType::Plane,
+                AnalyticSurface::Plane {
+                    point: self.origin,
+                    normal: self.z,
+                },
+            ),
+            Kind::Cylinder { radius } => (
+                SurfaceType::Cylinder,
+                AnalyticSurface::Cylinder { axis, radius },
+            ),
+            Kind::Sphere { radius } => (
+                SurfaceType::Sphere,
+                AnalyticSurface::Sphere {
+                    center: self.origin,
+                    radius,
+                },
+            ),
+            Kind::Torus { major, minor } => (
+                SurfaceType::Torus,
+                AnalyticSurface::Torus {
+                    axis,
+                    major_radius: major,
+                    minor_radius: minor,
+                },
+            ),
             Kind::Cone { radius, semi_angle } => (
                 SurfaceType::Cone,
-                Axis {
-                    origin: self.origin - radius / semi_angle.tan() * self.z,
-                    direction: self.z,
+                AnalyticSurface::Cone {
+                    axis: Axis {
+                        origin: self.origin - radius / semi_angle.tan() * self.z,
+                        direction: self.z,
+                    },
+                    half_angle: semi_angle,
                 },
-                Some(radius),
-                None,
-                Some(semi_angle),
             ),
         }
     }
@@ -410,7 +430,10 @@ mod tests {
         // The apex, one unit below the placement, with any u.
         let apex = cone.origin - cone.z;
         assert!(cone.point(1.3, -1.0).distance(apex) < 1e-12);
-        assert!(cone.describe().1.origin.distance(apex) < 1e-12);
+        let AnalyticSurface::Cone { axis, .. } = cone.describe().1 else {
+            panic!("not a cone")
+        };
+        assert!(axis.origin.distance(apex) < 1e-12);
         let q = cone.project(apex, Some([0.7, 0.0]));
         assert!((q[0] - 0.7).abs() < 1e-12 && (q[1] + 1.0).abs() < 1e-12);
         // Sphere poles and equator.

@@ -23,7 +23,7 @@ use super::text::{self, Records};
 use super::{run_with_timeout, FaceSurface, SkippedFace};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::Axis;
+use crate::mesh::{AnalyticSurface, Axis};
 
 /// One face truck could convert, with its id and exact surface description.
 #[derive(Clone)]
@@ -494,12 +494,9 @@ fn convert_surface(
         .ok()
         .flatten();
     if let Some(a) = &exact {
-        let (surface, axis, radius, minor_radius, half_angle) = a.describe();
+        let (surface, exact) = a.describe();
         info.surface = surface;
-        info.axis = Some(axis);
-        info.radius = radius;
-        info.minor_radius = minor_radius;
-        info.half_angle = half_angle;
+        info.exact = Some(exact);
     }
     if !holder.same_sense {
         surface.invert();
@@ -674,32 +671,34 @@ fn surface_info(surface: &Surface, entity: String, face_id: u64) -> FaceSurface 
         body: 0,
         surface: SurfaceType::Other(entity.clone()),
         entity,
-        axis: None,
-        radius: None,
-        minor_radius: None,
-        half_angle: None,
+        exact: None,
+        revolution_axis: None,
     };
     match surface {
         Surface::ElementarySurface(es) => match es.as_ref() {
             ElementarySurface::Plane(p) => {
                 info.surface = SurfaceType::Plane;
-                info.axis = Some(Axis {
-                    origin: dv(p.origin()),
-                    direction: dvv(p.normal()),
+                info.exact = Some(AnalyticSurface::Plane {
+                    point: dv(p.origin()),
+                    normal: dvv(p.normal()),
                 });
             }
             ElementarySurface::Sphere(s) => {
                 info.surface = SurfaceType::Sphere;
                 let m = s.transform();
-                info.axis = Some(placed_axis(m, s.entity().0.center(), Vector3::unit_z()));
-                info.radius = Some(s.entity().0.radius());
+                info.exact = Some(AnalyticSurface::Sphere {
+                    center: placed_axis(m, s.entity().0.center(), Vector3::unit_z()).origin,
+                    radius: s.entity().0.radius(),
+                });
             }
             ElementarySurface::ToroidalSurface(t) => {
                 info.surface = SurfaceType::Torus;
                 let m = t.transform();
-                info.axis = Some(placed_axis(m, t.entity().center(), Vector3::unit_z()));
-                info.radius = Some(t.entity().large_radius());
-                info.minor_radius = Some(t.entity().small_radius());
+                info.exact = Some(AnalyticSurface::Torus {
+                    axis: placed_axis(m, t.entity().center(), Vector3::unit_z()),
+                    major_radius: t.entity().large_radius(),
+                    minor_radius: t.entity().small_radius(),
+                });
             }
             ElementarySurface::CylindricalSurface(c) => {
                 info.surface = SurfaceType::Cylinder;
@@ -707,8 +706,10 @@ fn surface_info(surface: &Surface, entity: String, face_id: u64) -> FaceSurface 
                 let rc = c.entity();
                 let axis = placed_axis(m, rc.origin(), rc.axis());
                 let a = dv(m.transform_point(rc.entity_curve().0));
-                info.radius = Some(radial(a, &axis).length());
-                info.axis = Some(axis);
+                info.exact = Some(AnalyticSurface::Cylinder {
+                    axis,
+                    radius: radial(a, &axis).length(),
+                });
             }
             ElementarySurface::ConicalSurface(c) => {
                 info.surface = SurfaceType::Cone;
@@ -725,7 +726,6 @@ fn surface_info(surface: &Surface, entity: String, face_id: u64) -> FaceSurface 
                 } else {
                     rb.length()
                 };
-                info.radius = Some(sa);
                 if (sa - sb).abs() > 1e-300 {
                     let t = sa / (sa - sb);
                     let apex = a + t * (b - a);
@@ -735,10 +735,12 @@ fn surface_info(surface: &Surface, entity: String, face_id: u64) -> FaceSurface 
                         d = -d;
                     }
                     let h = (far - apex).dot(d);
-                    info.half_angle = Some(radial(far, &axis).length().atan2(h));
-                    info.axis = Some(Axis {
-                        origin: apex,
-                        direction: d,
+                    info.exact = Some(AnalyticSurface::Cone {
+                        axis: Axis {
+                            origin: apex,
+                            direction: d,
+                        },
+                        half_angle: radial(far, &axis).length().atan2(h),
                     });
                 }
             }
@@ -747,7 +749,7 @@ fn surface_info(surface: &Surface, entity: String, face_id: u64) -> FaceSurface 
             SweptCurve::ExtrudedCurve(_) => info.surface = SurfaceType::SurfaceOfExtrusion,
             SweptCurve::RevolutedCurve(r) => {
                 info.surface = SurfaceType::SurfaceOfRevolution;
-                info.axis = Some(placed_axis(
+                info.revolution_axis = Some(placed_axis(
                     r.transform(),
                     r.entity().origin(),
                     r.entity().axis(),

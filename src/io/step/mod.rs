@@ -65,7 +65,7 @@ use std::time::Duration;
 
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::{Axis, ControlMesh};
+use crate::mesh::{AnalyticSurface, Axis, ControlMesh};
 
 /// Options of [`read_step`].
 #[derive(Clone, Debug, PartialEq)]
@@ -137,16 +137,12 @@ pub struct FaceSurface {
     /// STEP entity name of the surface (`CYLINDRICAL_SURFACE`, `B_SPLINE_SURFACE_WITH_KNOTS`,
     /// or a complex instance `(BOUNDED_SURFACE B_SPLINE_SURFACE ...)`).
     pub entity: String,
-    /// Plane: a point and the normal. Cylinder: a point on the axis and its direction.
-    /// Cone: the apex and the axis direction (pointing from the apex into the cone).
-    /// Sphere, torus: the centre and the axis. Revolution: the axis. Else `None`.
-    pub axis: Option<Axis>,
-    /// Cylinder, sphere: radius; torus: major radius; cone: radius at the placement.
-    pub radius: Option<f64>,
-    /// Torus: minor radius.
-    pub minor_radius: Option<f64>,
-    /// Cone: half angle in radians.
-    pub half_angle: Option<f64>,
+    /// The exact surface of a plane, cylinder, cone (its axis from the apex into the
+    /// cone), sphere or torus face; `None` for other surfaces (and for a cone whose apex
+    /// cannot be placed).
+    pub exact: Option<AnalyticSurface>,
+    /// A surface of revolution's axis.
+    pub revolution_axis: Option<Axis>,
 }
 
 /// One body: a solid (MANIFOLD_SOLID_BREP, BREP_WITH_VOIDS; one per assembly instance) or a

@@ -26,7 +26,7 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::{Axis, BoundarySurface, ControlMesh, PatchKind};
+use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind};
 
 type MeshedShell = CompressedShell<Point3, PolylineCurve<Point3>, Option<PolygonMesh>>;
 /// One face as a shell of its own, for truck's tessellator.
@@ -844,7 +844,13 @@ impl<'a> WeldedModel<'a> {
         let place = face.body.placement;
         let mut info = face.parsed.info.clone();
         info.body = self.bodies.len() as u32;
-        if let Some(a) = &mut info.axis {
+        info.exact = info.exact.map(|s| {
+            s.placed(
+                |p| place.transform_point3(p),
+                |v| place.transform_vector3(v),
+            )
+        });
+        if let Some(a) = &mut info.revolution_axis {
             a.origin = place.transform_point3(a.origin);
             a.direction = place.transform_vector3(a.direction).normalize_or_zero();
         }
@@ -1210,28 +1216,23 @@ fn split_doubled_ears(
 }
 
 fn scale_surface(f: &mut FaceSurface, s: f64) {
-    if let Some(a) = &mut f.axis {
+    f.exact = f.exact.map(|e| e.scaled(s));
+    if let Some(a) = &mut f.revolution_axis {
         a.origin *= s;
-    }
-    for r in [&mut f.radius, &mut f.minor_radius].into_iter().flatten() {
-        *r *= s;
     }
 }
 
 /// The patch kind a face's exact surface asks for: boundary patches with the exact axis for
 /// planes, cylinders and cones; closed patches for everything else.
 pub(super) fn patch_kind(f: &FaceSurface) -> PatchKind {
-    match (&f.surface, f.axis) {
+    match (&f.surface, f.exact) {
         (SurfaceType::Plane, _) => PatchKind::Boundary(BoundarySurface::Plane),
-        (SurfaceType::Cylinder, Some(axis)) => {
+        (SurfaceType::Cylinder, Some(AnalyticSurface::Cylinder { axis, .. })) => {
             PatchKind::Boundary(BoundarySurface::Cylinder { axis })
         }
-        (SurfaceType::Cone, Some(axis)) => PatchKind::Boundary(BoundarySurface::Cone {
-            axis: Axis {
-                origin: axis.origin,
-                direction: axis.direction,
-            },
-        }),
+        (SurfaceType::Cone, Some(AnalyticSurface::Cone { axis, .. })) => {
+            PatchKind::Boundary(BoundarySurface::Cone { axis })
+        }
         _ => PatchKind::Closed,
     }
 }
