@@ -21,7 +21,7 @@ use glam::DVec3;
 
 use super::curves::CurveNetwork;
 use super::exact::ExactSurface;
-use crate::mesh::{edge_key, Axis, BoundarySurface, ControlMesh, PatchKind};
+use crate::mesh::{edge_key, AnalyticSurface, Axis, BoundarySurface, ControlMesh, PatchKind};
 use crate::metrics::TriangleSurface;
 
 /// The input's faces (groups) one by one: a closest-point structure per group and the
@@ -110,18 +110,43 @@ impl OwnFaces<'_> {
     }
 }
 
-/// Distance from points to one analytic surface (a cylinder or cone group's), fitted to the
-/// group's vertices: the radius of a cylinder, the opening of a cone about its apex.
-enum AnalyticSurface {
-    Cylinder {
-        axis: Axis,
-        radius: f64,
-    },
-    /// Points `(h, r)` in the axis frame satisfy `r = slope * h`.
-    Cone {
-        axis: Axis,
-        slope: f64,
-    },
+/// The analytic surface of a cylinder or cone group, fitted to the group's vertices about
+/// the patch's axis: the radius of a cylinder, the opening of a cone about its apex (least
+/// squares on `r = slope * h`). `None` for planes (their facets lie on them), closed
+/// patches (no analytic surface) and degenerate fits.
+fn fit_about_axis(kind: &PatchKind, points: &[DVec3]) -> Option<AnalyticSurface> {
+    if points.is_empty() {
+        return None;
+    }
+    match *kind {
+        PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => {
+            let radius =
+                points.iter().map(|&p| axial(&axis, p).1).sum::<f64>() / points.len() as f64;
+            radius
+                .is_finite()
+                .then_some(AnalyticSurface::Cylinder { axis, radius })
+        }
+        PatchKind::Boundary(BoundarySurface::Cone { axis }) => {
+            let (num, den) = points.iter().fold((0.0, 0.0), |a, &p| {
+                let (h, r) = axial(&axis, p);
+                (a.0 + r * h, a.1 + h * h)
+            });
+            let slope = num / den;
+            if !(den > 0.0 && slope.is_finite() && slope != 0.0) {
+                return None;
+            }
+            // A negative slope is the cone opening the other way along the axis.
+            let direction = axis.direction * slope.signum();
+            Some(AnalyticSurface::Cone {
+                axis: Axis {
+                    origin: axis.origin,
+                    direction,
+                },
+                half_angle: slope.abs().atan(),
+            })
+        }
+        _ => None,
+    }
 }
 
 /// Height along the axis and distance from it.
@@ -129,47 +154,6 @@ fn axial(axis: &Axis, p: DVec3) -> (f64, f64) {
     let d = p - axis.origin;
     let h = d.dot(axis.direction);
     (h, (d - h * axis.direction).length())
-}
-
-impl AnalyticSurface {
-    /// The surface of a boundary patch kind through `points`; `None` for planes (their
-    /// facets lie on them) and closed patches (no analytic surface).
-    fn fit(kind: &PatchKind, points: &[DVec3]) -> Option<AnalyticSurface> {
-        if points.is_empty() {
-            return None;
-        }
-        match *kind {
-            PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => {
-                let radius =
-                    points.iter().map(|&p| axial(&axis, p).1).sum::<f64>() / points.len() as f64;
-                radius
-                    .is_finite()
-                    .then_some(AnalyticSurface::Cylinder { axis, radius })
-            }
-            PatchKind::Boundary(BoundarySurface::Cone { axis }) => {
-                let (num, den) = points.iter().fold((0.0, 0.0), |a, &p| {
-                    let (h, r) = axial(&axis, p);
-                    (a.0 + r * h, a.1 + h * h)
-                });
-                let slope = num / den;
-                (den > 0.0 && slope.is_finite()).then_some(AnalyticSurface::Cone { axis, slope })
-            }
-            _ => None,
-        }
-    }
-
-    /// Distance from `p` to the surface (exact for the cylinder; for the cone, to the
-    /// generator line in `p`'s half-plane, which is exact on the apex's side of the
-    /// surface's normal plane).
-    fn distance(&self, p: DVec3) -> f64 {
-        match self {
-            AnalyticSurface::Cylinder { axis, radius } => (axial(axis, p).1 - radius).abs(),
-            AnalyticSurface::Cone { axis, slope } => {
-                let (h, r) = axial(axis, p);
-                (r - slope * h).abs() / (1.0 + slope * slope).sqrt()
-            }
-        }
-    }
 }
 
 /// Barycentric sample grid of a facet: all `(i, j, k)/N` with `i + j + k = N`. A flat
@@ -206,7 +190,7 @@ pub(crate) fn add_analytic_surface_allowance(
     let surfaces: Vec<Option<AnalyticSurface>> = kinds
         .iter()
         .zip(&group_points)
-        .map(|(k, pts)| AnalyticSurface::fit(k, pts))
+        .map(|(k, pts)| fit_about_axis(k, pts))
         .collect();
     for ((t, &g), allowance) in triangles.iter().zip(face_groups).zip(chord.iter_mut()) {
         let Some(Some(surface)) = surfaces.get(g as usize) else {
