@@ -117,12 +117,10 @@ pub(crate) fn same_faces(a: &ControlMesh, b: &ControlMesh) -> bool {
 /// [`STEP_CHORD_FRACTION`] of the encode tolerance.
 #[cfg(feature = "step")]
 pub fn step_options_for(tolerance: Tolerance) -> crate::io::step::StepOptions {
-    let mut o = crate::io::step::StepOptions::default();
-    match tolerance.scaled(STEP_CHORD_FRACTION) {
-        Tolerance::Absolute(t) => o.chordal_tolerance = Some(t),
-        Tolerance::Relative(f) => o.relative_chordal_tolerance = f,
+    crate::io::step::StepOptions {
+        chordal_tolerance: tolerance.scaled(STEP_CHORD_FRACTION),
+        ..Default::default()
     }
-    o
 }
 
 /// Per-group surface hints from the `<name>.faces.json` sidecar next to `input`, matched by

@@ -318,10 +318,7 @@ mod step {
             .iter()
             .map(|v| {
                 let mut o = step_options_for(opts.fit.tolerance);
-                if let Some(c) = &mut o.chordal_tolerance {
-                    *c *= v.chord_factor;
-                }
-                o.relative_chordal_tolerance *= v.chord_factor;
+                o.chordal_tolerance = o.chordal_tolerance.scaled(v.chord_factor);
                 o.analytic_chordal_factor = v.analytic_factor;
                 o.stretch_parameter_plane = v.stretch;
                 o

@@ -65,18 +65,16 @@ use std::time::Duration;
 
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::{AnalyticSurface, Axis, ControlMesh};
+use crate::mesh::{AnalyticSurface, Axis, ControlMesh, Tolerance};
 
 /// Options of [`read_step`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepOptions {
-    /// Chordal tolerance of the tessellation in millimetres (the output unit). `None`:
-    /// `relative_chordal_tolerance` times the bounding-box diagonal.
-    pub chordal_tolerance: Option<f64>,
-    /// Default chordal tolerance as a fraction of the bounding-box diagonal: a quarter of the
-    /// encoder's default tolerance (1e-3 of the diagonal), so the tessellation's own chord
-    /// error takes a small part of the error budget.
-    pub relative_chordal_tolerance: f64,
+    /// Chordal tolerance of the tessellation: in millimetres (the output unit), or relative
+    /// to the model's bounding-box diagonal. Default: a quarter of the encoder's default
+    /// tolerance ([`Tolerance::DEFAULT`]), so the tessellation's own chord error takes a
+    /// small part of the error budget.
+    pub chordal_tolerance: Tolerance,
     /// Faces on a plane, cylinder, cone, sphere or torus read from the record are
     /// tessellated at this multiple of the chordal tolerance, and so are the edges only such
     /// faces share (default 1: one chordal tolerance for all). The encoder measures those
@@ -107,8 +105,7 @@ pub struct StepOptions {
 impl Default for StepOptions {
     fn default() -> Self {
         StepOptions {
-            chordal_tolerance: None,
-            relative_chordal_tolerance: 2.5e-4,
+            chordal_tolerance: Tolerance::DEFAULT.scaled(0.25),
             analytic_chordal_factor: 1.0,
             stretch_parameter_plane: true,
             to_millimetres: true,

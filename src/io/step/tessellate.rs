@@ -26,7 +26,7 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind};
+use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind, Tolerance};
 
 type MeshedShell = CompressedShell<Point3, PolylineCurve<Point3>, Option<PolygonMesh>>;
 /// One face as a shell of its own, for truck's tessellator.
@@ -216,8 +216,8 @@ impl Tolerances {
     /// `scale` millimetres; an error when they are not positive numbers.
     fn choose(path: &Path, diag: f64, scale: f64, opts: &StepOptions) -> Result<Self> {
         let chord_mm = match opts.chordal_tolerance {
-            Some(t) => t,
-            None => opts.relative_chordal_tolerance * diag * scale,
+            Tolerance::Absolute(t) => t,
+            Tolerance::Relative(f) => f * diag * scale,
         };
         if !(chord_mm > 0.0 && chord_mm.is_finite()) {
             return Err(Error::input(
