@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::curves::{self, build_curve_network, CurveNetwork, CurveOptions};
 use crate::error::Result;
-use crate::mesh::{Axis, ControlMesh};
+use crate::mesh::{Axis, ControlMesh, Tolerance};
 use crate::metrics::segment_parameter;
 
 /// The curve network with what the rounds look up in it.
@@ -26,7 +26,7 @@ impl Chains {
         let net = build_curve_network(
             mesh,
             &CurveOptions {
-                simplify_tolerance: Some(tol),
+                simplify_tolerance: Tolerance::Absolute(tol),
                 ..Default::default()
             },
         )?;

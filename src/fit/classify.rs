@@ -13,8 +13,7 @@ use super::plan::GroupPlan;
 use super::primitives::{fit_cone, fit_cylinder, fit_plane};
 use super::segment::{segment, SegmentOptions};
 use crate::error::Result;
-use crate::mesh::AnalyticSurface;
-use crate::mesh::{BoundarySurface, ControlMesh, PatchKind};
+use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind, Tolerance};
 
 /// The input's faces as the fit works on them.
 pub(super) struct Faces {
@@ -50,7 +49,7 @@ pub(super) fn classify_faces(
             sharp_angle_deg: opts.sharp_angle_deg,
             // Region growing merges more with a looser tolerance, and merged regions hide
             // features a patch cannot follow: cap it.
-            tolerance: Some(0.25 * tol.min(2e-3 * diag)),
+            tolerance: Tolerance::Absolute(0.25 * tol.min(2e-3 * diag)),
             ..Default::default()
         };
         let (seg, seg_report) = segment(&mesh, &seg_opts)?;

@@ -15,7 +15,7 @@ use glam::DVec3;
 
 use super::adjacency::EdgeTable;
 use crate::error::{Error, Result};
-use crate::mesh::ControlMesh;
+use crate::mesh::{ControlMesh, Tolerance};
 
 /// Parameters of [`build_curve_network`].
 #[derive(Clone, Debug, PartialEq)]
@@ -23,16 +23,16 @@ pub struct CurveOptions {
     /// A chain vertex where the polyline turns by more than this (angle between the
     /// incoming and outgoing edge directions) becomes a corner.
     pub corner_angle_deg: f64,
-    /// Douglas-Peucker tolerance of the control polygons, in model units; default
-    /// `1e-3 * bounding-box diagonal`.
-    pub simplify_tolerance: Option<f64>,
+    /// Douglas-Peucker tolerance of the control polygons (0 keeps every vertex); default
+    /// [`Tolerance::DEFAULT`].
+    pub simplify_tolerance: Tolerance,
 }
 
 impl Default for CurveOptions {
     fn default() -> Self {
         CurveOptions {
             corner_angle_deg: 60.0,
-            simplify_tolerance: None,
+            simplify_tolerance: Tolerance::DEFAULT,
         }
     }
 }
@@ -274,7 +274,7 @@ fn checked_tolerance(mesh: &ControlMesh, opts: &CurveOptions) -> Result<f64> {
             opts.corner_angle_deg
         )));
     }
-    let tol = opts.simplify_tolerance.unwrap_or(1e-3 * mesh.diagonal());
+    let tol = opts.simplify_tolerance.resolve(mesh.diagonal());
     if !(tol >= 0.0 && tol.is_finite()) {
         return Err(Error::Parameter(format!(
             "simplification tolerance {tol} must be finite and >= 0"

@@ -35,17 +35,19 @@ use glam::DVec3;
 use super::adjacency::{face_normals_and_areas, EdgeTable};
 use super::primitives::{fit_kind_within, refine, SurfaceFit};
 use crate::error::{Error, Result};
-use crate::mesh::{AnalyticSurface, Residuals, SurfaceKind};
-use crate::mesh::{Axis, BoundarySurface, ControlMesh, Group, PatchKind};
+use crate::mesh::{
+    AnalyticSurface, Axis, BoundarySurface, ControlMesh, Group, PatchKind, Residuals, SurfaceKind,
+    Tolerance,
+};
 
 /// Parameters of [`segment`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct SegmentOptions {
     /// Edges whose dihedral angle (between face normals) exceeds this are sharp.
     pub sharp_angle_deg: f64,
-    /// Max distance of a vertex to its region's primitive, in model units; default
-    /// `1e-3 * bounding-box diagonal`.
-    pub tolerance: Option<f64>,
+    /// Max distance of a vertex to its region's primitive; default
+    /// [`Tolerance::DEFAULT`].
+    pub tolerance: Tolerance,
     /// Regions produced by splitting a smooth component that are smaller than this merge
     /// into a neighbour.
     pub min_region_triangles: usize,
@@ -79,7 +81,7 @@ impl Default for SegmentOptions {
     fn default() -> Self {
         SegmentOptions {
             sharp_angle_deg: 30.0,
-            tolerance: None,
+            tolerance: Tolerance::DEFAULT,
             min_region_triangles: 12,
             normal_angle_deg: 20.0,
             kinds: SurfaceKind::ALL.to_vec(),
@@ -716,13 +718,10 @@ fn checked_tolerance(mesh: &ControlMesh, opts: &SegmentOptions) -> Result<f64> {
             opts.normal_angle_deg
         )));
     }
-    let tol = opts.tolerance.unwrap_or(1e-3 * mesh.diagonal());
-    if !(tol > 0.0 && tol.is_finite()) {
-        return Err(Error::Parameter(format!(
-            "segmentation tolerance {tol} must be positive (degenerate mesh?)"
-        )));
-    }
-    Ok(tol)
+    opts.tolerance.checked(
+        mesh.diagonal(),
+        "segmentation tolerance (of a degenerate mesh?)",
+    )
 }
 
 /// True when faces `f` and `g` meet at more than the sharp angle. Degenerate faces (zero
@@ -1329,7 +1328,7 @@ mod tests {
             ..Default::default()
         }));
         assert!(bad(SegmentOptions {
-            tolerance: Some(-1.0),
+            tolerance: Tolerance::Absolute(-1.0),
             ..Default::default()
         }));
         assert!(bad(SegmentOptions {
