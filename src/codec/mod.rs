@@ -29,7 +29,7 @@ use glam::DVec3;
 
 use self::bytes::{put_section, put_varint, read_section, Reader};
 use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
-use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, Quantizer};
+use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, GridAxis, Quantizer};
 use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
 use crate::error::{Error, Result};
 use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
@@ -682,6 +682,100 @@ impl Recency {
     }
 }
 
+/// What encoder and decoder both know while coding face groups in encoding order (spec
+/// §6.4-§6.5): the groups of the faces so far and the candidate lists of the current face.
+struct GroupCoding<'a> {
+    rb: &'a Rebuilt,
+    /// Coded group of every rebuilt face so far (`NONE` for holes and later faces).
+    face_group: Vec<u32>,
+    prev_real: Option<usize>,
+    cands: Vec<u32>,
+    vcands: Vec<u32>,
+    /// Only for version-3 files with more than one group, the only ones that name a group
+    /// by its recency rank.
+    recency: Option<Recency>,
+}
+
+impl<'a> GroupCoding<'a> {
+    /// No face has a group yet.
+    fn new(rb: &'a Rebuilt, recency: Option<Recency>) -> Self {
+        GroupCoding {
+            rb,
+            face_group: vec![NONE; rb.faces.len()],
+            prev_real: None,
+            cands: Vec::new(),
+            vcands: Vec::new(),
+            recency,
+        }
+    }
+
+    /// Collects the edge candidates of mesh face `f` and returns its context class
+    /// (versions 1-2: by the number of candidates; version 3: [`group_class`]).
+    fn edge_candidates(&mut self, f: usize, groups_v3: bool) -> usize {
+        group_candidates(
+            self.rb,
+            f,
+            &self.face_group,
+            self.prev_real,
+            &mut self.cands,
+        );
+        if groups_v3 {
+            group_class(self.rb, f, &self.face_group, &self.cands)
+        } else {
+            self.cands.len().clamp(1, 3) - 1
+        }
+    }
+
+    /// The group a decoded symbol names for mesh face `f` (its edge candidates collected);
+    /// `next_group` is the next unused group id.
+    fn resolve(&mut self, f: usize, sym: GroupSym, next_group: &mut u32) -> Result<u32> {
+        let missing = |what: &str, c: u8, n: usize| {
+            Error::format(
+                "connectivity",
+                "group",
+                format!("face {f} refers to {what} candidate group {c} of {n}"),
+            )
+        };
+        Ok(match sym {
+            GroupSym::New => {
+                *next_group += 1;
+                *next_group - 1
+            }
+            GroupSym::Explicit(id) => id,
+            GroupSym::Candidate(c) => *self
+                .cands
+                .get(usize::from(c))
+                .ok_or_else(|| missing("edge", c, self.cands.len()))?,
+            GroupSym::Vertex(c) => {
+                vertex_candidates(self.rb, f, &self.face_group, &self.cands, &mut self.vcands);
+                *self
+                    .vcands
+                    .get(usize::from(c))
+                    .ok_or_else(|| missing("vertex", c, self.vcands.len()))?
+            }
+            GroupSym::Recent(r) => match &self.recency {
+                Some(rc) if r < rc.used => self.face_group[rc.face_of(r)],
+                _ => {
+                    return Err(Error::format(
+                        "connectivity",
+                        "group_rank",
+                        format!("rank {r} among the groups used so far"),
+                    ))
+                }
+            },
+        })
+    }
+
+    /// Records group `g` for mesh face `f`.
+    fn assign(&mut self, f: usize, g: u32) {
+        self.face_group[f] = g;
+        if let Some(rc) = &mut self.recency {
+            rc.assign(g, f);
+        }
+        self.prev_real = Some(f);
+    }
+}
+
 // ------------------------------------------------------------------------------------------
 // Crease coding (spec §7)
 
@@ -1265,44 +1359,312 @@ fn parse_header(
     Ok((header, quant))
 }
 
+/// Decodes a file section by section: the mesh, and what [`inspect`] reports about it.
 fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     limit("input bytes", bytes.len() as u64, limits.max_input_bytes)?;
-    let mut r = Reader::new(bytes, "file");
-    let magic = r.bytes(4, "magic")?;
-    if magic != MAGIC {
-        return Err(Error::format(
-            "file",
-            "magic",
-            "not an .scode file (bad magic bytes)",
-        ));
+    let file = FileSections::read(bytes, limits)?;
+    let counts = CodedCounts::of(&file.header)?;
+    let mut conn = file.connectivity(counts.traversal)?;
+    file.check_isolated_vertices_fit()?;
+    let (patch_kinds, grid_axes) = file.patches()?;
+    let creases = file.creases(&conn, counts.coded)?;
+    let q = file.geometry(&conn, &creases, &patch_kinds, &grid_axes, counts.coded)?;
+    let merges = file.fixups(counts.coded)?;
+    let final_of_coded = final_numbering(counts.coded, &merges);
+    let (names, input_of_coded) = file.names()?;
+    let patch_kinds = match &input_of_coded {
+        Some(order) => restore_input_group_order(order, &mut conn.face_group, &patch_kinds),
+        None => patch_kinds,
+    };
+    let mut positions = vec![DVec3::ZERO; file.header.vertex_count as usize];
+    for c in 0..counts.coded {
+        positions[final_of_coded[c] as usize] = file.quant.dequantize(q[c]);
     }
-    let major = r.u8("version_major")?;
-    let minor = r.u8("version_minor")?;
-    let features = features_for(major, minor)?;
-    let max_raw = limits.max_input_bytes;
-    let verify = limits.verify_checksums;
+    let mesh = assemble_mesh(
+        &file.header,
+        &conn,
+        &creases,
+        &final_of_coded,
+        positions,
+        names,
+        &patch_kinds,
+    )?;
+    let info = FileInfo {
+        header: file.header.clone(),
+        sections: file.sections,
+        total_bytes: bytes.len(),
+        sharp_edge_count: mesh.sharp_edges.len(),
+        corner_count: mesh.corners.len(),
+        group_names: mesh.groups.iter().map(|g| g.name.clone()).collect(),
+        patch_kinds,
+        component_count: conn.rb.faces.iter().filter(|f| f.start).count(),
+        label_count: conn.label_count,
+        group_bits: conn.group_bits,
+    };
+    Ok((
+        Decoded {
+            header: file.header,
+            mesh,
+        },
+        info,
+    ))
+}
 
-    let mut sections_info = Vec::new();
-    let hs = read_section(&mut r, Some(0), verify, max_raw)?;
-    if hs.id != SEC_HEADER {
-        return Err(Error::format(
-            "file",
-            "section",
-            "the first section must be the header",
-        ));
+/// A file split into its sections, with the parsed header: what the section decoders
+/// read.
+struct FileSections {
+    header: Header,
+    quant: Quantizer,
+    features: Features,
+    /// Payload of every known section present, by section id.
+    payloads: [Option<Vec<u8>>; 7],
+    sections: Vec<SectionInfo>,
+}
+
+impl FileSections {
+    /// Checks magic and version, parses the header and reads the other sections (ids
+    /// increasing; unknown skippable ones are ignored), checking the optional ones against
+    /// the header flags.
+    fn read(bytes: &[u8], limits: &Limits) -> Result<Self> {
+        let mut r = Reader::new(bytes, "file");
+        let magic = r.bytes(4, "magic")?;
+        if magic != MAGIC {
+            return Err(Error::format(
+                "file",
+                "magic",
+                "not an .scode file (bad magic bytes)",
+            ));
+        }
+        let major = r.u8("version_major")?;
+        let minor = r.u8("version_minor")?;
+        let features = features_for(major, minor)?;
+        let hs = read_section(
+            &mut r,
+            Some(0),
+            limits.verify_checksums,
+            limits.max_input_bytes,
+        )?;
+        if hs.id != SEC_HEADER {
+            return Err(Error::format(
+                "file",
+                "section",
+                "the first section must be the header",
+            ));
+        }
+        // The magic and version bytes count towards the header's size.
+        let mut sections = vec![SectionInfo {
+            name: "header",
+            stored_bytes: hs.stored_bytes + 6,
+            raw_bytes: hs.payload.len(),
+        }];
+        let (header, quant) = parse_header(&hs.payload, major, minor, limits)?;
+        let payloads = read_payloads(&mut r, limits, &mut sections)?;
+        check_optional_sections(&payloads, header.flags)?;
+        Ok(FileSections {
+            header,
+            quant,
+            features,
+            payloads,
+            sections,
+        })
     }
-    sections_info.push(SectionInfo {
-        name: "header",
-        stored_bytes: hs.stored_bytes + 6,
-        raw_bytes: hs.payload.len(),
-    });
-    let (header, quant) = parse_header(&hs.payload, major, minor, limits)?;
 
-    // Remaining sections, in increasing id order; unknown skippable ones are ignored.
+    /// The payload of section `id`, if the file has it.
+    fn optional(&self, id: u8) -> Option<&[u8]> {
+        self.payloads[id as usize].as_deref()
+    }
+
+    /// The payload of section `id`; an error naming the section if the file lacks it.
+    fn required(&self, id: u8) -> Result<&[u8]> {
+        self.optional(id).ok_or_else(|| {
+            Error::format(section_name(id), "section", "required section is missing")
+        })
+    }
+
+    /// Decodes the `connectivity` section: the labels, the structure they rebuild (checked
+    /// against the header's counts) and the face groups.
+    fn connectivity(&self, traversal_vertices: usize) -> Result<Connectivity> {
+        let header = &self.header;
+        let mut cr = Reader::new(self.required(SEC_CONNECTIVITY)?, "connectivity");
+        let label_count =
+            cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
+        // Each label is one frequency-model symbol: at least log2(8216 / 8207) bits (9 other
+        // symbols keep a count >= 1 out of a total <= 8192 + 24), i.e. < 6,400 labels per byte.
+        let coded = cr.rest();
+        if label_count > (coded.len() as u64 + 5) * 6_400 {
+            return Err(Error::format(
+                "connectivity",
+                "label_count",
+                format!(
+                    "{label_count} labels cannot fit in {} coded bytes",
+                    coded.len()
+                ),
+            ));
+        }
+        let mut dec = RangeDecoder::new(coded, "connectivity")?;
+        let mut models = ConnModels::new(self.features.groups_v3);
+        let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
+        let mut labels = Vec::new();
+        for _ in 0..label_count {
+            labels.push(models.decode_label(&mut dec, max_degree.max(3))?);
+        }
+        let rb = rebuild(&labels)?;
+        check_rebuilt_counts(&rb, header, traversal_vertices)?;
+        let face_group = decode_face_groups(
+            &rb,
+            &mut dec,
+            &mut models,
+            header.group_count as usize,
+            self.features.groups_v3,
+        )?;
+        dec.finish()?;
+        Ok(Connectivity {
+            rb,
+            face_group,
+            label_count: labels.len(),
+            group_bits: models.group_bits,
+        })
+    }
+
+    /// Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
+    /// their number by its size before allocating per-vertex arrays.
+    fn check_isolated_vertices_fit(&self) -> Result<()> {
+        let geometry_len = self.required(SEC_GEOMETRY)?.len();
+        let isolated = self.header.isolated_vertex_count;
+        if isolated.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
+            return Err(Error::format(
+                "geometry",
+                "isolated_vertex_count",
+                format!("{isolated} isolated vertices cannot fit in {geometry_len} coded bytes"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Decodes the optional `patches` section: patch kinds and grid axes per coded group
+    /// (all closed without it).
+    fn patches(&self) -> Result<patches::DecodedPatches> {
+        let group_count = self.header.group_count as usize;
+        match self.optional(SEC_PATCHES) {
+            Some(p) if LEGACY && !self.features.coded_patches => {
+                patches::decode_v1(p, group_count, &self.quant)
+            }
+            Some(p) => patches::decode(p, group_count, &self.quant),
+            None => Ok((
+                vec![PatchKind::Closed; group_count],
+                vec![None; group_count],
+            )),
+        }
+    }
+
+    /// Decodes the `creases` section: sharp flags per edge, corner flags per coded vertex.
+    fn creases(&self, conn: &Connectivity, coded_count: usize) -> Result<Creases> {
+        let rb = &conn.rb;
+        let edges = label_edges(&rb.label_edge);
+        let mut sharp = vec![false; edges.len()];
+        let mut corner = vec![false; coded_count];
+        let mut d = RangeDecoder::new(self.required(SEC_CREASES)?, "creases")?;
+        let crease_he = code_creases(
+            rb,
+            &edges,
+            &conn.face_group,
+            &mut sharp,
+            &mut corner,
+            &mut d,
+        )?;
+        d.finish()?;
+        Ok(Creases {
+            edges,
+            sharp,
+            corner,
+            crease_he,
+        })
+    }
+
+    /// Decodes the `geometry` section: the grid position of every coded vertex.
+    fn geometry(
+        &self,
+        conn: &Connectivity,
+        creases: &Creases,
+        patch_kinds: &[PatchKind],
+        grid_axes: &[Option<GridAxis>],
+        coded_count: usize,
+    ) -> Result<Vec<[i32; 3]>> {
+        let mut q = vec![[0i32; 3]; coded_count];
+        let groups_tmp: Vec<Group> = patch_kinds
+            .iter()
+            .map(|&patch| Group {
+                name: String::new(),
+                patch,
+            })
+            .collect();
+        let face_plane_group = plane_groups_of_faces(&conn.face_group, &groups_tmp);
+        let (face_axis, axes) = patches::face_axes(&conn.face_group, grid_axes);
+        let arcs = ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
+        };
+        let features = &self.features;
+        let mut d = RangeDecoder::new(self.required(SEC_GEOMETRY)?, "geometry")?;
+        let mut gd = GeomDecoder::new(&mut d, self.quant.max_q());
+        geometry::walk(
+            &conn.rb,
+            &face_plane_group,
+            self.header.group_count as usize,
+            self.quant.bits,
+            features
+                .crease_prediction
+                .then_some(creases.crease_he.as_slice()),
+            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
+            &mut q,
+            &mut gd,
+        )?;
+        d.finish()?;
+        Ok(q)
+    }
+
+    /// Decodes the `fixups` section (present exactly when the header counts merged
+    /// vertices): the `(copy, representative)` pairs of coded vertices to merge.
+    fn fixups(&self, coded_count: usize) -> Result<Vec<(u32, u32)>> {
+        match (self.optional(SEC_FIXUPS), self.header.merged_vertex_count) {
+            (None, 0) => Ok(Vec::new()),
+            (Some(p), m) if m > 0 => read_merges(p, m, coded_count),
+            _ => Err(Error::format(
+                "fixups",
+                "section",
+                "section presence does not match the header's merged vertex count",
+            )),
+        }
+    }
+
+    /// Decodes the optional `names` section: the names by coded group and (version 2 on) the
+    /// input's group order, `input_of_coded[c]` for coded group `c`.
+    fn names(&self) -> Result<(Vec<String>, Option<Vec<u32>>)> {
+        let group_count = self.header.group_count as usize;
+        match self.optional(SEC_NAMES) {
+            None => Ok((vec![String::new(); group_count], None)),
+            Some(p) if LEGACY && !self.features.names_in_input_order => {
+                Ok((names::read_v1(p, group_count)?, None))
+            }
+            Some(p) => {
+                let (names, order) = names::read(p, group_count)?;
+                Ok((names, Some(order)))
+            }
+        }
+    }
+}
+
+/// Reads the sections after the header up to the end of the file, by id; records each
+/// known one in `sections`.
+fn read_payloads(
+    r: &mut Reader,
+    limits: &Limits,
+    sections: &mut Vec<SectionInfo>,
+) -> Result<[Option<Vec<u8>>; 7]> {
     let mut payloads: [Option<Vec<u8>>; 7] = Default::default();
     let mut last_id = SEC_HEADER;
     while !r.is_empty() {
-        let s = read_section(&mut r, None, verify, max_raw)?;
+        let s = read_section(r, None, limits.verify_checksums, limits.max_input_bytes)?;
         if s.id <= last_id {
             return Err(Error::format(
                 "file",
@@ -1321,19 +1683,25 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
                 format!("unknown section id {}", s.id),
             ));
         }
-        sections_info.push(SectionInfo {
+        sections.push(SectionInfo {
             name: section_name(s.id),
             stored_bytes: s.stored_bytes,
             raw_bytes: s.payload.len(),
         });
         payloads[s.id as usize] = Some(s.payload);
     }
+    Ok(payloads)
+}
+
+/// The header flags say which optional sections are present, so a file cut at a section
+/// boundary is detected.
+fn check_optional_sections(payloads: &[Option<Vec<u8>>; 7], flags: u64) -> Result<()> {
     for (id, flag) in [
         (SEC_PATCHES, FLAG_PATCHES),
         (SEC_FIXUPS, FLAG_MERGES),
         (SEC_NAMES, FLAG_NAMES),
     ] {
-        if payloads[id as usize].is_some() != (header.flags & flag != 0) {
+        if payloads[id as usize].is_some() != (flags & flag != 0) {
             return Err(Error::format(
                 section_name(id),
                 "section",
@@ -1341,54 +1709,53 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             ));
         }
     }
-    let required = |id: u8| -> Result<&Vec<u8>> {
-        payloads[id as usize].as_ref().ok_or_else(|| {
-            Error::format(section_name(id), "section", "required section is missing")
-        })
-    };
+    Ok(())
+}
 
+/// Vertex counts the header implies.
+struct CodedCounts {
+    /// Coded vertices: the decoded ones plus the copies the fixups merge away.
+    coded: usize,
+    /// Of those, the ones the traversal reaches (all but the isolated ones).
+    traversal: usize,
+}
+
+impl CodedCounts {
+    /// The counts, or an error if the header's vertex counts contradict each other.
+    fn of(header: &Header) -> Result<Self> {
+        let coded = header
+            .vertex_count
+            .checked_add(header.merged_vertex_count)
+            .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
+            as usize;
+        let traversal = coded
+            .checked_sub(header.isolated_vertex_count as usize)
+            .ok_or_else(|| {
+                Error::format(
+                    "header",
+                    "isolated_vertex_count",
+                    "exceeds the vertex count",
+                )
+            })?;
+        Ok(CodedCounts { coded, traversal })
+    }
+}
+
+/// The decoded `connectivity` section.
+struct Connectivity {
+    rb: Rebuilt,
+    /// Group of every rebuilt face (`NONE` for holes): coded ids, input ids once
+    /// [`restore_input_group_order`] has run.
+    face_group: Vec<u32>,
+    label_count: usize,
+    /// Bits spent on face groups (for `inspect`).
+    group_bits: f64,
+}
+
+/// The labels must rebuild exactly the faces, corners and traversal vertices the header
+/// announces.
+fn check_rebuilt_counts(rb: &Rebuilt, header: &Header, traversal_vertices: usize) -> Result<()> {
     let nf = header.face_count as usize;
-    let coded_count = header
-        .vertex_count
-        .checked_add(header.merged_vertex_count)
-        .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
-        as usize;
-    let traversal_vertices = coded_count
-        .checked_sub(header.isolated_vertex_count as usize)
-        .ok_or_else(|| {
-            Error::format(
-                "header",
-                "isolated_vertex_count",
-                "exceeds the vertex count",
-            )
-        })?;
-    let group_count = header.group_count as usize;
-
-    // Connectivity.
-    let conn = required(SEC_CONNECTIVITY)?;
-    let mut cr = Reader::new(conn, "connectivity");
-    let label_count = cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
-    // Each label is one frequency-model symbol: at least log2(8216 / 8207) bits (9 other
-    // symbols keep a count >= 1 out of a total <= 8192 + 24), i.e. < 6,400 labels per byte.
-    let coded = cr.rest();
-    if label_count > (coded.len() as u64 + 5) * 6_400 {
-        return Err(Error::format(
-            "connectivity",
-            "label_count",
-            format!(
-                "{label_count} labels cannot fit in {} coded bytes",
-                coded.len()
-            ),
-        ));
-    }
-    let mut dec = RangeDecoder::new(coded, "connectivity")?;
-    let mut models = ConnModels::new(features.groups_v3);
-    let mut labels = Vec::new();
-    let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
-    for _ in 0..label_count {
-        labels.push(models.decode_label(&mut dec, max_degree.max(3))?);
-    }
-    let rb = rebuild(&labels)?;
     let real_faces = rb.faces.iter().filter(|f| !f.hole).count();
     let real_corners: u64 = rb
         .faces
@@ -1416,13 +1783,21 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             ),
         ));
     }
-    // Resolve groups in encoding order.
-    let mut face_group = vec![NONE; rb.faces.len()];
+    Ok(())
+}
+
+/// Decodes the group of every mesh face in encoding order (spec §6.5); with at most one
+/// group nothing is coded.
+fn decode_face_groups(
+    rb: &Rebuilt,
+    dec: &mut RangeDecoder,
+    models: &mut ConnModels,
+    group_count: usize,
+    groups_v3: bool,
+) -> Result<Vec<u32>> {
+    let recency = (groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
+    let mut coding = GroupCoding::new(rb, recency);
     let mut next_group = 0u32;
-    let mut prev_real = None;
-    let (mut cands, mut vcands) = (Vec::new(), Vec::new());
-    let mut recency =
-        (features.groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
     for i in 0..rb.faces.len() {
         if rb.faces[i].hole {
             continue;
@@ -1430,45 +1805,9 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         let g = if group_count <= 1 {
             0
         } else {
-            group_candidates(&rb, i, &face_group, prev_real, &mut cands);
-            let class = if features.groups_v3 {
-                group_class(&rb, i, &face_group, &cands)
-            } else {
-                cands.len().clamp(1, 3) - 1
-            };
-            let missing = |what: &str, c: u8, n: usize| {
-                Error::format(
-                    "connectivity",
-                    "group",
-                    format!("face {i} refers to {what} candidate group {c} of {n}"),
-                )
-            };
-            match models.decode_group(&mut dec, next_group, class)? {
-                GroupSym::New => {
-                    next_group += 1;
-                    next_group - 1
-                }
-                GroupSym::Explicit(id) => id,
-                GroupSym::Candidate(c) => *cands
-                    .get(usize::from(c))
-                    .ok_or_else(|| missing("edge", c, cands.len()))?,
-                GroupSym::Vertex(c) => {
-                    vertex_candidates(&rb, i, &face_group, &cands, &mut vcands);
-                    *vcands
-                        .get(usize::from(c))
-                        .ok_or_else(|| missing("vertex", c, vcands.len()))?
-                }
-                GroupSym::Recent(r) => match &recency {
-                    Some(rc) if r < rc.used => face_group[rc.face_of(r)],
-                    _ => {
-                        return Err(Error::format(
-                            "connectivity",
-                            "group_rank",
-                            format!("rank {r} among the groups used so far"),
-                        ))
-                    }
-                },
-            }
+            let class = coding.edge_candidates(i, groups_v3);
+            let sym = models.decode_group(dec, next_group, class)?;
+            coding.resolve(i, sym, &mut next_group)?
         };
         if g as usize >= group_count {
             return Err(Error::format(
@@ -1477,156 +1816,88 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
                 format!("group {g} of {group_count}"),
             ));
         }
-        face_group[i] = g;
-        if let Some(rc) = &mut recency {
-            rc.assign(g, i);
-        }
-        prev_real = Some(i);
+        coding.assign(i, g);
     }
-    dec.finish()?;
+    Ok(coding.face_group)
+}
 
-    // Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
-    // their number by its size before allocating per-vertex arrays.
-    let geometry_len = required(SEC_GEOMETRY)?.len();
-    if header.isolated_vertex_count.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
-        return Err(Error::format(
-            "geometry",
-            "isolated_vertex_count",
-            format!(
-                "{} isolated vertices cannot fit in {geometry_len} coded bytes",
-                header.isolated_vertex_count
-            ),
-        ));
-    }
+/// The decoded `creases` section, by edge in label order and by coded vertex.
+struct Creases {
+    /// One half-edge per edge.
+    edges: Vec<u32>,
+    sharp: Vec<bool>,
+    corner: Vec<bool>,
+    /// Per half-edge: whether its edge is sharp or on the mesh boundary.
+    crease_he: Vec<bool>,
+}
 
-    // Patches.
-    let (patch_kinds, grid_axes) = match &payloads[SEC_PATCHES as usize] {
-        Some(p) if LEGACY && !features.coded_patches => patches::decode_v1(p, group_count, &quant)?,
-        Some(p) => patches::decode(p, group_count, &quant)?,
-        None => (
-            vec![PatchKind::Closed; group_count],
-            vec![None; group_count],
-        ),
-    };
-
-    // Creases.
-    let edges = label_edges(&rb.label_edge);
-    let mut sharp = vec![false; edges.len()];
-    let mut corner = vec![false; coded_count];
-    let crease_he = {
-        let mut d = RangeDecoder::new(required(SEC_CREASES)?, "creases")?;
-        let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
-        d.finish()?;
-        crease
-    };
-
-    // Geometry.
-    let mut q = vec![[0i32; 3]; coded_count];
-    {
-        let groups_tmp: Vec<Group> = patch_kinds
-            .iter()
-            .map(|&patch| Group {
-                name: String::new(),
-                patch,
-            })
-            .collect();
-        let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
-        let (face_axis, axes) = patches::face_axes(&face_group, &grid_axes);
-        let arcs = ArcAxes {
-            face_axis: &face_axis,
-            axes: &axes,
-        };
-        let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
-        let mut gd = GeomDecoder::new(&mut d, quant.max_q());
-        geometry::walk(
-            &rb,
-            &face_plane_group,
-            group_count,
-            quant.bits,
-            features.crease_prediction.then_some(crease_he.as_slice()),
-            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
-            &mut q,
-            &mut gd,
-        )?;
-        d.finish()?;
-    }
-
-    // Fixups.
+/// Reads `m` merges: each copy as the gap after the previous one, its representative as the
+/// distance back; every copy must exist and every representative precede its copy and not
+/// be a copy itself.
+fn read_merges(payload: &[u8], m: u64, coded_count: usize) -> Result<Vec<(u32, u32)>> {
+    let mut fr = Reader::new(payload, "fixups");
     let mut merges = Vec::new();
-    match (&payloads[SEC_FIXUPS as usize], header.merged_vertex_count) {
-        (None, 0) => {}
-        (Some(p), m) if m > 0 => {
-            let mut fr = Reader::new(p, "fixups");
-            let mut prev: u64 = 0;
-            let mut is_copy = vec![false; coded_count];
-            for i in 0..m {
-                let gap = fr.varint("copy")?;
-                let d = if i == 0 {
-                    gap
-                } else {
-                    prev.saturating_add(gap).saturating_add(1)
-                };
-                if d >= coded_count as u64 {
-                    return Err(fr.err("copy", format!("vertex {d} does not exist")));
-                }
-                let back = fr.varint("representative")?;
-                if back >= d {
-                    return Err(fr.err("representative", "must precede the copy"));
-                }
-                let rep = d - back - 1;
-                if is_copy[rep as usize] {
-                    return Err(fr.err("representative", "is itself a copy"));
-                }
-                is_copy[d as usize] = true;
-                merges.push((d as u32, rep as u32));
-                prev = d;
-            }
-            fr.expect_end()?;
-        }
-        _ => {
-            return Err(Error::format(
-                "fixups",
-                "section",
-                "section presence does not match the header's merged vertex count",
-            ))
-        }
-    }
-    let final_of_coded = final_numbering(coded_count, &merges);
-
-    // Names, and (version 2) the input's group order: coded group `c` becomes group
-    // `input_of_coded[c]`.
-    let mut names = vec![String::new(); group_count];
-    let mut input_of_coded: Option<Vec<u32>> = None;
-    if let Some(p) = &payloads[SEC_NAMES as usize] {
-        if LEGACY && !features.names_in_input_order {
-            names = names::read_v1(p, group_count)?;
+    let mut prev: u64 = 0;
+    let mut is_copy = vec![false; coded_count];
+    for i in 0..m {
+        let gap = fr.varint("copy")?;
+        let d = if i == 0 {
+            gap
         } else {
-            let (n, order) = names::read(p, group_count)?;
-            names = n;
-            input_of_coded = Some(order);
+            prev.saturating_add(gap).saturating_add(1)
+        };
+        if d >= coded_count as u64 {
+            return Err(fr.err("copy", format!("vertex {d} does not exist")));
         }
+        let back = fr.varint("representative")?;
+        if back >= d {
+            return Err(fr.err("representative", "must precede the copy"));
+        }
+        let rep = d - back - 1;
+        if is_copy[rep as usize] {
+            return Err(fr.err("representative", "is itself a copy"));
+        }
+        is_copy[d as usize] = true;
+        merges.push((d as u32, rep as u32));
+        prev = d;
     }
-    let mut patch_kinds = patch_kinds;
-    if let Some(order) = &input_of_coded {
-        for g in face_group.iter_mut() {
-            if let Some(&o) = order.get(*g as usize) {
-                *g = o;
-            }
-        }
-        let mut kinds = vec![PatchKind::Closed; group_count];
-        for (c, &o) in order.iter().enumerate() {
-            kinds[o as usize] = patch_kinds[c];
-        }
-        patch_kinds = kinds;
-    }
+    fr.expect_end()?;
+    Ok(merges)
+}
 
-    // Assemble.
-    let mut mesh = ControlMesh::new();
-    let final_count = header.vertex_count as usize;
-    mesh.positions = vec![DVec3::ZERO; final_count];
-    for c in 0..coded_count {
-        mesh.positions[final_of_coded[c] as usize] = quant.dequantize(q[c]);
+/// Renumbers the face groups from coded to input order (`order[c]` is the input id of coded
+/// group `c`) and returns the patch kinds in input order.
+fn restore_input_group_order(
+    order: &[u32],
+    face_group: &mut [u32],
+    patch_kinds: &[PatchKind],
+) -> Vec<PatchKind> {
+    for g in face_group.iter_mut() {
+        if let Some(&o) = order.get(*g as usize) {
+            *g = o;
+        }
     }
+    let mut kinds = vec![PatchKind::Closed; patch_kinds.len()];
+    for (c, &o) in order.iter().enumerate() {
+        kinds[o as usize] = patch_kinds[c];
+    }
+    kinds
+}
+
+/// Builds the decoded mesh in final vertex numbering and checks it (merges of a malformed
+/// file can make it invalid).
+fn assemble_mesh(
+    header: &Header,
+    conn: &Connectivity,
+    creases: &Creases,
+    final_of_coded: &[u32],
+    positions: Vec<DVec3>,
+    names: Vec<String>,
+    patch_kinds: &[PatchKind],
+) -> Result<ControlMesh> {
+    let rb = &conn.rb;
+    let mut mesh = ControlMesh::new();
+    mesh.positions = positions;
     mesh.face_vertices
         .reserve(header.face_corner_count as usize);
     let mut buf = Vec::new();
@@ -1636,15 +1907,15 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         }
         buf.clear();
         buf.extend(rb.face_vertices(i).map(|v| final_of_coded[v as usize]));
-        mesh.push_face(&buf, face_group[i]);
+        mesh.push_face(&buf, conn.face_group[i]);
     }
     mesh.groups = names
         .into_iter()
-        .zip(&patch_kinds)
+        .zip(patch_kinds)
         .map(|(name, &patch)| Group { name, patch })
         .collect();
-    for (j, &h) in edges.iter().enumerate() {
-        if sharp[j] {
+    for (j, &h) in creases.edges.iter().enumerate() {
+        if creases.sharp[j] {
             let t = rb.twin[h as usize];
             mesh.sharp_edges.insert(edge_key(
                 final_of_coded[rb.vertex[h as usize] as usize],
@@ -1652,27 +1923,14 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             ));
         }
     }
-    for (c, &is) in corner.iter().enumerate() {
+    for (c, &is) in creases.corner.iter().enumerate() {
         if is {
             mesh.corners.insert(final_of_coded[c]);
         }
     }
     mesh.validate()
         .map_err(|e| Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}")))?;
-
-    let info = FileInfo {
-        header: header.clone(),
-        sections: sections_info,
-        total_bytes: bytes.len(),
-        sharp_edge_count: mesh.sharp_edges.len(),
-        corner_count: mesh.corners.len(),
-        group_names: mesh.groups.iter().map(|g| g.name.clone()).collect(),
-        patch_kinds,
-        component_count: rb.faces.iter().filter(|f| f.start).count(),
-        label_count: labels.len(),
-        group_bits: models.group_bits,
-    };
-    Ok((Decoded { header, mesh }, info))
+    Ok(mesh)
 }
 
 #[cfg(test)]
