@@ -28,7 +28,7 @@ use std::collections::BTreeSet;
 use glam::DVec3;
 
 use self::bytes::{put_section, put_varint, read_section, Reader};
-use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
+use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt, Traversal};
 use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, GridAxis, Quantizer};
 use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
 use crate::error::{Error, Result};
@@ -691,8 +691,8 @@ struct GroupCoding<'a> {
     prev_real: Option<usize>,
     cands: Vec<u32>,
     vcands: Vec<u32>,
-    /// Only for version-3 files with more than one group, the only ones that name a group
-    /// by its recency rank.
+    /// Always kept by the encoder; by the decoder only for version-3 files with more than
+    /// one group, the only ones that name a group by its recency rank.
     recency: Option<Recency>,
 }
 
@@ -723,6 +723,30 @@ impl<'a> GroupCoding<'a> {
             group_class(self.rb, f, &self.face_group, &self.cands)
         } else {
             self.cands.len().clamp(1, 3) - 1
+        }
+    }
+
+    /// The symbol naming group `g`, already used, for mesh face `f` (its edge candidates
+    /// collected): an edge candidate, else a vertex candidate, else its recency rank.
+    fn used_group_symbol(&mut self, f: usize, g: u32) -> GroupSym {
+        match self
+            .cands
+            .iter()
+            .take(GROUP_CANDIDATES)
+            .position(|&c| c == g)
+        {
+            Some(c) => GroupSym::Candidate(c as u8),
+            None => {
+                vertex_candidates(self.rb, f, &self.face_group, &self.cands, &mut self.vcands);
+                match self.vcands.iter().position(|&c| c == g) {
+                    Some(c) => GroupSym::Vertex(c as u8),
+                    None => {
+                        let recency = self.recency.as_ref();
+                        let recency = recency.expect("the encoder always tracks recency");
+                        GroupSym::Recent(recency.rank_of(g))
+                    }
+                }
+            }
         }
     }
 
@@ -874,6 +898,92 @@ pub fn encode(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Vec<u8>> {
 /// re-merged by the decoder (`fixups` section); a non-manifold control mesh is an error.
 /// Every sharp edge must be an edge of the mesh.
 pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<u8>, EncodeMap)> {
+    let bits = check_options(opts)?;
+    mesh.validate()?;
+    if mesh.face_count() > 0 && mesh.groups.is_empty() {
+        return Err(Error::Mesh("faces but no groups".into()));
+    }
+    let input = ManifoldInput::of(mesh, opts.content == Content::RawMesh)?;
+    let work = input.cut.as_ref().unwrap_or(mesh);
+    let tr = encode_traversal(&input.he);
+    let rb = rebuild(&tr.labels).map_err(|e| internal_error(&e.to_string()))?;
+    if rb.faces.len() != tr.faces.len() {
+        return Err(internal_error("face count mismatch"));
+    }
+    let order = CodedOrder::new(&rb, &tr, &input, work.vertex_count())?;
+    let (rep_of_orig, merges) = merges_of_copies(&order.orig_of_coded, mesh.vertex_count());
+    let final_of_coded = final_numbering(order.coded_to_work.len(), &merges);
+    let groups = CodedGroups::new(mesh, &rb, &order.face_source);
+
+    let conn = connectivity_payload(&tr.labels, &groups.symbols, mesh.groups.len());
+    let quant = quantizer_for(mesh, opts, bits);
+    let (patches, group_axes) = patches::encode(&groups.groups, &quant)?;
+    let (creases, crease_he) = creases_payload(mesh, &rb, &order.orig_of_coded, &groups)?;
+    let geometry = geometry_payload(work, &rb, &order, &quant, &groups, &group_axes, &crease_he)?;
+    let store_names = opts.store_group_names && groups.groups.iter().any(|g| !g.name.is_empty());
+    let flags = header_flags(
+        opts.content,
+        &quant,
+        order.isolated,
+        !merges.is_empty(),
+        patches.is_some(),
+        store_names,
+    );
+    let header = header_payload(
+        mesh,
+        opts.content,
+        &quant,
+        flags,
+        order.isolated,
+        merges.len(),
+    );
+
+    let mut out = Vec::new();
+    out.extend_from_slice(&MAGIC);
+    out.push(FORMAT_VERSION_MAJOR);
+    out.push(FORMAT_VERSION_MINOR);
+    put_section(&mut out, SEC_HEADER, &header, false, true);
+    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
+    if let Some(p) = patches {
+        put_section(&mut out, SEC_PATCHES, &p, true, false);
+    }
+    put_section(&mut out, SEC_CREASES, &creases, true, false);
+    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
+    if !merges.is_empty() {
+        put_section(&mut out, SEC_FIXUPS, &fixups_payload(&merges), true, false);
+    }
+    if store_names {
+        let payload = names_payload(mesh, &groups.coded_of_input);
+        put_section(&mut out, SEC_NAMES, &payload, true, false);
+    }
+
+    let vertex: Vec<u32> = (0..mesh.vertex_count())
+        .map(|v| final_of_coded[rep_of_orig[v] as usize])
+        .collect();
+    let face = coded_face_numbers(&rb, &order.face_source, mesh.face_count());
+    // With names stored, the decoder restores the input's group order.
+    let group = if store_names {
+        (0..mesh.groups.len() as u32).collect()
+    } else {
+        groups.coded_of_input
+    };
+    Ok((
+        out,
+        EncodeMap {
+            vertex,
+            face,
+            group,
+        },
+    ))
+}
+
+/// An encoder failure that valid input cannot cause.
+fn internal_error(what: &str) -> Error {
+    Error::Mesh(format!("internal encoder error: {what}"))
+}
+
+/// Checks the encoder settings; returns the quantisation bits.
+fn check_options(opts: &EncodeOptions) -> Result<u8> {
     let bits = opts.quantization_bits;
     if !(4..=24).contains(&bits) {
         return Err(Error::Parameter(format!(
@@ -893,159 +1003,249 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             )));
         }
     }
-    mesh.validate()?;
-    if mesh.face_count() > 0 && mesh.groups.is_empty() {
-        return Err(Error::Mesh("faces but no groups".into()));
-    }
-    let raw = opts.content == Content::RawMesh;
-    let (cut, source, he): (Option<ControlMesh>, Vec<u32>, HalfEdgeMesh) =
+    Ok(bits)
+}
+
+/// The manifold mesh the encoder traverses: the input itself, or for a raw mesh that is not
+/// manifold, the input cut apart at its non-manifold edges and vertices.
+struct ManifoldInput {
+    /// The cut mesh, if the input had to be cut.
+    cut: Option<ControlMesh>,
+    /// Input vertex of every vertex of the traversed mesh.
+    source: Vec<u32>,
+    he: HalfEdgeMesh,
+}
+
+impl ManifoldInput {
+    /// Cuts `mesh` apart where it is not manifold if it is a raw mesh (`raw`); a control
+    /// mesh must be manifold as it is.
+    fn of(mesh: &ControlMesh, raw: bool) -> Result<Self> {
         match HalfEdgeMesh::build(mesh) {
-            Ok(he) => (None, (0..mesh.vertex_count() as u32).collect(), he),
+            Ok(he) => Ok(ManifoldInput {
+                cut: None,
+                source: (0..mesh.vertex_count() as u32).collect(),
+                he,
+            }),
             Err(e) if raw => {
                 let (c, s) = cut_non_manifold(mesh)?;
                 let he = HalfEdgeMesh::build(&c).map_err(|e2| {
                     Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
                 })?;
-                (Some(c), s, he)
+                Ok(ManifoldInput {
+                    cut: Some(c),
+                    source: s,
+                    he,
+                })
             }
-            Err(e) => return Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
-        };
-    let work = cut.as_ref().unwrap_or(mesh);
-    let tr = encode_traversal(&he);
-    let internal = |what: &str| Error::Mesh(format!("internal encoder error: {what}"));
-    let rb = rebuild(&tr.labels).map_err(|e| internal(&e.to_string()))?;
-    if rb.faces.len() != tr.faces.len() {
-        return Err(internal("face count mismatch"));
-    }
-
-    // Map rebuilt (coded) vertices to work-mesh vertices.
-    let nw = work.vertex_count();
-    let mut coded_to_work = vec![NONE; nw];
-    let mut work_to_coded = vec![NONE; nw];
-    let mut rebuilt_face_source = vec![NONE; rb.faces.len()];
-    for (i, rf) in rb.faces.iter().enumerate() {
-        let (f, entry) = tr.faces[i];
-        rebuilt_face_source[i] = f;
-        let (mut hr, mut ho) = (rf.first, entry);
-        for _ in 0..rf.degree {
-            let (c, w) = (rb.vertex[hr as usize], he.origin[ho as usize]);
-            if coded_to_work[c as usize] == NONE && work_to_coded[w as usize] == NONE {
-                coded_to_work[c as usize] = w;
-                work_to_coded[w as usize] = c;
-            } else if coded_to_work[c as usize] != w {
-                return Err(internal("vertex mapping mismatch"));
-            }
-            hr = rb.next[hr as usize];
-            ho = he.next[ho as usize];
+            Err(e) => Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
         }
     }
-    let traversal_vertices = rb.vertex_count;
-    let mut isolated = 0u64;
-    let mut next_coded = traversal_vertices as u32;
-    for (w, wc) in work_to_coded.iter_mut().enumerate() {
-        if *wc == NONE {
-            *wc = next_coded;
-            coded_to_work[next_coded as usize] = w as u32;
-            next_coded += 1;
-            isolated += 1;
-        }
-    }
-    let coded_count = nw;
-    let orig_of_coded: Vec<u32> = coded_to_work.iter().map(|&w| source[w as usize]).collect();
+}
 
-    // Merges: every coded copy of an input vertex merges into the lowest coded copy.
-    let mut rep_of_orig = vec![NONE; mesh.vertex_count()];
+/// How the rebuilt (coded) structure maps onto the traversed mesh: coded vertices are the
+/// traversal's in rebuilt order, then the isolated vertices in mesh order.
+struct CodedOrder {
+    /// Traversed-mesh vertex of every coded vertex.
+    coded_to_work: Vec<u32>,
+    /// Input vertex of every coded vertex.
+    orig_of_coded: Vec<u32>,
+    /// Face of the traversed (and input) mesh of every rebuilt face.
+    face_source: Vec<u32>,
+    isolated: u64,
+}
+
+impl CodedOrder {
+    /// Matches rebuilt faces with the traversal's corner by corner; `nw` is the traversed
+    /// mesh's vertex count.
+    fn new(rb: &Rebuilt, tr: &Traversal, input: &ManifoldInput, nw: usize) -> Result<Self> {
+        let he = &input.he;
+        let mut coded_to_work = vec![NONE; nw];
+        let mut work_to_coded = vec![NONE; nw];
+        let mut face_source = vec![NONE; rb.faces.len()];
+        for (i, rf) in rb.faces.iter().enumerate() {
+            let (f, entry) = tr.faces[i];
+            face_source[i] = f;
+            let (mut hr, mut ho) = (rf.first, entry);
+            for _ in 0..rf.degree {
+                let (c, w) = (rb.vertex[hr as usize], he.origin[ho as usize]);
+                if coded_to_work[c as usize] == NONE && work_to_coded[w as usize] == NONE {
+                    coded_to_work[c as usize] = w;
+                    work_to_coded[w as usize] = c;
+                } else if coded_to_work[c as usize] != w {
+                    return Err(internal_error("vertex mapping mismatch"));
+                }
+                hr = rb.next[hr as usize];
+                ho = he.next[ho as usize];
+            }
+        }
+        let mut isolated = 0u64;
+        let mut next_coded = rb.vertex_count as u32;
+        for (w, wc) in work_to_coded.iter_mut().enumerate() {
+            if *wc == NONE {
+                *wc = next_coded;
+                coded_to_work[next_coded as usize] = w as u32;
+                next_coded += 1;
+                isolated += 1;
+            }
+        }
+        let orig_of_coded = coded_to_work
+            .iter()
+            .map(|&w| input.source[w as usize])
+            .collect();
+        Ok(CodedOrder {
+            coded_to_work,
+            orig_of_coded,
+            face_source,
+            isolated,
+        })
+    }
+}
+
+/// Every coded copy of an input vertex merges into the lowest coded copy. Returns that
+/// representative per input vertex and the `(copy, representative)` pairs, copies ascending.
+fn merges_of_copies(orig_of_coded: &[u32], input_vertices: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
+    let mut rep_of_orig = vec![NONE; input_vertices];
     for (c, &o) in orig_of_coded.iter().enumerate() {
         if rep_of_orig[o as usize] == NONE {
             rep_of_orig[o as usize] = c as u32;
         }
     }
-    let merges: Vec<(u32, u32)> = orig_of_coded
+    let merges = orig_of_coded
         .iter()
         .enumerate()
         .filter(|&(c, &o)| rep_of_orig[o as usize] != c as u32)
         .map(|(c, &o)| (c as u32, rep_of_orig[o as usize]))
         .collect();
-    let final_of_coded = final_numbering(coded_count, &merges);
+    (rep_of_orig, merges)
+}
 
-    // Groups: renumbered by first appearance in encoding order; unused groups at the end.
-    let mut group_new = vec![NONE; mesh.groups.len()];
-    let mut next_group = 0u32;
-    let mut face_group_new = vec![NONE; rb.faces.len()];
-    let mut group_syms = Vec::new();
-    let mut prev_real = None;
-    let (mut cands, mut vcands) = (Vec::new(), Vec::new());
-    let mut recency = Recency::new(mesh.groups.len(), rb.faces.len());
-    for (i, rf) in rb.faces.iter().enumerate() {
-        if rf.hole {
-            continue;
-        }
-        let og = mesh.face_groups[rebuilt_face_source[i] as usize] as usize;
-        group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
-        let class = group_class(&rb, i, &face_group_new, &cands);
-        let seen = next_group;
-        let sym = if group_new[og] == NONE {
-            group_new[og] = next_group;
-            next_group += 1;
-            GroupSym::New
-        } else {
-            let g = group_new[og];
-            match cands.iter().take(GROUP_CANDIDATES).position(|&c| c == g) {
-                Some(c) => GroupSym::Candidate(c as u8),
-                None => {
-                    vertex_candidates(&rb, i, &face_group_new, &cands, &mut vcands);
-                    match vcands.iter().position(|&c| c == g) {
-                        Some(c) => GroupSym::Vertex(c as u8),
-                        None => GroupSym::Recent(recency.rank_of(g)),
-                    }
+/// The groups in coded order: renumbered by first appearance in encoding order, unused
+/// groups at the end; with the symbols that code them.
+struct CodedGroups {
+    /// Coded id of every input group.
+    coded_of_input: Vec<u32>,
+    /// Coded group of every rebuilt face (`NONE` for holes).
+    face_group: Vec<u32>,
+    /// The groups by coded id.
+    groups: Vec<Group>,
+    /// Per mesh face in encoding order: its group symbol, context class and the number of
+    /// groups used before it.
+    symbols: Vec<(GroupSym, usize, u32)>,
+}
+
+impl CodedGroups {
+    /// Numbers the groups of `mesh` in the order the rebuilt faces (input faces
+    /// `face_source`) first use them and picks each face's group symbol.
+    fn new(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> Self {
+        let mut coded_of_input = vec![NONE; mesh.groups.len()];
+        let mut next_group = 0u32;
+        let mut symbols = Vec::new();
+        let recency = Recency::new(mesh.groups.len(), rb.faces.len());
+        let mut coding = GroupCoding::new(rb, Some(recency));
+        for (i, rf) in rb.faces.iter().enumerate() {
+            if rf.hole {
+                continue;
+            }
+            let og = mesh.face_groups[face_source[i] as usize] as usize;
+            // The encoder writes the current version: version-3 classes and symbols.
+            let class = coding.edge_candidates(i, true);
+            let seen = next_group;
+            let sym = match coded_of_input[og] {
+                NONE => {
+                    coded_of_input[og] = next_group;
+                    next_group += 1;
+                    GroupSym::New
                 }
-            }
-        };
-        group_syms.push((sym, class, seen));
-        face_group_new[i] = group_new[og];
-        recency.assign(group_new[og], i);
-        prev_real = Some(i);
+                g => coding.used_group_symbol(i, g),
+            };
+            symbols.push((sym, class, seen));
+            coding.assign(i, coded_of_input[og]);
+        }
+        for g in coded_of_input.iter_mut().filter(|g| **g == NONE) {
+            *g = next_group;
+            next_group += 1;
+        }
+        let mut groups = vec![Group::default(); mesh.groups.len()];
+        for (og, &ng) in coded_of_input.iter().enumerate() {
+            groups[ng as usize] = mesh.groups[og].clone();
+        }
+        CodedGroups {
+            coded_of_input,
+            face_group: coding.face_group,
+            groups,
+            symbols,
+        }
     }
-    for g in group_new.iter_mut().filter(|g| **g == NONE) {
-        *g = next_group;
-        next_group += 1;
-    }
-    let mut groups_new_order = vec![Group::default(); mesh.groups.len()];
-    for (og, &ng) in group_new.iter().enumerate() {
-        groups_new_order[ng as usize] = mesh.groups[og].clone();
-    }
-    let group_count = mesh.groups.len() as u64;
+}
 
-    // Connectivity section.
+/// The `connectivity` section's payload (§6): label count, then labels and (with more than
+/// one group) group symbols in one range-coded stream.
+fn connectivity_payload(
+    labels: &[Label],
+    symbols: &[(GroupSym, usize, u32)],
+    group_count: usize,
+) -> Vec<u8> {
     let mut conn = Vec::new();
-    put_varint(&mut conn, tr.labels.len() as u64);
-    {
-        let mut enc = RangeEncoder::new();
-        let mut models = ConnModels::new(true);
-        for &l in &tr.labels {
-            models.encode_label(&mut enc, l);
-        }
-        if group_count > 1 {
-            for &(sym, class, seen) in &group_syms {
-                models.encode_group(&mut enc, sym, class, seen);
-            }
-        }
-        conn.extend_from_slice(&enc.finish());
+    put_varint(&mut conn, labels.len() as u64);
+    let mut enc = RangeEncoder::new();
+    let mut models = ConnModels::new(true);
+    for &l in labels {
+        models.encode_label(&mut enc, l);
     }
+    if group_count > 1 {
+        for &(sym, class, seen) in symbols {
+            models.encode_group(&mut enc, sym, class, seen);
+        }
+    }
+    conn.extend_from_slice(&enc.finish());
+    conn
+}
 
-    // Patches section.
-    let quant = match opts.grid_covers {
+/// The position grid: over the positions, and the box `opts.grid_covers` if given.
+fn quantizer_for(mesh: &ControlMesh, opts: &EncodeOptions, bits: u8) -> Quantizer {
+    match opts.grid_covers {
         None => Quantizer::for_positions(&mesh.positions, bits, opts.step_scale),
         Some(corners) => {
             let mut covered = mesh.positions.clone();
             covered.extend(corners);
             Quantizer::for_positions(&covered, bits, opts.step_scale)
         }
-    };
-    let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
+    }
+}
 
-    // Creases section.
+/// The `creases` section's payload (§7) and, per half-edge, whether its edge is a crease.
+fn creases_payload(
+    mesh: &ControlMesh,
+    rb: &Rebuilt,
+    orig_of_coded: &[u32],
+    groups: &CodedGroups,
+) -> Result<(Vec<u8>, Vec<bool>)> {
     let edges = label_edges(&rb.label_edge);
+    let mut sharp = sharp_flags(mesh, rb, &edges, orig_of_coded)?;
+    let mut corner: Vec<bool> = orig_of_coded
+        .iter()
+        .map(|o| mesh.corners.contains(o))
+        .collect();
+    let mut enc = RangeEncoder::new();
+    let crease_he = code_creases(
+        rb,
+        &edges,
+        &groups.face_group,
+        &mut sharp,
+        &mut corner,
+        &mut enc,
+    )?;
+    Ok((enc.finish(), crease_he))
+}
+
+/// The sharp flag of every edge in label order; an error if a sharp edge of the mesh is
+/// not among them.
+fn sharp_flags(
+    mesh: &ControlMesh,
+    rb: &Rebuilt,
+    edges: &[u32],
+    orig_of_coded: &[u32],
+) -> Result<Vec<bool>> {
     let mut sharp = vec![false; edges.len()];
     let mut matched = BTreeSet::new();
     for (j, &h) in edges.iter().enumerate() {
@@ -1065,51 +1265,57 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             "sharp edge {missing:?} is not an edge of the mesh"
         )));
     }
-    let mut corner: Vec<bool> = orig_of_coded
-        .iter()
-        .map(|o| mesh.corners.contains(o))
-        .collect();
-    let mut creases_enc = RangeEncoder::new();
-    let crease_he = code_creases(
-        &rb,
-        &edges,
-        &face_group_new,
-        &mut sharp,
-        &mut corner,
-        &mut creases_enc,
-    )?;
-    let creases = creases_enc.finish();
+    Ok(sharp)
+}
 
-    // Geometry section.
-    let mut q: Vec<[i32; 3]> = coded_to_work
+/// The `geometry` section's payload (§8): the traversed mesh's positions on the grid,
+/// predicted and range-coded.
+fn geometry_payload(
+    work: &ControlMesh,
+    rb: &Rebuilt,
+    order: &CodedOrder,
+    quant: &Quantizer,
+    groups: &CodedGroups,
+    group_axes: &[Option<GridAxis>],
+    crease_he: &[bool],
+) -> Result<Vec<u8>> {
+    let mut q: Vec<[i32; 3]> = order
+        .coded_to_work
         .iter()
         .map(|&w| quant.quantize(work.positions[w as usize]))
         .collect();
-    let face_plane_group = plane_groups_of_faces(&face_group_new, &groups_new_order);
-    let (face_axis, axes) = patches::face_axes(&face_group_new, &group_axes);
-    let mut geom_enc = RangeEncoder::new();
-    {
-        let mut ge = GeomEncoder::new(&mut geom_enc);
-        // The encoder writes the current version: predictions along creases, arcs round axes.
-        geometry::walk(
-            &rb,
-            &face_plane_group,
-            groups_new_order.len(),
-            bits,
-            Some(&crease_he),
-            (!axes.is_empty()).then_some(&ArcAxes {
-                face_axis: &face_axis,
-                axes: &axes,
-            }),
-            &mut q,
-            &mut ge,
-        )?;
-    }
-    let geometry = geom_enc.finish();
+    let face_plane_group = plane_groups_of_faces(&groups.face_group, &groups.groups);
+    let (face_axis, axes) = patches::face_axes(&groups.face_group, group_axes);
+    let mut enc = RangeEncoder::new();
+    let mut ge = GeomEncoder::new(&mut enc);
+    // The encoder writes the current version: predictions along creases, arcs round axes.
+    geometry::walk(
+        rb,
+        &face_plane_group,
+        groups.groups.len(),
+        quant.bits,
+        Some(crease_he),
+        (!axes.is_empty()).then_some(&ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
+        }),
+        &mut q,
+        &mut ge,
+    )?;
+    Ok(enc.finish())
+}
 
-    // Header.
+/// Header flag bits (§5) of a file with these contents.
+fn header_flags(
+    content: Content,
+    quant: &Quantizer,
+    isolated: u64,
+    merges: bool,
+    patches: bool,
+    names: bool,
+) -> u64 {
     let mut flags = 0u64;
-    if let Content::ControlMesh { .. } = opts.content {
+    if let Content::ControlMesh { .. } = content {
         flags |= FLAG_CONTROL_MESH;
     }
     if !quant.as_f32 {
@@ -1118,31 +1324,42 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     if isolated > 0 {
         flags |= FLAG_ISOLATED;
     }
-    if !merges.is_empty() {
+    if merges {
         flags |= FLAG_MERGES;
     }
-    if patches.is_some() {
+    if patches {
         flags |= FLAG_PATCHES;
     }
-    let store_names = opts.store_group_names && groups_new_order.iter().any(|g| !g.name.is_empty());
-    if store_names {
+    if names {
         flags |= FLAG_NAMES;
     }
+    flags
+}
+
+/// The `header` section's payload (§5).
+fn header_payload(
+    mesh: &ControlMesh,
+    content: Content,
+    quant: &Quantizer,
+    flags: u64,
+    isolated: u64,
+    merge_count: usize,
+) -> Vec<u8> {
     let mut header = Vec::new();
     put_varint(&mut header, flags);
-    if let Content::ControlMesh { default_level } = opts.content {
+    if let Content::ControlMesh { default_level } = content {
         header.push(default_level);
     }
-    header.push(bits);
+    header.push(quant.bits);
     put_varint(&mut header, mesh.vertex_count() as u64);
     put_varint(&mut header, mesh.face_count() as u64);
     put_varint(&mut header, mesh.face_vertices.len() as u64);
-    put_varint(&mut header, group_count);
+    put_varint(&mut header, mesh.groups.len() as u64);
     if isolated > 0 {
         put_varint(&mut header, isolated);
     }
-    if !merges.is_empty() {
-        put_varint(&mut header, merges.len() as u64);
+    if merge_count > 0 {
+        put_varint(&mut header, merge_count as u64);
     }
     for v in quant.min.iter().chain(std::iter::once(&quant.extent)) {
         if quant.as_f32 {
@@ -1151,63 +1368,44 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             header.extend_from_slice(&v.to_le_bytes());
         }
     }
+    header
+}
 
-    let mut out = Vec::new();
-    out.extend_from_slice(&MAGIC);
-    out.push(FORMAT_VERSION_MAJOR);
-    out.push(FORMAT_VERSION_MINOR);
-    put_section(&mut out, SEC_HEADER, &header, false, true);
-    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
-    if let Some(p) = patches {
-        put_section(&mut out, SEC_PATCHES, &p, true, false);
+/// The `fixups` section's payload (§9 *Fixups*): per merge, the gap to the previous copy
+/// and the distance back to the representative.
+fn fixups_payload(merges: &[(u32, u32)]) -> Vec<u8> {
+    let mut fx = Vec::new();
+    let mut prev: i64 = -1;
+    for &(d, r) in merges {
+        put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
+        put_varint(&mut fx, u64::from(d - r - 1));
+        prev = i64::from(d);
     }
-    put_section(&mut out, SEC_CREASES, &creases, true, false);
-    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
-    if !merges.is_empty() {
-        let mut fx = Vec::new();
-        let mut prev: i64 = -1;
-        for &(d, r) in &merges {
-            put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
-            put_varint(&mut fx, u64::from(d - r - 1));
-            prev = i64::from(d);
-        }
-        put_section(&mut out, SEC_FIXUPS, &fx, true, false);
-    }
-    if store_names {
-        let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
-        let mut input_of_coded = vec![0u32; group_new.len()];
-        for (og, &ng) in group_new.iter().enumerate() {
-            input_of_coded[ng as usize] = og as u32;
-        }
-        let payload = names::write(&input_names, &input_of_coded);
-        put_section(&mut out, SEC_NAMES, &payload, true, false);
-    }
+    fx
+}
 
-    let vertex: Vec<u32> = (0..mesh.vertex_count())
-        .map(|v| final_of_coded[rep_of_orig[v] as usize])
-        .collect();
-    let mut face = vec![NONE; mesh.face_count()];
+/// The `names` section's payload (§9 *Names*): names in input group order, with the coded
+/// order.
+fn names_payload(mesh: &ControlMesh, coded_of_input: &[u32]) -> Vec<u8> {
+    let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
+    let mut input_of_coded = vec![0u32; coded_of_input.len()];
+    for (og, &ng) in coded_of_input.iter().enumerate() {
+        input_of_coded[ng as usize] = og as u32;
+    }
+    names::write(&input_names, &input_of_coded)
+}
+
+/// Decoded face number of every input face: mesh faces in encoding order.
+fn coded_face_numbers(rb: &Rebuilt, face_source: &[u32], face_count: usize) -> Vec<u32> {
+    let mut face = vec![NONE; face_count];
     let mut next_face = 0u32;
     for (i, rf) in rb.faces.iter().enumerate() {
         if !rf.hole {
-            face[rebuilt_face_source[i] as usize] = next_face;
+            face[face_source[i] as usize] = next_face;
             next_face += 1;
         }
     }
-    // With names stored, the decoder restores the input's group order.
-    let group = if store_names {
-        (0..mesh.groups.len() as u32).collect()
-    } else {
-        group_new
-    };
-    Ok((
-        out,
-        EncodeMap {
-            vertex,
-            face,
-            group,
-        },
-    ))
+    face
 }
 
 /// Final vertex id of every coded vertex after the merges (`(copy, representative)` pairs,
