@@ -31,6 +31,7 @@ mod next_level;
 mod par;
 mod sparse;
 mod topology;
+mod uniform;
 
 #[cfg(test)]
 pub(crate) mod test_support;
@@ -47,6 +48,7 @@ use crate::mesh::ControlMesh;
 pub use lod::{lod_corner_face, AdaptiveMesh};
 pub use masks::{loop_beta, loop_omega};
 pub use sparse::BoundaryPatchOutput;
+pub use uniform::UniformSurface;
 
 use masks::{eclass, ValenceTables};
 use next_level::NextLevel;

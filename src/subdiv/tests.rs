@@ -1560,6 +1560,8 @@ fn connectivity_meshes() -> Vec<ControlMesh> {
     meshes.push(belt_mesh(6, false, true).0);
     meshes.push(belt_mesh(5, true, false).0);
     meshes.push(cone_with_cap(0.2).0);
+    meshes.push(ruled_belt(6, true).0);
+    meshes.push(plane_ngon(7));
     meshes.extend(load_corpus("tess/four_cone_coarse.obj"));
     meshes
 }
@@ -1617,5 +1619,40 @@ fn finest_limit_positions_without_the_finest_level() {
             q.iter().map(|x| x.to_array().map(f64::to_bits)).collect()
         };
         assert_eq!(bits(&through_level_2), bits(&built));
+    }
+}
+
+/// A [`UniformSurface`] hands out, group by group, the triangles [`subdivide`] outputs, with
+/// the same corner positions bit for bit.
+#[test]
+fn uniform_surface_groups_are_the_subdivided_output() {
+    let bits = |p: DVec3| p.to_array().map(f64::to_bits);
+    for m in connectivity_meshes() {
+        for level in 0..=3u32 {
+            let opts = SubdivOptions {
+                limit: true,
+                normals: false,
+                ..Default::default()
+            };
+            let (out, _) = subdivide(&m, level, &opts).unwrap();
+            let surface = UniformSurface::new(&m, level, DEFAULT_MAX_FACES).unwrap();
+            let n_groups = out.face_groups.iter().map(|&g| g as usize + 1).max();
+            assert_eq!(surface.group_count(), n_groups.unwrap_or(0));
+            let mut tris = Vec::new();
+            for g in 0..surface.group_count() {
+                let expected: Vec<[u64; 3]> = (0..out.face_count())
+                    .filter(|&f| out.face_groups[f] as usize == g)
+                    .flat_map(|f| out.face(f).to_vec())
+                    .map(|v| bits(out.positions[v as usize]))
+                    .collect();
+                surface.group_triangles(g, &mut tris);
+                let got: Vec<[u64; 3]> = tris
+                    .iter()
+                    .flatten()
+                    .map(|&v| bits(surface.positions()[v as usize]))
+                    .collect();
+                assert_eq!(got, expected, "level {level} group {g}");
+            }
+        }
     }
 }
