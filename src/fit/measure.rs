@@ -624,6 +624,9 @@ fn index_group(positions: &[DVec3], triangles: &[[u32; 3]]) -> Result<GroupDecod
             })
         })
         .collect();
+    drop(local);
+    // Kept until the face changes: without the slack of growing by pushes.
+    own.shrink_to_fit();
     let surface = if triangles.is_empty() {
         None
     } else {

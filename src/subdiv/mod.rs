@@ -536,18 +536,10 @@ impl Refinement {
                 j: m - 1,
             };
             check_count(level_positions.len(), next.vertex_count(), m)?;
-            let mut out = vec![DVec3::ZERO; next.vertex_count()];
-            par::for_each_mut(&mut out, |v, o| {
-                *o = eval::eval_limit(&next, t, b, level_positions, v)
-            });
-            return Ok(out);
+            return Ok(limit_positions_of(&next, t, b, level_positions));
         }
         let l = self.checked_level(level_positions, m)?;
-        let mut out = vec![DVec3::ZERO; l.nv];
-        par::for_each_mut(&mut out, |v, o| {
-            *o = eval::eval_limit(l, t, b, level_positions, v)
-        });
-        Ok(out)
+        Ok(limit_positions_of(l, t, b, level_positions))
     }
 
     /// Unit limit normals of the level-`m` vertices given their level-`m` positions (crease
@@ -688,6 +680,18 @@ impl Refinement {
         }
         Ok(cur)
     }
+}
+
+/// Limit positions of every vertex of level `l` from its positions `p` (one per vertex).
+fn limit_positions_of(
+    l: &(impl next_level::Connectivity + Sync),
+    t: &ValenceTables,
+    b: &topology::Base,
+    p: &[DVec3],
+) -> Vec<DVec3> {
+    let mut out = vec![DVec3::ZERO; p.len()];
+    par::for_each_mut(&mut out, |v, o| *o = eval::eval_limit(l, t, b, p, v));
+    out
 }
 
 /// `Error::Parameter` unless `given` positions are the `nv` of level `m`.

@@ -5,7 +5,8 @@ use glam::DVec3;
 
 use super::sparse::{Chains, SparsePlan, UniformFaces};
 use super::topology::{Base, Level};
-use super::Refinement;
+use super::next_level::NextLevel;
+use super::{limit_positions_of, Refinement};
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 
@@ -36,36 +37,57 @@ impl UniformSurface {
     /// triangles before sparse output).
     pub fn new(mesh: &ControlMesh, level: u32, max_faces: u64) -> Result<UniformSurface> {
         let r = Refinement::with_max_faces(mesh, level, max_faces)?;
-        let positions = {
-            let (mut p, mut scratch) = (Vec::new(), Vec::new());
-            r.positions_into(&mesh.positions, level, &mut p, &mut scratch)?;
-            drop(scratch);
-            r.limit_positions(&p, level)?
-        };
+        let mut p = Vec::new();
+        r.positions_into(&mesh.positions, level, &mut p, &mut Vec::new())?;
         let level_nv = r.level_nv();
+        if level == 0 {
+            let positions = r.limit_positions(&p, 0)?;
+            let Refinement {
+                mut levels, base, ..
+            } = r;
+            return Ok(Self::assemble(positions, levels.swap_remove(0), base, None, level_nv, 0));
+        }
+        // From here on only level n-1 (whose next level's limit masks give the positions,
+        // and whose faces' children are the dense faces' triangles) and level 0 are read.
         let Refinement {
-            mut levels, base, ..
+            mut levels,
+            base,
+            tables,
+            ..
         } = r;
-        let last = (level > 0).then(|| {
-            let l = &mut levels[level as usize - 1];
-            let (faces, face_edges) = if level == 1 {
-                // Level 0 is kept whole below.
-                (l.faces.clone(), l.face_edges.clone())
-            } else {
-                (
-                    std::mem::take(&mut l.faces),
-                    std::mem::take(&mut l.face_edges),
-                )
-            };
-            Level {
-                nv: l.nv,
-                faces,
-                face_edges,
-                ..Default::default()
-            }
-        });
-        levels.truncate(1);
-        let l0 = levels.pop().expect("a refinement has level 0");
+        let mut last = levels.pop().expect("levels 0..n-1 are built");
+        let l0 = if level == 1 {
+            last.clone()
+        } else {
+            levels.swap_remove(0)
+        };
+        drop(levels);
+        let next = NextLevel {
+            l: &last,
+            base: &base,
+            j: level - 1,
+        };
+        let positions = limit_positions_of(&next, &tables, &base, &p);
+        drop(p);
+        let last = Level {
+            nv: last.nv,
+            faces: std::mem::take(&mut last.faces),
+            face_edges: std::mem::take(&mut last.face_edges),
+            ..Default::default()
+        };
+        Ok(Self::assemble(positions, l0, base, Some(last), level_nv, level))
+    }
+
+    /// The surface of level-`n` limit `positions`, given level 0 and level n-1 (faces, face
+    /// edges and vertex count only).
+    fn assemble(
+        positions: Vec<DVec3>,
+        l0: Level,
+        base: Base,
+        last: Option<Level>,
+        level_nv: Vec<usize>,
+        n: u32,
+    ) -> UniformSurface {
         let plan = SparsePlan::new(&l0, &base);
         let n_groups = base
             .group
@@ -86,17 +108,17 @@ impl UniformSurface {
             group_faces[fill[g as usize] as usize] = k as u32;
             fill[g as usize] += 1;
         }
-        Ok(UniformSurface {
+        UniformSurface {
             positions,
             l0,
             base,
             last,
             level_nv,
-            n: level,
+            n,
             plan,
             group_offsets,
             group_faces,
-        })
+        }
     }
 
     /// Limit positions by level-n vertex id (the ids [`UniformSurface::group_triangles`]
