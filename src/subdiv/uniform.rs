@@ -3,9 +3,9 @@
 
 use glam::DVec3;
 
+use super::next_level::NextLevel;
 use super::sparse::{Chains, SparsePlan, UniformFaces};
 use super::topology::{Base, Level};
-use super::next_level::NextLevel;
 use super::{limit_positions_of, Refinement};
 use crate::error::Result;
 use crate::mesh::ControlMesh;
@@ -45,7 +45,14 @@ impl UniformSurface {
             let Refinement {
                 mut levels, base, ..
             } = r;
-            return Ok(Self::assemble(positions, levels.swap_remove(0), base, None, level_nv, 0));
+            return Ok(Self::assemble(
+                positions,
+                levels.swap_remove(0),
+                base,
+                None,
+                level_nv,
+                0,
+            ));
         }
         // From here on only level n-1 (whose next level's limit masks give the positions,
         // and whose faces' children are the dense faces' triangles) and level 0 are read.
@@ -75,7 +82,14 @@ impl UniformSurface {
             face_edges: std::mem::take(&mut last.face_edges),
             ..Default::default()
         };
-        Ok(Self::assemble(positions, l0, base, Some(last), level_nv, level))
+        Ok(Self::assemble(
+            positions,
+            l0,
+            base,
+            Some(last),
+            level_nv,
+            level,
+        ))
     }
 
     /// The surface of level-`n` limit `positions`, given level 0 and level n-1 (faces, face
