@@ -17,9 +17,10 @@ use super::encoder::FitError;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    closest_points_near, sample_surface, SampleCount, SurfaceSample, TriangleSurface,
+    closest_points_near, closest_points_near_with, sample_surface, RandomSamples, SampleCount,
+    SurfaceSample, TriangleSurface,
 };
-use crate::subdiv::{subdivide, SubdivOptions};
+use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
 /// Error of a decoded surface against the input, measured both ways.
 pub(crate) struct Measurement {
@@ -46,10 +47,10 @@ struct GroupDecoded {
     /// cannot find a nearer point on this face.
     lo: DVec3,
     hi: DVec3,
-    /// Per decoded sample (the face's vertices, then random points by area): its excess
-    /// over the input's chord allowance (see [`OwnFaces::excess`]) and its plain distance
-    /// to the input. Points are kept only where they are needed (below): a face at a fine
-    /// level has millions of samples.
+    /// Per decoded sample ([`GroupSamples`]): its excess over the input's chord allowance
+    /// (see [`OwnFaces::excess`]) and its plain distance to the input. The points are not
+    /// kept (a face at a fine level has millions of samples): [`GroupSamples`] makes any of
+    /// them again.
     samples: Vec<[f64; 2]>,
     /// The sample of largest excess (its excess and point), if any.
     worst: Option<(f64, DVec3)>,
@@ -63,18 +64,25 @@ fn bits(p: DVec3) -> [u64; 3] {
 }
 
 impl GroupDecoded {
-    /// Whether the face's triangles are `faces` of `mesh`, corner by corner, bit for bit.
-    fn same_triangles(&self, mesh: &ControlMesh, faces: &[u32]) -> bool {
+    /// Whether the face's triangles are group `g`'s of `surface`, corner by corner, bit for
+    /// bit (stops making them at the first difference).
+    fn same_triangles(&self, surface: &UniformSurface, g: usize) -> bool {
+        let positions = surface.positions();
         let Some(s) = &self.surface else {
-            return faces.is_empty();
+            return surface.visit_group_triangles(g, |t| t.is_empty());
         };
-        s.triangles().len() == faces.len()
-            && s.triangles().iter().zip(faces).all(|(t, &f)| {
-                let face = mesh.face(f as usize);
-                (0..3).all(|k| {
-                    bits(s.positions()[t[k] as usize]) == bits(mesh.positions[face[k] as usize])
-                })
+        let (mine, corners) = (s.triangles(), s.positions());
+        let mut next = 0;
+        let all = surface.visit_group_triangles(g, |tris| {
+            let Some(old) = mine.get(next..next + tris.len()) else {
+                return false;
+            };
+            next += tris.len();
+            old.iter().zip(tris).all(|(o, t)| {
+                (0..3).all(|k| bits(corners[o[k] as usize]) == bits(positions[t[k] as usize]))
             })
+        });
+        all && next == mine.len()
     }
 
     /// Distance from `p` to the box (0 inside).
@@ -83,11 +91,50 @@ impl GroupDecoded {
     }
 }
 
+/// The decoded samples of one face: its vertices, then random points by area, seeded by the
+/// group so an unchanged face gets the same points. Each is made on its own, when needed.
+struct GroupSamples<'a> {
+    /// The face's vertices (every one is a corner of its triangles).
+    vertices: &'a [DVec3],
+    random: RandomSamples<'a>,
+}
+
+impl<'a> GroupSamples<'a> {
+    /// The samples of group `g`'s `triangles` over its own `positions` (all of them
+    /// corners), with `random` random points.
+    fn new(positions: &'a [DVec3], triangles: &'a [[u32; 3]], random: usize, g: usize) -> Self {
+        let seed = 0x5C0D_E000_0000_0002 ^ ((g as u64) << 20);
+        GroupSamples {
+            vertices: positions,
+            random: RandomSamples::new(positions, triangles, SampleCount::Total(random), seed),
+        }
+    }
+
+    /// The samples of a face's index (`None`: the face has no triangles, so no samples).
+    fn of(surface: Option<&'a TriangleSurface>, random: usize, g: usize) -> Option<Self> {
+        surface.map(|s| GroupSamples::new(s.positions(), s.triangles(), random, g))
+    }
+
+    fn len(&self) -> usize {
+        self.vertices.len() + self.random.len()
+    }
+
+    fn point(&self, i: usize) -> DVec3 {
+        match self.vertices.get(i) {
+            Some(&p) => p,
+            None => self.random.get(i - self.vertices.len()).point,
+        }
+    }
+}
+
 /// What the previous full measurement kept for the next one.
 #[derive(Default)]
 struct MeasureCache {
-    /// By group: its decoded triangles and their measurement.
-    groups: Vec<GroupDecoded>,
+    /// By group: its decoded triangles and their measurement; `None` where nothing is kept
+    /// (a group that changed in a measurement that stopped at its probe: its old results
+    /// were dropped before the new ones were made, so that the two never take memory at
+    /// once).
+    groups: Vec<Option<GroupDecoded>>,
     /// Input->decoded, per input sample: the distance and the group holding the nearest
     /// decoded point. While that group is unchanged the distance is still reachable, so
     /// only changed groups can bring it down.
@@ -123,15 +170,42 @@ const PROBE_SAMPLES: usize = 2000;
 /// descendants of each control face together, so runs of output triangles are compact).
 const LEAF_TRIANGLES: usize = 16;
 
-/// Indices of the (up to) `k` largest values, deterministic order.
-fn top_k(values: &[f64], k: usize) -> Vec<usize> {
-    let mut idx: Vec<usize> = (0..values.len()).collect();
-    if idx.len() > k {
-        idx.select_nth_unstable_by(k, |&a, &b| values[b].total_cmp(&values[a]).then(a.cmp(&b)));
-        idx.truncate(k);
+/// The ids of the (up to) `k` largest of `values` (`(value, id)` pairs, ids increasing),
+/// ties to the smaller id, in id order. A bounded heap, so millions of values need no array.
+fn top_k<T: Ord + Copy>(values: impl Iterator<Item = (f64, T)>, k: usize) -> Vec<T> {
+    /// Ordered so that the heap's greatest entry is the one to give up first: the smallest
+    /// value, then the largest id.
+    struct Kept<T>(f64, T);
+    impl<T: Ord> Ord for Kept<T> {
+        fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+            other.0.total_cmp(&self.0).then(self.1.cmp(&other.1))
+        }
     }
-    idx.sort_unstable();
-    idx
+    impl<T: Ord> PartialOrd for Kept<T> {
+        fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+            Some(self.cmp(other))
+        }
+    }
+    impl<T: Ord> PartialEq for Kept<T> {
+        fn eq(&self, other: &Self) -> bool {
+            self.cmp(other).is_eq()
+        }
+    }
+    impl<T: Ord> Eq for Kept<T> {}
+    let mut heap = std::collections::BinaryHeap::with_capacity(k + 1);
+    for (v, id) in values {
+        let x = Kept(v, id);
+        if heap.len() < k {
+            heap.push(x);
+        } else if heap.peek().is_some_and(|worst| x < *worst) {
+            // Usually not: most values are not among the largest.
+            heap.pop();
+            heap.push(x);
+        }
+    }
+    let mut ids: Vec<T> = heap.into_iter().map(|x| x.1).collect();
+    ids.sort_unstable();
+    ids
 }
 
 /// Maps `f` over `items` (in parallel with the `parallel` feature), results in order.
@@ -144,6 +218,19 @@ fn map_ordered<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync + Send)
     #[cfg(not(feature = "parallel"))]
     {
         items.iter().map(f).collect()
+    }
+}
+
+/// Calls `f(i, item)` for every item (in parallel with the `parallel` feature).
+fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter_mut().enumerate().for_each(|(i, x)| f(i, x));
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter_mut().enumerate().for_each(|(i, x)| f(i, x));
     }
 }
 
@@ -266,93 +353,118 @@ impl<'a> ErrorMeter<'a> {
     /// samples that were worst last time and returns `None` as soon as one of them shows
     /// the full measurement would exceed the tolerance beyond the chord allowance or
     /// `max_cap` (exact: they are samples of the full measurement). A measurement that
-    /// returns `None` leaves what the previous one kept as it was.
+    /// returns `None` keeps what the previous one kept, except, when it was an input sample
+    /// that failed, for the groups that changed (their new indexes had been built by then).
     pub fn measure_unless_over(
         &self,
         decoded: &ControlMesh,
         level: u8,
         over: Option<f64>,
     ) -> Result<Option<Measurement>> {
-        let (surface_mesh, _) = subdivide(
-            decoded,
-            u32::from(level),
-            &SubdivOptions {
-                limit: true,
-                normals: false,
-                ..Default::default()
-            },
-        )?;
-        let n_groups = self.mesh.groups.len().max(
-            surface_mesh
-                .face_groups
-                .iter()
-                .map(|&g| g as usize + 1)
-                .max()
-                .unwrap_or(0),
-        );
-        let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n_groups];
-        for (f, &g) in surface_mesh.face_groups.iter().enumerate() {
-            faces_of[g as usize].push(f as u32);
-        }
+        let surface = UniformSurface::new(decoded, u32::from(level), DEFAULT_MAX_FACES)?;
+        let n_groups = self.mesh.groups.len().max(surface.group_count());
         let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
-        let changed: Vec<usize> = (0..n_groups)
-            .filter(|&g| {
-                !cache
-                    .groups
-                    .get(g)
-                    .is_some_and(|c| c.same_triangles(&surface_mesh, &faces_of[g]))
-            })
-            .collect();
-        // Changed groups: indexed and sampled (in parallel); the others as cached.
-        let (mut fresh, points): (Vec<GroupDecoded>, Vec<Vec<DVec3>>) =
-            map_ordered(&changed, |&g| {
-                let gd = index_group(&surface_mesh, &faces_of[g])?;
-                let random = self.group_samples.get(g).copied().unwrap_or(0);
-                let points = group_sample_points(&gd, random, g);
-                Ok((gd, points))
-            })
-            .into_iter()
-            .collect::<Result<Vec<_>>>()?
-            .into_iter()
-            .unzip();
-        drop(faces_of);
-        drop(surface_mesh);
-        let radius = 2.0 * self.tol;
-        let fails = |d: f64, chord: f64, max_cap: f64| d - chord > self.tol || d > max_cap;
+        cache.groups.resize_with(n_groups, || None);
+        let changed: Vec<usize> = (0..n_groups).collect::<Vec<_>>();
+        let same = map_ordered(&changed, |&g| {
+            cache.groups[g]
+                .as_ref()
+                .is_some_and(|c| c.same_triangles(&surface, g))
+        });
+        let changed: Vec<usize> = changed.into_iter().filter(|&g| !same[g]).collect();
         if let Some(max_cap) = over {
-            // The worst decoded samples of last time: an unchanged group's as measured, a
-            // changed group's at the same index measured now.
-            let mut probe: Vec<(usize, DVec3)> = Vec::new();
-            for &(g, i) in &cache.probe_out {
-                let (g, i) = (g as usize, i as usize);
-                match changed.binary_search(&g) {
-                    Ok(k) => probe.extend(points[k].get(i).map(|&p| (g, p))),
-                    Err(_) => {
-                        if let Some(&[e, d]) = cache.groups.get(g).and_then(|c| c.samples.get(i)) {
-                            if e > self.tol || d > max_cap {
-                                return Ok(None);
-                            }
-                        }
-                    }
-                }
-            }
-            let pts: Vec<DVec3> = probe.iter().map(|x| x.1).collect();
-            let hits = closest_points_near(&pts, self.input_surface, radius);
-            if probe.iter().zip(&hits).any(|(&(g, p), h)| {
-                self.out_excess(p, g, h.triangle, h.distance) > self.tol || h.distance > max_cap
-            }) {
+            if self.decoded_probe_fails(&cache, &changed, &surface, max_cap) {
                 return Ok(None);
             }
         }
-        // The groups of this surface, by index.
-        let groups: Vec<&GroupDecoded> = (0..n_groups)
+        // What changed groups kept is of no more use: dropped before their new indexes exist.
+        for &g in &changed {
+            cache.groups[g] = None;
+        }
+        let mut fresh: Vec<GroupDecoded> = map_ordered(&changed, |&g| index_group(&surface, g))
+            .into_iter()
+            .collect::<Result<_>>()?;
+        drop(surface);
+        let Some(in_hits) = self.input_to_decoded(&cache, &changed, &fresh, over) else {
+            return Ok(None);
+        };
+        // Decoded->input for the changed groups' samples.
+        for_each_mut(&mut fresh, |k, gd| self.measure_decoded(changed[k], gd));
+        for (gd, &g) in fresh.into_iter().zip(&changed) {
+            cache.groups[g] = Some(gd);
+        }
+        let mut measurement = self.summarise(&in_hits, &mut cache);
+        measurement.changed_groups = changed.len();
+        cache.in_hits = in_hits;
+        Ok(Some(measurement))
+    }
+
+    /// Whether one of the worst decoded samples of last time is over the tolerance or
+    /// `max_cap`: an unchanged group's as measured, a changed group's at the same index
+    /// measured now (on `surface`, before any index is built, so a failing probe leaves
+    /// what was kept as it was).
+    fn decoded_probe_fails(
+        &self,
+        cache: &MeasureCache,
+        changed: &[usize],
+        surface: &UniformSurface,
+        max_cap: f64,
+    ) -> bool {
+        let mut probe: Vec<(usize, DVec3)> = Vec::new();
+        // The probes are in (group, index) order.
+        for run in cache.probe_out.chunk_by(|a, b| a.0 == b.0) {
+            let g = run[0].0 as usize;
+            if changed.binary_search(&g).is_ok() {
+                let local = localise(surface, g);
+                if local.triangles.is_empty() {
+                    continue;
+                }
+                let random = self.group_samples.get(g).copied().unwrap_or(0);
+                let samples = GroupSamples::new(&local.positions, &local.triangles, random, g);
+                let points = run
+                    .iter()
+                    .map(|x| x.1 as usize)
+                    .filter(|&i| i < samples.len());
+                probe.extend(points.map(|i| (g, samples.point(i))));
+                continue;
+            }
+            let Some(kept) = cache.groups.get(g).and_then(Option::as_ref) else {
+                continue;
+            };
+            for &(_, i) in run {
+                if let Some(&[e, d]) = kept.samples.get(i as usize) {
+                    if e > self.tol || d > max_cap {
+                        return true;
+                    }
+                }
+            }
+        }
+        let pts: Vec<DVec3> = probe.iter().map(|x| x.1).collect();
+        let hits = closest_points_near(&pts, self.input_surface, 2.0 * self.tol);
+        probe.iter().zip(&hits).any(|(&(g, p), h)| {
+            self.out_excess(p, g, h.triangle, h.distance) > self.tol || h.distance > max_cap
+        })
+    }
+
+    /// Input->decoded: per input sample, the distance to the decoded surface and the group
+    /// holding the nearest point. While the group holding a sample's old nearest point is
+    /// unchanged, that distance is still reached and only changed groups can be nearer.
+    /// With `over = Some(max_cap)`, `None` when one of last time's worst samples fails.
+    fn input_to_decoded(
+        &self,
+        cache: &MeasureCache,
+        changed: &[usize],
+        fresh: &[GroupDecoded],
+        over: Option<f64>,
+    ) -> Option<Vec<(f64, u32)>> {
+        let groups: Vec<&GroupDecoded> = (0..cache.groups.len())
             .map(|g| match changed.binary_search(&g) {
                 Ok(k) => &fresh[k],
-                Err(_) => &cache.groups[g],
+                Err(_) => cache.groups[g]
+                    .as_ref()
+                    .expect("an unchanged group is kept"),
             })
             .collect();
-        // Input->decoded. While the group holding a sample's old nearest point is unchanged,
-        // that distance is still reached and only changed groups can be nearer.
         let n_in = self.input_samples.len();
         let reuse = cache.in_hits.len() == n_in;
         let in_hit = |i: usize| -> (f64, u32) {
@@ -360,73 +472,60 @@ impl<'a> ErrorMeter<'a> {
             let own = self.mesh.face_groups[s.triangle as usize] as usize;
             match cache.in_hits.get(i) {
                 Some(&hit) if reuse && changed.binary_search(&(hit.1 as usize)).is_err() => {
-                    Self::nearest_decoded(s.point, own, &groups, Some(&changed), hit)
+                    Self::nearest_decoded(s.point, own, &groups, Some(changed), hit)
                 }
                 _ => Self::nearest_decoded(s.point, own, &groups, None, (f64::INFINITY, u32::MAX)),
             }
         };
         if let Some(max_cap) = over {
-            if cache.probe_in.iter().any(|&i| {
-                fails(
-                    in_hit(i).0,
-                    self.chord[self.input_samples[i].triangle as usize],
-                    max_cap,
-                )
-            }) {
-                return Ok(None);
+            let fails = |i: usize| {
+                let d = in_hit(i).0;
+                d - self.chord[self.input_samples[i].triangle as usize] > self.tol || d > max_cap
+            };
+            if cache.probe_in.iter().any(|&i| fails(i)) {
+                return None;
             }
         }
         let indices: Vec<usize> = (0..n_in).collect();
-        let in_hits: Vec<(f64, u32)> = map_ordered(&indices, |&i| in_hit(i));
-        drop(groups);
-        // Decoded->input for the changed groups' samples.
-        let indices: Vec<usize> = (0..fresh.len()).collect();
-        let measured: Vec<Vec<[f64; 2]>> = map_ordered(&indices, |&k| {
-            let g = changed[k];
-            closest_points_near(&points[k], self.input_surface, radius)
-                .iter()
-                .zip(&points[k])
-                .map(|(h, &p)| [self.out_excess(p, g, h.triangle, h.distance), h.distance])
-                .collect()
-        });
-        for ((gd, samples), pts) in fresh.iter_mut().zip(measured).zip(points) {
-            for (i, (&[e, _], &p)) in samples.iter().zip(&pts).enumerate() {
-                if gd.worst.is_none_or(|w| e > w.0) {
-                    gd.worst = Some((e, p));
-                }
-                if e > self.tol {
-                    gd.over_tolerance.push((i as u32, p));
-                }
-            }
-            gd.samples = samples;
-        }
-        let old_groups = std::mem::take(&mut cache.groups);
-        let mut fresh_iter = fresh.into_iter();
-        let mut old_iter = old_groups.into_iter();
-        let mut groups: Vec<GroupDecoded> = Vec::with_capacity(n_groups);
-        for g in 0..n_groups {
-            let old = old_iter.next();
-            let gd = if changed.binary_search(&g).is_ok() {
-                fresh_iter.next()
-            } else {
-                old
-            };
-            groups.push(gd.expect("a group is fresh or cached"));
-        }
-        let mut measurement = self.summarise(&groups, &in_hits, &mut cache);
-        measurement.changed_groups = changed.len();
-        cache.groups = groups;
-        cache.in_hits = in_hits;
-        Ok(Some(measurement))
+        Some(map_ordered(&indices, |&i| in_hit(i)))
     }
 
-    /// Statistics, per-group excesses and the next probes of one measurement.
-    fn summarise(
-        &self,
-        groups: &[GroupDecoded],
-        in_hits: &[(f64, u32)],
-        cache: &mut MeasureCache,
-    ) -> Measurement {
+    /// Measures the samples of changed group `g` against the input.
+    fn measure_decoded(&self, g: usize, gd: &mut GroupDecoded) {
+        let random = self.group_samples.get(g).copied().unwrap_or(0);
+        let Some(samples) = GroupSamples::of(gd.surface.as_ref(), random, g) else {
+            return;
+        };
+        let measured = closest_points_near_with(
+            samples.len(),
+            |i| samples.point(i),
+            self.input_surface,
+            2.0 * self.tol,
+            |_, p, h| [self.out_excess(p, g, h.triangle, h.distance), h.distance],
+        );
+        let (mut worst, mut over_tolerance) = (None, Vec::new());
+        for (i, &[e, _]) in measured.iter().enumerate() {
+            if worst.is_none_or(|w: (f64, DVec3)| e > w.0) {
+                worst = Some((e, samples.point(i)));
+            }
+            if e > self.tol {
+                over_tolerance.push((i as u32, samples.point(i)));
+            }
+        }
+        drop(samples);
+        gd.samples = measured;
+        gd.worst = worst;
+        gd.over_tolerance = over_tolerance;
+    }
+
+    /// Statistics, per-group excesses and the next probes of one measurement (every group
+    /// of `cache` measured).
+    fn summarise(&self, in_hits: &[(f64, u32)], cache: &mut MeasureCache) -> Measurement {
+        let groups: Vec<&GroupDecoded> = cache
+            .groups
+            .iter()
+            .map(|g| g.as_ref().expect("every group is measured"))
+            .collect();
         let stats = |d: &mut dyn Iterator<Item = f64>| -> (f64, f64, f64) {
             let (mut max, mut sq, mut sum, mut n) = (0.0f64, 0.0, 0.0, 0usize);
             for x in d {
@@ -460,15 +559,7 @@ impl<'a> ErrorMeter<'a> {
                 bad_points[g].push(s.point);
             }
         }
-        let mut out_ids: Vec<(u32, u32)> = Vec::new();
-        let mut excess_out = Vec::new();
-        let mut d_out = Vec::new();
         for (g, gd) in groups.iter().enumerate() {
-            for (i, &[e, d]) in gd.samples.iter().enumerate() {
-                out_ids.push((g as u32, i as u32));
-                excess_out.push(e);
-                d_out.push(d);
-            }
             let Some((e, p)) = gd.worst else { continue };
             worst = worst.max(e);
             if g < n_groups {
@@ -479,17 +570,28 @@ impl<'a> ErrorMeter<'a> {
             }
         }
         // The next probe: the worst samples by excess and by plain distance.
-        let d_in: Vec<f64> = in_hits.iter().map(|h| h.0).collect();
-        let mut probe_in = top_k(&excess_in, PROBE_SAMPLES);
-        probe_in.extend(top_k(&d_in, PROBE_SAMPLES / 4));
+        let mut probe_in = top_k(excess_in.iter().copied().zip(0..), PROBE_SAMPLES);
+        probe_in.extend(top_k(
+            in_hits.iter().map(|h| h.0).zip(0..),
+            PROBE_SAMPLES / 4,
+        ));
         probe_in.sort_unstable();
         probe_in.dedup();
-        let mut probe_out = top_k(&excess_out, PROBE_SAMPLES);
-        probe_out.extend(top_k(&d_out, PROBE_SAMPLES / 4));
+        let out = |k: usize| {
+            groups.iter().enumerate().flat_map(move |(g, gd)| {
+                gd.samples
+                    .iter()
+                    .enumerate()
+                    .map(move |(i, s)| (s[k], (g as u32, i as u32)))
+            })
+        };
+        let mut probe_out = top_k(out(0), PROBE_SAMPLES);
+        probe_out.extend(top_k(out(1), PROBE_SAMPLES / 4));
         probe_out.sort_unstable();
         probe_out.dedup();
+        let changed_groups = groups.len();
         cache.probe_in = probe_in;
-        cache.probe_out = probe_out.into_iter().map(|k| out_ids[k]).collect();
+        cache.probe_out = probe_out;
         Measurement {
             error: FitError {
                 max: max_in.max(max_out),
@@ -499,36 +601,62 @@ impl<'a> ErrorMeter<'a> {
             },
             group_excess,
             bad_points,
-            changed_groups: groups.len(),
+            changed_groups,
         }
     }
 }
 
-/// The closest-point index of a face's decoded triangles (`faces` of `mesh`, triangles),
-/// over its own vertices (shared corners merged, first use first); no samples yet.
-fn index_group(mesh: &ControlMesh, faces: &[u32]) -> Result<GroupDecoded> {
+/// A face's decoded triangles over its own vertices (shared corners merged, first use
+/// first), and the box of its corners.
+struct LocalTriangles {
+    positions: Vec<DVec3>,
+    triangles: Vec<[u32; 3]>,
+    lo: DVec3,
+    hi: DVec3,
+}
+
+/// Group `g`'s decoded triangles over its own vertices.
+fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
+    let all = surface.positions();
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     let mut local: std::collections::HashMap<u32, u32, rustc_hash::FxBuildHasher> =
         Default::default();
     let mut positions = Vec::new();
-    let triangles: Vec<[u32; 3]> = faces
-        .iter()
-        .map(|&f| {
-            let face = mesh.face(f as usize);
-            let mut t = [0u32; 3];
-            for (k, &v) in face[..3].iter().enumerate() {
-                t[k] = *local.entry(v).or_insert_with(|| {
-                    let p = mesh.positions[v as usize];
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    surface.visit_group_triangles(g, |block| {
+        triangles.extend(block.iter().map(|t| {
+            t.map(|v| {
+                *local.entry(v).or_insert_with(|| {
+                    let p = all[v as usize];
                     lo = lo.min(p);
                     hi = hi.max(p);
                     positions.push(p);
                     (positions.len() - 1) as u32
-                });
-            }
-            t
-        })
-        .collect();
+                })
+            })
+        }));
+        true
+    });
+    LocalTriangles {
+        positions,
+        triangles,
+        lo,
+        hi,
+    }
+}
+
+/// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
+fn index_group(surface: &UniformSurface, g: usize) -> Result<GroupDecoded> {
+    let LocalTriangles {
+        mut positions,
+        mut triangles,
+        lo,
+        hi,
+    } = localise(surface, g);
+    // Kept until the face changes: without the slack of growing by pushes.
+    positions.shrink_to_fit();
+    triangles.shrink_to_fit();
     let surface = if triangles.is_empty() {
         None
     } else {
@@ -546,24 +674,6 @@ fn index_group(mesh: &ControlMesh, faces: &[u32]) -> Result<GroupDecoded> {
         worst: None,
         over_tolerance: Vec::new(),
     })
-}
-
-/// A face's decoded sample points: its vertices, then `random` points by area, seeded by
-/// the group so an unchanged face gets the same points.
-fn group_sample_points(gd: &GroupDecoded, random: usize, g: usize) -> Vec<DVec3> {
-    let Some(s) = &gd.surface else {
-        return Vec::new();
-    };
-    sample_surface(
-        s.positions(),
-        s.triangles(),
-        SampleCount::Total(random),
-        true,
-        0x5C0D_E000_0000_0002 ^ ((g as u64) << 20),
-    )
-    .into_iter()
-    .map(|s| s.point)
-    .collect()
 }
 
 #[cfg(test)]
@@ -621,11 +731,23 @@ mod tests {
             "{} faces measured anew",
             again.changed_groups
         );
-        // A probe that fails leaves the kept results as they were.
+        // A decoded sample that fails its probe leaves the kept results as they were.
         assert!(kept
             .measure_unless_over(&all_faces, 3, Some(0.0))
             .unwrap()
             .is_none());
         assert_eq!(kept.measure(&one_face, 3).unwrap().changed_groups, 0);
+    }
+
+    /// The bounded heap keeps the k largest values, ties to the smaller id, in id order.
+    #[test]
+    fn top_k_keeps_the_largest_values_first_ids_on_ties() {
+        let values = [3.0, 1.0, 3.0, f64::NAN, 2.0, 3.0, -1.0];
+        let ids = |k| top_k(values.iter().copied().zip(0..), k);
+        assert_eq!(ids(0), Vec::<usize>::new());
+        assert_eq!(ids(1), vec![3]);
+        assert_eq!(ids(3), vec![0, 2, 3]);
+        assert_eq!(ids(5), vec![0, 2, 3, 4, 5]);
+        assert_eq!(ids(10), vec![0, 1, 2, 3, 4, 5, 6]);
     }
 }

@@ -109,30 +109,48 @@ pub fn closest_points_near(
     surface: &TriangleSurface,
     radius: f64,
 ) -> Vec<ClosestPoint> {
-    let chunk_fn = |chunk: &[DVec3]| -> Vec<ClosestPoint> {
-        let mut out = Vec::with_capacity(chunk.len());
+    closest_points_near_with(points.len(), |i| points[i], surface, radius, |_, _, h| *h)
+}
+
+/// [`closest_points_near`] for the `count` points `point(0..count)`, which are made as they
+/// are queried rather than held (a decoded face can have millions of samples), and whose
+/// hits are kept only as `keep(i, point, hit)`. The points are visited in the same chunks
+/// with the same bounds, so the answers are those of [`closest_points_near`].
+pub fn closest_points_near_with<R: Copy + Default + Send>(
+    count: usize,
+    point: impl Fn(usize) -> DVec3 + Sync,
+    surface: &TriangleSurface,
+    radius: f64,
+    keep: impl Fn(usize, DVec3, &ClosestPoint) -> R + Sync,
+) -> Vec<R> {
+    let chunk_fn = |start: usize, out: &mut [R]| {
         let mut prev: Option<DVec3> = None;
-        for &p in chunk {
+        for (k, o) in out.iter_mut().enumerate() {
+            let p = point(start + k);
             // |p - q| bounds the distance since q is on the surface; pad for rounding.
             let bound = prev.map_or(radius, |q| radius.min((p - q).length() * (1.0 + 1e-9)));
             let hit = surface
                 .closest_point_within(p, bound.max(1e-300))
                 .unwrap_or_else(|| surface.closest_point(p));
             prev = Some(hit.point).filter(|q| q.is_finite());
-            out.push(hit);
+            *o = keep(start + k, p, &hit);
         }
-        out
     };
+    let mut out = vec![R::default(); count];
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
-        let parts: Vec<Vec<ClosestPoint>> = points.par_chunks(CHUNK).map(chunk_fn).collect();
-        parts.concat()
+        out.par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, o)| chunk_fn(c * CHUNK, o));
     }
     #[cfg(not(feature = "parallel"))]
     {
-        points.chunks(CHUNK).flat_map(chunk_fn).collect()
+        for (c, o) in out.chunks_mut(CHUNK).enumerate() {
+            chunk_fn(c * CHUNK, o);
+        }
     }
+    out
 }
 
 /// Distances from each of `points` to `surface`, in the order of `points`.

@@ -11,13 +11,13 @@ mod sampling;
 mod surface;
 
 pub use distance::{
-    closest_points, closest_points_near, hausdorff, one_sided_distances, point_distances,
-    DistanceOptions, DistanceReport, OneSided,
+    closest_points, closest_points_near, closest_points_near_with, hausdorff, one_sided_distances,
+    point_distances, DistanceOptions, DistanceReport, OneSided,
 };
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
-pub use sampling::{sample_surface, SampleCount, SurfaceSample};
+pub use sampling::{sample_surface, RandomSamples, SampleCount, SurfaceSample};
 pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
 
 #[cfg(test)]

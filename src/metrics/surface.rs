@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
 /// Result of a closest-point query.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ClosestPoint {
     /// The closest point on the surface.
     pub point: DVec3,
@@ -29,7 +29,8 @@ pub struct ClosestPoint {
 /// came from, so callers can map a hit back to the face of their `ControlMesh`.
 pub struct TriangleSurface {
     index: Index,
-    source_face: Vec<u32>,
+    /// By triangle; `None` when every triangle is its own face (no array for the identity).
+    source_face: Option<Vec<u32>>,
 }
 
 /// How the triangles are indexed for closest-point queries.
@@ -65,8 +66,7 @@ impl TriangleSurface {
     /// Builds the BVH over `triangles` (indices into `positions`). Errors on an empty mesh,
     /// out-of-range indices or non-finite positions.
     pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Result<Self> {
-        let n = triangles.len() as u32;
-        Self::with_source(positions, triangles, (0..n).collect())
+        Self::with_source(positions, triangles, None)
     }
 
     /// Like [`TriangleSurface::new`], with one BVH leaf per `block` consecutive triangles
@@ -112,7 +112,6 @@ impl TriangleSurface {
         leaves.push(Aabb::new(lo, hi));
         runs.push(triangles.len() as u32);
         let bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &leaves);
-        let n = triangles.len() as u32;
         Ok(TriangleSurface {
             index: Index::Blocks {
                 positions,
@@ -120,14 +119,14 @@ impl TriangleSurface {
                 bvh,
                 runs,
             },
-            source_face: (0..n).collect(),
+            source_face: None,
         })
     }
 
     fn with_source(
         positions: Vec<DVec3>,
         triangles: Vec<[u32; 3]>,
-        source_face: Vec<u32>,
+        source_face: Option<Vec<u32>>,
     ) -> Result<Self> {
         check_triangles(&positions, &triangles)?;
         let trimesh = TriMesh::with_flags(positions, triangles, TriMeshFlags::empty())
@@ -141,7 +140,7 @@ impl TriangleSurface {
     /// Triangulates every face of `mesh` by a fan from its first vertex and builds the BVH.
     pub fn from_control_mesh(mesh: &ControlMesh) -> Result<Self> {
         let (triangles, source) = fan_triangulate(mesh)?;
-        Self::with_source(mesh.positions.clone(), triangles, source)
+        Self::with_source(mesh.positions.clone(), triangles, Some(source))
     }
 
     pub fn positions(&self) -> &[DVec3] {
@@ -161,7 +160,7 @@ impl TriangleSurface {
     /// Face of the source `ControlMesh` that triangle `t` was cut from (identity for
     /// [`TriangleSurface::new`]).
     pub fn source_face(&self, t: u32) -> u32 {
-        self.source_face[t as usize]
+        self.source_face.as_ref().map_or(t, |s| s[t as usize])
     }
 
     /// Closest point on the surface to `p`.

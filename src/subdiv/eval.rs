@@ -11,25 +11,31 @@ use glam::DVec3;
 
 use super::frame::Frame;
 use super::masks::{crease_limit_weights, eclass, normalize_or_zero, vclass, ValenceTables};
+use super::next_level::Connectivity;
 use super::topology::{Base, Level, NONE};
 
 /// Subdivision mask of old vertex `v` (its new position at the next level).
 #[inline]
-pub(crate) fn vertex_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut impl FnMut(u32, f64)) {
-    let c = l.vclass[v];
+pub(crate) fn vertex_mask(
+    l: &impl Connectivity,
+    t: &ValenceTables,
+    v: usize,
+    emit: &mut impl FnMut(u32, f64),
+) {
+    let c = l.vertex_class(v);
     if vclass::is_smooth_rule(c) {
-        let ring = l.ring(v);
+        let ring = l.ring_edges(v);
         let k = ring.len();
         let b = t.beta(k);
         emit(v as u32, 1.0 - k as f64 * b);
-        for &e in ring {
-            emit(l.other(e, v as u32), b);
+        for e in ring {
+            emit(l.other_end(e, v as u32), b);
         }
     } else if vclass::is_crease(c) {
         emit(v as u32, 0.75);
-        for &e in l.ring(v) {
-            if l.eclass[e as usize] & eclass::CREASE != 0 {
-                emit(l.other(e, v as u32), 0.125);
+        for e in l.ring_edges(v) {
+            if l.edge_class(e as usize) & eclass::CREASE != 0 {
+                emit(l.other_end(e, v as u32), 0.125);
             }
         }
     } else {
@@ -39,15 +45,15 @@ pub(crate) fn vertex_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut imp
 
 /// Subdivision mask of the new vertex on edge `e`.
 #[inline]
-pub(crate) fn edge_mask(l: &Level, e: usize, emit: &mut impl FnMut(u32, f64)) {
-    let [a, b] = l.edges[e];
-    let rule = l.eclass[e] & eclass::RULE_MASK;
-    let [fl, fr] = l.edge_faces[e];
+pub(crate) fn edge_mask(l: &impl Connectivity, e: usize, emit: &mut impl FnMut(u32, f64)) {
+    let [a, b] = l.edge_ends(e);
+    let rule = l.edge_class(e) & eclass::RULE_MASK;
+    let [fl, fr] = l.edge_faces(e);
     if rule == eclass::SMOOTH && fr != NONE {
         emit(a, 0.375);
         emit(b, 0.375);
-        emit(l.opposite(fl, e as u32), 0.125);
-        emit(l.opposite(fr, e as u32), 0.125);
+        emit(l.opposite_vertex(fl, e as u32), 0.125);
+        emit(l.opposite_vertex(fr, e as u32), 0.125);
     } else {
         let (wa, wb) = eclass::pair_weights(rule);
         emit(a, wa);
@@ -98,14 +104,14 @@ fn frame_of(base: &Base, id: u16) -> Option<&Frame> {
 /// Position of the new vertex `v` (old vertex rule) from level positions `p`.
 #[inline]
 pub(crate) fn eval_vertex(
-    l: &Level,
+    l: &impl Connectivity,
     t: &ValenceTables,
     base: &Base,
     p: &[DVec3],
     v: usize,
 ) -> DVec3 {
     let mut acc = DVec3::ZERO;
-    if let Some(fr) = frame_of(base, l.vframe(v)) {
+    if let Some(fr) = frame_of(base, l.vertex_frame(v)) {
         let mut terms = Terms::new();
         vertex_mask(l, t, v, &mut |i, w| {
             acc += p[i as usize] * w;
@@ -119,9 +125,9 @@ pub(crate) fn eval_vertex(
 
 /// Position of the new vertex on edge `e`.
 #[inline]
-pub(crate) fn eval_edge(l: &Level, base: &Base, p: &[DVec3], e: usize) -> DVec3 {
+pub(crate) fn eval_edge(l: &impl Connectivity, base: &Base, p: &[DVec3], e: usize) -> DVec3 {
     let mut acc = DVec3::ZERO;
-    if let Some(fr) = frame_of(base, l.eframe(e)) {
+    if let Some(fr) = frame_of(base, l.edge_frame(e)) {
         let mut terms = Terms::new();
         edge_mask(l, e, &mut |i, w| {
             acc += p[i as usize] * w;
@@ -135,24 +141,27 @@ pub(crate) fn eval_edge(l: &Level, base: &Base, p: &[DVec3], e: usize) -> DVec3 
 
 /// The two crease ring edges of a crease vertex, in ring order.
 #[inline]
-fn crease_pair(l: &Level, v: usize) -> Option<(u32, u32)> {
+fn crease_pair(l: &impl Connectivity, v: usize) -> Option<(u32, u32)> {
     let mut it = l
-        .ring(v)
-        .iter()
-        .copied()
-        .filter(|&e| l.eclass[e as usize] & eclass::CREASE != 0);
+        .ring_edges(v)
+        .filter(|&e| l.edge_class(e as usize) & eclass::CREASE != 0);
     Some((it.next()?, it.next()?))
 }
 
 /// Limit mask (Cartesian composition) of vertex `v` at this level (reference §4.1-4.2).
-pub(crate) fn limit_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut impl FnMut(u32, f64)) {
-    let c = l.vclass[v];
+pub(crate) fn limit_mask(
+    l: &impl Connectivity,
+    t: &ValenceTables,
+    v: usize,
+    emit: &mut impl FnMut(u32, f64),
+) {
+    let c = l.vertex_class(v);
     if vclass::is_smooth_rule(c) {
-        let ring = l.ring(v);
+        let ring = l.ring_edges(v);
         let (wc, wn) = t.limit(ring.len());
         emit(v as u32, wc);
-        for &e in ring {
-            emit(l.other(e, v as u32), wn);
+        for e in ring {
+            emit(l.other_end(e, v as u32), wn);
         }
     } else if vclass::is_crease(c) {
         let Some((ea, eb)) = crease_pair(l, v) else {
@@ -170,15 +179,15 @@ pub(crate) fn limit_mask(l: &Level, t: &ValenceTables, v: usize, emit: &mut impl
 
 /// Limit position of vertex `v` from level positions `p`.
 pub(crate) fn eval_limit(
-    l: &Level,
+    l: &impl Connectivity,
     t: &ValenceTables,
     base: &Base,
     p: &[DVec3],
     v: usize,
 ) -> DVec3 {
-    let c = l.vclass[v];
+    let c = l.vertex_class(v);
     if vclass::is_crease(c) {
-        if let Some(fr) = frame_of(base, l.vframe(v)) {
+        if let Some(fr) = frame_of(base, l.vertex_frame(v)) {
             if let Some((ea, eb)) = crease_pair(l, v) {
                 let (ws, wc) = crease_limit_weights(c == vclass::CREASE_REGULAR);
                 let vp = eval_vertex(l, t, base, p, v);

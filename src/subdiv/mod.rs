@@ -27,9 +27,11 @@ mod eval;
 mod frame;
 mod lod;
 mod masks;
+mod next_level;
 mod par;
 mod sparse;
 mod topology;
+mod uniform;
 
 #[cfg(test)]
 pub(crate) mod test_support;
@@ -46,8 +48,10 @@ use crate::mesh::ControlMesh;
 pub use lod::{lod_corner_face, AdaptiveMesh};
 pub use masks::{loop_beta, loop_omega};
 pub use sparse::BoundaryPatchOutput;
+pub use uniform::UniformSurface;
 
 use masks::{eclass, ValenceTables};
+use next_level::NextLevel;
 use topology::{Base, Level};
 
 /// Default cap on the number of finest-level triangles (`Error::LimitsExceeded` above it):
@@ -93,8 +97,10 @@ impl Default for SubdivOptions {
 pub struct Refinement {
     /// `levels[j]`: connectivity and classification of level j < n (level 0 when n = 0).
     levels: Vec<Level>,
-    /// Triangles of the finest level n (always built: uniform output needs only these).
-    finest_faces: Vec<u32>,
+    /// Triangles of the finest level n, built on first use: uniform output needs only these
+    /// of the finest level, and output made face by face (see [`UniformSurface`]) not even
+    /// these.
+    finest_faces: OnceLock<Vec<u32>>,
     finest_nv: usize,
     /// Full connectivity of level n, built on first use (edges, LOD, limit, normals), so
     /// that positions + triangles cost no more than they need.
@@ -135,7 +141,7 @@ impl<'a> LevelView<'a> {
     /// Triangle corners, 3 per face, counter-clockwise.
     pub fn triangles(&self) -> &'a [u32] {
         if self.level == self.r.max_level {
-            &self.r.finest_faces
+            self.r.finest_faces()
         } else {
             &self.r.levels[self.level as usize].faces
         }
@@ -262,14 +268,15 @@ impl Refinement {
             let _ = next.rings.set(topology::build_rings(prev));
             levels.push(next);
         }
-        let finest = OnceLock::new();
-        let (finest_faces, finest_nv) = if max_level == 0 {
+        let (finest, finest_faces) = (OnceLock::new(), OnceLock::new());
+        let finest_nv = if max_level == 0 {
             let l0 = &levels[0];
             let _ = finest.set(l0.clone());
-            (l0.faces.clone(), l0.nv)
+            let _ = finest_faces.set(l0.faces.clone());
+            l0.nv
         } else {
             let prev = &levels[max_level as usize - 1];
-            (topology::refine_faces(prev), prev.nv + prev.ne())
+            prev.nv + prev.ne()
         };
         Ok(Refinement {
             levels,
@@ -282,27 +289,43 @@ impl Refinement {
         })
     }
 
-    /// The finest triangles, consuming the refinement (uniform output without a copy).
-    fn into_finest_faces(self) -> Vec<u32> {
-        self.finest_faces
+    /// The finest triangles (built on first use).
+    fn finest_faces(&self) -> &[u32] {
+        self.finest_faces.get_or_init(|| {
+            let prev = &self.levels[self.max_level as usize - 1];
+            topology::refine_faces(prev)
+        })
     }
 
-    /// Level-`max_level` vertex ids along base edge `e`, from its stored first end to its
-    /// second (`2^n + 1` ids), by index arithmetic only: the vertex at position `i` was
-    /// created at level `j = n - 1 - tz(i)` on the level-j descendant `e 2^j + (i >> (tz + 1))`
-    /// of `e` (the descendants of a base edge are consecutive and ordered along it).
-    pub(crate) fn base_edge_chain(&self, e: usize, out: &mut Vec<u32>) {
+    /// The finest triangles, consuming the refinement (uniform output without a copy).
+    fn into_finest_faces(self) -> Vec<u32> {
+        self.finest_faces();
+        self.finest_faces.into_inner().unwrap_or_default()
+    }
+
+    /// Vertex count of every level below the finest.
+    fn level_nv(&self) -> Vec<usize> {
+        self.levels[..self.max_level as usize]
+            .iter()
+            .map(|l| l.nv)
+            .collect()
+    }
+
+    /// What uniform output reads of this refinement (see [`sparse::UniformFaces`]).
+    fn uniform_faces<'a>(
+        &'a self,
+        level_nv: &'a [usize],
+        plan: Option<&'a sparse::SparsePlan>,
+    ) -> sparse::UniformFaces<'a> {
         let n = self.max_level;
-        let [a, b] = self.levels[0].edges[e];
-        out.clear();
-        out.push(a);
-        for i in 1..1usize << n {
-            let tz = i.trailing_zeros();
-            let j = n - 1 - tz;
-            let k = i >> (tz + 1);
-            out.push((self.levels[j as usize].nv + (e << j) + k) as u32);
+        sparse::UniformFaces {
+            l0: &self.levels[0],
+            base: &self.base,
+            last: (n > 0).then(|| &self.levels[n as usize - 1]),
+            level_nv,
+            n,
+            plan,
         }
-        out.push(b);
     }
 
     /// Sharp edges of the finest level (the descendants of the control mesh's sharp edges),
@@ -311,9 +334,10 @@ impl Refinement {
         let l0 = &self.levels[0];
         let mut keys = Vec::new();
         let mut chain = Vec::new();
+        let level_nv = self.level_nv();
         for e in 0..l0.ne() {
             if l0.eclass[e] & eclass::SHARP != 0 {
-                self.base_edge_chain(e, &mut chain);
+                sparse::base_edge_chain(l0, &level_nv, self.max_level, e, &mut chain);
                 keys.extend(chain.windows(2).map(|w| crate::mesh::edge_key(w[0], w[1])));
             }
         }
@@ -501,14 +525,21 @@ impl Refinement {
     }
 
     /// Limit positions of the level-`m` vertices given their level-`m` positions.
+    /// The finest level's limit masks are read through the level before ([`NextLevel`]) unless
+    /// its connectivity is built anyway, which it then need not be.
     pub fn limit_positions(&self, level_positions: &[DVec3], m: u32) -> Result<Vec<DVec3>> {
-        let l = self.checked_level(level_positions, m)?;
-        let mut out = vec![DVec3::ZERO; l.nv];
         let (t, b) = (&self.tables, &self.base);
-        par::for_each_mut(&mut out, |v, o| {
-            *o = eval::eval_limit(l, t, b, level_positions, v)
-        });
-        Ok(out)
+        if m > 0 && m == self.max_level && self.finest.get().is_none() {
+            let next = NextLevel {
+                l: &self.levels[m as usize - 1],
+                base: b,
+                j: m - 1,
+            };
+            check_count(level_positions.len(), next.vertex_count(), m)?;
+            return Ok(limit_positions_of(&next, t, b, level_positions));
+        }
+        let l = self.checked_level(level_positions, m)?;
+        Ok(limit_positions_of(l, t, b, level_positions))
     }
 
     /// Unit limit normals of the level-`m` vertices given their level-`m` positions (crease
@@ -566,13 +597,7 @@ impl Refinement {
             )));
         }
         let l = self.level_with_rings(m as usize);
-        if pos.len() != l.nv {
-            return Err(Error::Parameter(format!(
-                "{} positions given, level {m} has {} vertices",
-                pos.len(),
-                l.nv
-            )));
-        }
+        check_count(pos.len(), l.nv, m)?;
         Ok(l)
     }
 
@@ -657,6 +682,28 @@ impl Refinement {
     }
 }
 
+/// Limit positions of every vertex of level `l` from its positions `p` (one per vertex).
+fn limit_positions_of(
+    l: &(impl next_level::Connectivity + Sync),
+    t: &ValenceTables,
+    b: &topology::Base,
+    p: &[DVec3],
+) -> Vec<DVec3> {
+    let mut out = vec![DVec3::ZERO; p.len()];
+    par::for_each_mut(&mut out, |v, o| *o = eval::eval_limit(l, t, b, p, v));
+    out
+}
+
+/// `Error::Parameter` unless `given` positions are the `nv` of level `m`.
+fn check_count(given: usize, nv: usize, m: u32) -> Result<()> {
+    if given != nv {
+        return Err(Error::Parameter(format!(
+            "{given} positions given, level {m} has {nv} vertices"
+        )));
+    }
+    Ok(())
+}
+
 /// Subdivides uniformly to `level` and returns the triangle mesh (groups kept, descendants
 /// of sharp edges flagged sharp, corner tags kept) plus limit normals when `opts.limit`
 /// (then the positions are limit positions too). Boundary patches are emitted as
@@ -693,7 +740,7 @@ pub fn subdivide(
     let Some(plan) = plan else {
         // Dense output: the finest triangles as they are (moved, not copied).
         let q = 1usize << (2 * level);
-        let nf = r.finest_faces.len() / 3;
+        let nf = r.finest_faces().len() / 3;
         let mut face_groups = Vec::with_capacity(nf);
         for &g in &r.base.group {
             face_groups.extend(std::iter::repeat_n(g, q));
@@ -709,7 +756,8 @@ pub fn subdivide(
         };
         return Ok((out, normals));
     };
-    let (tris, face_groups) = sparse::uniform(&r, &plan, level);
+    let level_nv = r.level_nv();
+    let (tris, face_groups) = sparse::uniform(&r.uniform_faces(&level_nv, Some(&plan)));
     let (positions, normals, remap) = sparse::compact(&positions, normals.as_deref(), &tris);
     let nf = tris.len() / 3;
     let out = ControlMesh {

@@ -15,8 +15,8 @@
 //! curved face would cut through the solid).
 
 use super::masks::eclass;
+use super::next_level::child_faces;
 use super::topology::{Base, Level, NONE};
-use super::Refinement;
 use glam::DVec3;
 
 /// How boundary patches (planes, cylinders, cones) appear in subdivided output.
@@ -147,6 +147,8 @@ impl SparsePlan {
 pub(crate) struct Chains {
     ch: [Vec<u32>; 3],
     q: Vec<u32>,
+    /// A base edge's chain, for [`UniformFaces::emit`].
+    edge: Vec<u32>,
 }
 
 /// Appends the triangles of the zipper between chains `p` and `q` (both running the same
@@ -194,7 +196,7 @@ pub(crate) fn emit_unit(
 ) -> usize {
     let start = out.len();
     let partner = plan.unit[k] as usize;
-    let Chains { ch, q } = bufs;
+    let Chains { ch, q, .. } = bufs;
     if partner != k {
         // Belt quad (w0, w1, w2, w3): split sides w0w1 (this face) and w2w3 (partner).
         let fe = &l0.face_edges[3 * k..3 * k + 3];
@@ -247,42 +249,101 @@ pub(crate) fn emit_unit(
     (out.len() - start) / 3
 }
 
+/// What uniform level-n output reads to make the triangles of one base face: level 0 (the
+/// sparse faces and the base edges), level n-1, whose faces' children are a dense base
+/// face's triangles (its faces, face edges and vertex count are read), and the vertex count
+/// of every level below n, which numbers the vertices along a base edge. Borrowed, so a
+/// caller can keep just these parts of a refinement once positions are evaluated.
+pub(crate) struct UniformFaces<'a> {
+    pub l0: &'a Level,
+    pub base: &'a Base,
+    /// Level n-1; `None` for n = 0.
+    pub last: Option<&'a Level>,
+    /// Vertex count of levels 0 to n-1.
+    pub level_nv: &'a [usize],
+    pub n: u32,
+    /// `None`: every face dense.
+    pub plan: Option<&'a SparsePlan>,
+}
+
+impl UniformFaces<'_> {
+    /// Appends the output triangles of base face `k` (flat, level-n vertex ids): its 4^n
+    /// children when it is dense, its unit's sparse triangles when it is the first face of
+    /// its unit (a belt quad is emitted by its first face), none otherwise. Returns how
+    /// many triangles it appended.
+    pub fn emit(&self, k: usize, bufs: &mut Chains, out: &mut Vec<u32>) -> usize {
+        let unit = self.plan.map_or(DENSE, |p| p.unit[k]);
+        if unit == DENSE {
+            let Some(last) = self.last else {
+                out.extend_from_slice(&self.l0.faces[3 * k..3 * k + 3]);
+                return 1;
+            };
+            let q = 1usize << (2 * (self.n - 1));
+            for f in k * q..(k + 1) * q {
+                out.extend_from_slice(&child_faces(last, f));
+            }
+            return 4 * q;
+        }
+        if (unit as usize) < k {
+            return 0;
+        }
+        let (l0, plan) = (self.l0, self.plan.expect("sparse faces have a plan"));
+        let mut edge_chain = std::mem::take(&mut bufs.edge);
+        let mut chain = |f: usize, s: usize, v: &mut Vec<u32>| {
+            let c = &l0.faces[3 * f..3 * f + 3];
+            let (a, b) = (c[s], c[(s + 1) % 3]);
+            let e = l0.face_edges[3 * f + s] as usize;
+            v.clear();
+            if !plan.split[e] {
+                v.extend_from_slice(&[a, b]);
+                return;
+            }
+            base_edge_chain(l0, self.level_nv, self.n, e, &mut edge_chain);
+            if edge_chain[0] == a {
+                v.extend_from_slice(&edge_chain);
+            } else {
+                v.extend(edge_chain.iter().rev());
+            }
+        };
+        let t = emit_unit(l0, plan, k, &mut chain, bufs, out);
+        bufs.edge = edge_chain;
+        t
+    }
+}
+
+/// Level-n vertex ids along base edge `e`, from its stored first end to its second
+/// (`2^n + 1` ids), by index arithmetic only: the vertex at position `i` was created at
+/// level `j = n - 1 - tz(i)` on the level-j descendant `e 2^j + (i >> (tz + 1))` of `e` (the
+/// descendants of a base edge are consecutive and ordered along it). `level_nv[j]` is the
+/// vertex count of level j.
+pub(crate) fn base_edge_chain(
+    l0: &Level,
+    level_nv: &[usize],
+    n: u32,
+    e: usize,
+    out: &mut Vec<u32>,
+) {
+    let [a, b] = l0.edges[e];
+    out.clear();
+    out.push(a);
+    for i in 1..1usize << n {
+        let tz = i.trailing_zeros();
+        let j = n - 1 - tz;
+        let k = i >> (tz + 1);
+        out.push((level_nv[j as usize] + (e << j) + k) as u32);
+    }
+    out.push(b);
+}
+
 /// Uniform level-n output with sparse boundary patches: flat triangles (level-n vertex
 /// ids) and the group of each triangle, in base-face order.
-pub(crate) fn uniform(r: &Refinement, plan: &SparsePlan, n: u32) -> (Vec<u32>, Vec<u32>) {
-    let l0 = &r.levels[0];
-    let q = 1usize << (2 * n);
-    let dense = &r.finest_faces;
+pub(crate) fn uniform(faces: &UniformFaces<'_>) -> (Vec<u32>, Vec<u32>) {
     let mut tris = Vec::new();
     let mut groups = Vec::new();
     let mut bufs = Chains::default();
-    let mut edge_chain = Vec::new();
-    let mut chain = |f: usize, s: usize, v: &mut Vec<u32>| {
-        let c = &l0.faces[3 * f..3 * f + 3];
-        let (a, b) = (c[s], c[(s + 1) % 3]);
-        let e = l0.face_edges[3 * f + s] as usize;
-        v.clear();
-        if !plan.split[e] {
-            v.extend_from_slice(&[a, b]);
-            return;
-        }
-        r.base_edge_chain(e, &mut edge_chain);
-        if edge_chain[0] == a {
-            v.extend_from_slice(&edge_chain);
-        } else {
-            v.extend(edge_chain.iter().rev());
-        }
-    };
-    for k in 0..l0.nf() {
-        let g = r.base.group[k];
-        let u = plan.unit[k];
-        if u == DENSE {
-            tris.extend_from_slice(&dense[3 * k * q..3 * (k + 1) * q]);
-            groups.extend(std::iter::repeat_n(g, q));
-        } else if u as usize >= k {
-            let t = emit_unit(l0, plan, k, &mut chain, &mut bufs, &mut tris);
-            groups.extend(std::iter::repeat_n(g, t));
-        }
+    for k in 0..faces.l0.nf() {
+        let t = faces.emit(k, &mut bufs, &mut tris);
+        groups.extend(std::iter::repeat_n(faces.base.group[k], t));
     }
     (tris, groups)
 }

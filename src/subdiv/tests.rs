@@ -1550,3 +1550,109 @@ fn unpaired_cone_group_is_dense_and_watertight() {
         assert_eq!(count(cap), (n << level) - 2);
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// The finest level read through the level before
+
+/// Meshes with creases, darts, corners, mesh boundaries and cylinder/cone frames.
+fn connectivity_meshes() -> Vec<ControlMesh> {
+    let mut meshes = vec![tetrahedron(), mixed_mesh()];
+    meshes.push(belt_mesh(6, false, true).0);
+    meshes.push(belt_mesh(5, true, false).0);
+    meshes.push(cone_with_cap(0.2).0);
+    meshes.push(ruled_belt(6, true).0);
+    meshes.push(plane_ngon(7));
+    meshes.extend(load_corpus("tess/four_cone_coarse.obj"));
+    meshes
+}
+
+/// Every query [`next_level::NextLevel`] answers equals the built level's arrays.
+#[test]
+fn next_level_answers_as_the_built_level() {
+    use next_level::{Connectivity, NextLevel};
+    for m in connectivity_meshes() {
+        let r = Refinement::new(&m, 3).unwrap();
+        for j in 0..3u32 {
+            let next = NextLevel {
+                l: r.level_with_rings(j as usize),
+                base: &r.base,
+                j,
+            };
+            let built = r.level_with_rings(j as usize + 1);
+            assert_eq!(next.vertex_count(), built.nv);
+            for v in 0..built.nv {
+                assert_eq!(next.vertex_class(v), built.vertex_class(v), "class of {v}");
+                assert_eq!(next.vertex_frame(v), built.vertex_frame(v), "frame of {v}");
+                let ring: Vec<u32> = next.ring_edges(v).collect();
+                assert_eq!(ring, built.ring(v), "ring of {v}");
+                assert_eq!(next.ring_edges(v).len(), ring.len());
+            }
+            for e in 0..built.ne() {
+                assert_eq!(next.edge_class(e), built.edge_class(e), "class of edge {e}");
+                assert_eq!(next.edge_frame(e), built.edge_frame(e), "frame of edge {e}");
+                assert_eq!(next.edge_ends(e), built.edges[e]);
+                let faces = next.edge_faces(e);
+                assert_eq!(faces, built.edge_faces[e]);
+                for f in faces.into_iter().filter(|&f| f != topology::NONE) {
+                    assert_eq!(
+                        next.opposite_vertex(f, e as u32),
+                        built.opposite(f, e as u32)
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Limit positions of the finest level are the same bits whether its connectivity is built
+/// or read through the level before.
+#[test]
+fn finest_limit_positions_without_the_finest_level() {
+    for m in connectivity_meshes() {
+        let r = Refinement::new(&m, 3).unwrap();
+        let p = r.positions(&m.positions).unwrap();
+        let through_level_2 = r.limit_positions(&p, 3).unwrap();
+        assert!(r.finest.get().is_none(), "the finest level was built");
+        let _ = r.level(3).edge_count();
+        let built = r.limit_positions(&p, 3).unwrap();
+        let bits = |q: &[DVec3]| -> Vec<[u64; 3]> {
+            q.iter().map(|x| x.to_array().map(f64::to_bits)).collect()
+        };
+        assert_eq!(bits(&through_level_2), bits(&built));
+    }
+}
+
+/// A [`UniformSurface`] hands out, group by group, the triangles [`subdivide`] outputs, with
+/// the same corner positions bit for bit.
+#[test]
+fn uniform_surface_groups_are_the_subdivided_output() {
+    let bits = |p: DVec3| p.to_array().map(f64::to_bits);
+    for m in connectivity_meshes() {
+        for level in 0..=3u32 {
+            let opts = SubdivOptions {
+                limit: true,
+                normals: false,
+                ..Default::default()
+            };
+            let (out, _) = subdivide(&m, level, &opts).unwrap();
+            let surface = UniformSurface::new(&m, level, DEFAULT_MAX_FACES).unwrap();
+            let n_groups = out.face_groups.iter().map(|&g| g as usize + 1).max();
+            assert_eq!(surface.group_count(), n_groups.unwrap_or(0));
+            let mut tris = Vec::new();
+            for g in 0..surface.group_count() {
+                let expected: Vec<[u64; 3]> = (0..out.face_count())
+                    .filter(|&f| out.face_groups[f] as usize == g)
+                    .flat_map(|f| out.face(f).to_vec())
+                    .map(|v| bits(out.positions[v as usize]))
+                    .collect();
+                surface.group_triangles(g, &mut tris);
+                let got: Vec<[u64; 3]> = tris
+                    .iter()
+                    .flatten()
+                    .map(|&v| bits(surface.positions()[v as usize]))
+                    .collect();
+                assert_eq!(got, expected, "level {level} group {g}");
+            }
+        }
+    }
+}

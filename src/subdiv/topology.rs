@@ -13,6 +13,7 @@ use crate::mesh::{edge_key, ControlMesh, PatchKind};
 
 use super::frame::Frame;
 use super::masks::{eclass, vclass};
+use super::next_level::{child_face_edges, child_faces};
 use super::par;
 
 /// Marker for "no face" in `edge_faces`.
@@ -464,15 +465,9 @@ pub(crate) fn next_counts(v: u64, e: u64, f: u64) -> (u64, u64, u64) {
 /// Triangles of level j+1 from level j: the only part of the finest level that plain
 /// uniform output needs.
 pub(crate) fn refine_faces(l: &Level) -> Vec<u32> {
-    let nv = l.nv;
     let mut faces = vec![0u32; 12 * l.nf()];
     par::for_each_chunk_mut(&mut faces, 12, |f, out| {
-        let c = &l.faces[3 * f..3 * f + 3];
-        let fe = &l.face_edges[3 * f..3 * f + 3];
-        let m0 = nv as u32 + fe[0];
-        let m1 = nv as u32 + fe[1];
-        let m2 = nv as u32 + fe[2];
-        out.copy_from_slice(&[c[0], m0, m2, m0, c[1], m1, m2, m1, c[2], m0, m1, m2]);
+        out.copy_from_slice(&child_faces(l, f));
     });
     faces
 }
@@ -488,37 +483,11 @@ pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
     let has_frames = !l.eframe.is_empty();
     let base_of = |f: usize| f >> (2 * j);
 
-    // "half of e at x": 2e if x is the stored first endpoint, else 2e+1.
-    let half = |e: u32, x: u32| -> u32 {
-        if l.edges[e as usize][0] == x {
-            2 * e
-        } else {
-            2 * e + 1
-        }
-    };
-
     // Faces and face edges: 4 children per face.
     let faces = refine_faces(l);
     let mut face_edges = vec![0u32; 12 * nf];
     par::for_each_chunk_mut(&mut face_edges, 12, |f, out| {
-        let c = &l.faces[3 * f..3 * f + 3];
-        let fe = &l.face_edges[3 * f..3 * f + 3];
-        let i0 = (2 * ne + 3 * f) as u32;
-        let (i1, i2) = (i0 + 1, i0 + 2);
-        out.copy_from_slice(&[
-            half(fe[0], c[0]),
-            i0,
-            half(fe[2], c[0]),
-            half(fe[0], c[1]),
-            half(fe[1], c[1]),
-            i1,
-            i2,
-            half(fe[1], c[2]),
-            half(fe[2], c[2]),
-            i1,
-            i2,
-            i0,
-        ]);
+        out.copy_from_slice(&child_face_edges(l, f));
     });
 
     // Edges and edge faces.
