@@ -7,6 +7,11 @@
 //! the input, and only changed faces are indexed, sampled and queried again. Every reuse is
 //! exact: the distances are those a full measurement gives, so the encoder's decisions do not
 //! depend on what was cached.
+//!
+//! At a fine level the decoded surface has millions of triangles, so nothing holds all of
+//! them twice: the surface is handed out face by face ([`UniformSurface`]), a changed face's
+//! old index is dropped before its new one is built, and decoded samples are made as they
+//! are measured.
 
 use std::sync::Mutex;
 
@@ -365,13 +370,13 @@ impl<'a> ErrorMeter<'a> {
         let n_groups = self.mesh.groups.len().max(surface.group_count());
         let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
         cache.groups.resize_with(n_groups, || None);
-        let changed: Vec<usize> = (0..n_groups).collect::<Vec<_>>();
-        let same = map_ordered(&changed, |&g| {
+        let groups: Vec<usize> = (0..n_groups).collect();
+        let unchanged = map_ordered(&groups, |&g| {
             cache.groups[g]
                 .as_ref()
                 .is_some_and(|c| c.same_triangles(&surface, g))
         });
-        let changed: Vec<usize> = changed.into_iter().filter(|&g| !same[g]).collect();
+        let changed: Vec<usize> = groups.into_iter().filter(|&g| !unchanged[g]).collect();
         if let Some(max_cap) = over {
             if self.decoded_probe_fails(&cache, &changed, &surface, max_cap) {
                 return Ok(None);

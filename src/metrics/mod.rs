@@ -181,6 +181,29 @@ mod tests {
         assert_ne!(&s4[..], &s1[6..16]);
     }
 
+    /// Random samples made one at a time are the points of one generator stream read in
+    /// order: sample i from its outputs 3i to 3i + 2.
+    #[test]
+    fn random_samples_one_at_a_time_follow_the_stream() {
+        let pos = vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, 0.5)];
+        let tris = vec![[0, 1, 2], [1, 3, 2]];
+        let samples = RandomSamples::new(&pos, &tris, SampleCount::Total(50), 0xABC);
+        let total =
+            0.5 + 0.5 * (DVec3::new(-1.0, 1.0, 0.0).cross(DVec3::new(0.0, 1.0, 0.5))).length();
+        let mut rng = SplitMix64::new(0xABC);
+        for i in 0..samples.len() {
+            let (target, r1, r2) = (rng.next_f64() * total, rng.next_f64(), rng.next_f64());
+            let s = samples.get(i);
+            assert_eq!(s.triangle, u32::from(target >= 0.5), "sample {i}");
+            let sq = r1.sqrt();
+            assert_eq!(
+                s.barycentric,
+                [1.0 - sq, sq * (1.0 - r2), sq * r2],
+                "sample {i}"
+            );
+        }
+    }
+
     fn grid_mesh(n: usize, z: f64, quads: bool) -> ControlMesh {
         let mut m = ControlMesh::new();
         let g = m.push_group("face_0", PatchKind::Closed);

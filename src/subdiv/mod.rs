@@ -524,9 +524,9 @@ impl Refinement {
         self.positions_at(control, self.max_level())
     }
 
-    /// Limit positions of the level-`m` vertices given their level-`m` positions.
-    /// The finest level's limit masks are read through the level before ([`NextLevel`]) unless
-    /// its connectivity is built anyway, which it then need not be.
+    /// Limit positions of the level-`m` vertices given their level-`m` positions. Unless it
+    /// is built already, the finest level's connectivity is read through the level before
+    /// ([`NextLevel`]): limit positions alone never build it.
     pub fn limit_positions(&self, level_positions: &[DVec3], m: u32) -> Result<Vec<DVec3>> {
         let (t, b) = (&self.tables, &self.base);
         if m > 0 && m == self.max_level && self.finest.get().is_none() {
