@@ -84,60 +84,38 @@ impl AnalyticSurface {
     /// The surface moved by a rigid placement: `point` maps positions, `vector` directions
     /// (renormalised); sizes are unchanged.
     pub fn placed(self, point: impl Fn(DVec3) -> DVec3, vector: impl Fn(DVec3) -> DVec3) -> Self {
-        let axis = |a: Axis| Axis {
-            origin: point(a.origin),
-            direction: vector(a.direction).normalize_or_zero(),
-        };
-        match self {
-            AnalyticSurface::Plane { point: p, normal } => AnalyticSurface::Plane {
-                point: point(p),
-                normal: vector(normal).normalize_or_zero(),
-            },
-            AnalyticSurface::Sphere { center, radius } => AnalyticSurface::Sphere {
-                center: point(center),
-                radius,
-            },
-            AnalyticSurface::Cylinder { axis: a, radius } => AnalyticSurface::Cylinder {
-                axis: axis(a),
-                radius,
-            },
-            AnalyticSurface::Cone {
-                axis: a,
-                half_angle,
-            } => AnalyticSurface::Cone {
-                axis: axis(a),
-                half_angle,
-            },
-            AnalyticSurface::Torus {
-                axis: a,
-                major_radius,
-                minor_radius,
-            } => AnalyticSurface::Torus {
-                axis: axis(a),
-                major_radius,
-                minor_radius,
-            },
-        }
+        self.mapped(point, |v| vector(v).normalize_or_zero(), 1.0)
     }
 
     /// The surface with every length times `s` (a change of unit about the origin).
     pub fn scaled(self, s: f64) -> Self {
+        self.mapped(|p| p * s, |d| d, s)
+    }
+
+    /// The surface with its points mapped by `point`, its unit directions by `direction`
+    /// and its radii times `length`.
+    fn mapped(
+        self,
+        point: impl Fn(DVec3) -> DVec3,
+        direction: impl Fn(DVec3) -> DVec3,
+        length: f64,
+    ) -> Self {
         let axis = |a: Axis| Axis {
-            origin: a.origin * s,
-            direction: a.direction,
+            origin: point(a.origin),
+            direction: direction(a.direction),
         };
         match self {
-            AnalyticSurface::Plane { point, normal } => AnalyticSurface::Plane {
-                point: point * s,
-                normal,
+            AnalyticSurface::Plane { point: p, normal } => AnalyticSurface::Plane {
+                point: point(p),
+                normal: direction(normal),
             },
             AnalyticSurface::Sphere { center, radius } => AnalyticSurface::Sphere {
-                center: center * s,
-                radius: radius * s,
+                center: point(center),
+                radius: radius * length,
             },
             AnalyticSurface::Cylinder { axis: a, radius } => AnalyticSurface::Cylinder {
                 axis: axis(a),
-                radius: radius * s,
+                radius: radius * length,
             },
             AnalyticSurface::Cone {
                 axis: a,
@@ -152,8 +130,8 @@ impl AnalyticSurface {
                 minor_radius,
             } => AnalyticSurface::Torus {
                 axis: axis(a),
-                major_radius: major_radius * s,
-                minor_radius: minor_radius * s,
+                major_radius: major_radius * length,
+                minor_radius: minor_radius * length,
             },
         }
     }
