@@ -36,247 +36,166 @@ pub struct Traversal {
 /// Runs the Face Fixer encoder over every connected component (start face: the lowest
 /// unprocessed mesh face, start corner: its first corner).
 pub fn encode_traversal(he: &HalfEdgeMesh) -> Traversal {
-    let mut walk = TraversalWalk::new(he);
+    let nh = he.origin.len();
+    let mut a_next = vec![NONE; nh];
+    let mut a_prev = vec![NONE; nh];
+    let mut loop_of = vec![NONE; nh];
+    let mut processed = vec![false; he.face_count()];
+    let mut labels = Vec::with_capacity(nh / 2 + 16);
+    let mut faces = Vec::with_capacity(he.face_count());
+    let mut next_id = 0u32;
+    let mut stack: Vec<(u32, u32)> = Vec::new();
+
     for f0 in 0..he.real_face_count as u32 {
-        if !walk.processed[f0 as usize] {
-            walk.component(f0);
+        if processed[f0 as usize] {
+            continue;
         }
-    }
-    Traversal {
-        labels: walk.labels,
-        faces: walk.faces,
-    }
-}
-
-/// Cyclic doubly linked lists over half-edges: the boundary loops of the region the encoder
-/// has processed, or the active and suspended boundaries while the decoder undoes labels.
-struct Loops {
-    next: Vec<u32>,
-    prev: Vec<u32>,
-}
-
-impl Loops {
-    /// Makes `b` follow `a`.
-    fn link(&mut self, a: u32, b: u32) {
-        self.next[a as usize] = b;
-        self.prev[b as usize] = a;
-    }
-}
-
-/// The encoder's state (face-fixer.md §3): the boundary loops of the processed region, the
-/// loop id of every half-edge on one (`NONE` elsewhere), the current loop and its gate, and
-/// the suspended loops of the current component as (loop id, gate).
-struct TraversalWalk<'a> {
-    he: &'a HalfEdgeMesh,
-    loops: Loops,
-    loop_of: Vec<u32>,
-    processed: Vec<bool>,
-    labels: Vec<Label>,
-    faces: Vec<(u32, u32)>,
-    next_id: u32,
-    cur: u32,
-    gate: u32,
-    stack: Vec<(u32, u32)>,
-}
-
-impl<'a> TraversalWalk<'a> {
-    /// Nothing processed yet.
-    fn new(he: &'a HalfEdgeMesh) -> Self {
-        let nh = he.origin.len();
-        TraversalWalk {
-            he,
-            loops: Loops {
-                next: vec![NONE; nh],
-                prev: vec![NONE; nh],
-            },
-            loop_of: vec![NONE; nh],
-            processed: vec![false; he.face_count()],
-            labels: Vec::with_capacity(nh / 2 + 16),
-            faces: Vec::with_capacity(he.face_count()),
-            next_id: 0,
-            cur: NONE,
-            gate: NONE,
-            stack: Vec::new(),
-        }
-    }
-
-    /// Encodes the component of mesh face `f0`: its start label, then one label per gate
-    /// until its last boundary loop closes.
-    fn component(&mut self, f0: u32) {
-        self.start(f0);
-        while self.step() {}
-    }
-
-    /// Starts a component at mesh face `f0` and its first corner: the face's half-edges form
-    /// the first boundary loop.
-    fn start(&mut self, f0: u32) {
-        let he = self.he;
-        self.processed[f0 as usize] = true;
+        processed[f0 as usize] = true;
         let first = he.face_first[f0 as usize];
-        self.faces.push((f0, first));
-        self.labels.push(Label::F(he.face_degree[f0 as usize]));
-        self.cur = self.next_id;
-        self.next_id += 1;
+        faces.push((f0, first));
+        labels.push(Label::F(he.face_degree[f0 as usize]));
+        let mut cur = next_id;
+        next_id += 1;
         for h in he.face_half_edges(f0) {
-            self.loops.link(h, he.next[h as usize]);
-            self.loop_of[h as usize] = self.cur;
+            let n = he.next[h as usize];
+            a_next[h as usize] = n;
+            a_prev[n as usize] = h;
+            loop_of[h as usize] = cur;
         }
-        self.gate = first;
-        self.stack.clear();
-    }
-
-    /// Emits the label of the current gate and moves on; false once the component's last
-    /// loop has closed.
-    fn step(&mut self) -> bool {
-        let g = self.gate;
-        let t = self.he.twin[g as usize];
-        let u = self.he.face[t as usize];
-        if !self.processed[u as usize] {
-            self.fix_face(g, t, u);
-            return true;
-        }
-        let lt = self.loop_of[t as usize];
-        debug_assert_ne!(lt, NONE, "twin of the gate must be on a boundary");
-        self.loop_of[g as usize] = NONE;
-        self.loop_of[t as usize] = NONE;
-        if lt == self.cur {
-            self.zip(g, t)
-        } else {
-            self.merge(g, t, lt);
-            true
-        }
-    }
-
-    /// F / H: face `u` across the gate `g` (entered by `t`) joins the region; its other
-    /// half-edges replace the gate in the current loop.
-    fn fix_face(&mut self, g: u32, t: u32, u: u32) {
-        let he = self.he;
-        self.processed[u as usize] = true;
-        self.faces.push((u, t));
-        let l = he.face_degree[u as usize];
-        let (p, n) = (self.loops.prev[g as usize], self.loops.next[g as usize]);
-        let mut last = p;
-        let mut x = he.next[t as usize];
-        for _ in 0..l - 1 {
-            self.loops.link(last, x);
-            self.loop_of[x as usize] = self.cur;
-            last = x;
-            x = he.next[x as usize];
-        }
-        self.loops.link(last, n);
-        self.loop_of[g as usize] = NONE;
-        self.gate = last;
-        self.labels.push(if he.is_hole_face(u) {
-            Label::H(l)
-        } else {
-            Label::F(l)
-        });
-    }
-
-    /// R, L, E or S: the gate `g` and its twin `t` are both on the current loop and are
-    /// zipped. False when that closes the component's last loop.
-    fn zip(&mut self, g: u32, t: u32) -> bool {
-        let x_empty = self.loops.next[g as usize] == t;
-        let y_empty = self.loops.next[t as usize] == g;
-        if x_empty && y_empty {
-            self.labels.push(Label::E);
-            match self.stack.pop() {
-                None => return false,
-                Some((id, gt)) => {
-                    self.cur = id;
-                    self.gate = gt;
+        let mut gate = first;
+        stack.clear();
+        loop {
+            let g = gate;
+            let t = he.twin[g as usize];
+            let u = he.face[t as usize];
+            if !processed[u as usize] {
+                processed[u as usize] = true;
+                faces.push((u, t));
+                let l = he.face_degree[u as usize];
+                let (p, n) = (a_prev[g as usize], a_next[g as usize]);
+                let mut last = p;
+                let mut x = he.next[t as usize];
+                for _ in 0..l - 1 {
+                    a_next[last as usize] = x;
+                    a_prev[x as usize] = last;
+                    loop_of[x as usize] = cur;
+                    last = x;
+                    x = he.next[x as usize];
                 }
+                a_next[last as usize] = n;
+                a_prev[n as usize] = last;
+                loop_of[g as usize] = NONE;
+                gate = last;
+                labels.push(if he.is_hole_face(u) {
+                    Label::H(l)
+                } else {
+                    Label::F(l)
+                });
+                continue;
             }
-        } else if x_empty {
-            let (p, n) = (self.loops.prev[g as usize], self.loops.next[t as usize]);
-            self.loops.link(p, n);
-            self.gate = p;
-            self.labels.push(Label::R);
-        } else if y_empty {
-            let (p, n) = (self.loops.prev[t as usize], self.loops.next[g as usize]);
-            self.loops.link(p, n);
-            self.gate = p;
-            self.labels.push(Label::L);
-        } else {
-            self.split(g, t);
+            let lt = loop_of[t as usize];
+            debug_assert_ne!(lt, NONE, "twin of the gate must be on a boundary");
+            loop_of[g as usize] = NONE;
+            loop_of[t as usize] = NONE;
+            if lt == cur {
+                let x_empty = a_next[g as usize] == t;
+                let y_empty = a_next[t as usize] == g;
+                if x_empty && y_empty {
+                    labels.push(Label::E);
+                    match stack.pop() {
+                        None => break,
+                        Some((id, gt)) => {
+                            cur = id;
+                            gate = gt;
+                        }
+                    }
+                } else if x_empty {
+                    let (p, n) = (a_prev[g as usize], a_next[t as usize]);
+                    a_next[p as usize] = n;
+                    a_prev[n as usize] = p;
+                    gate = p;
+                    labels.push(Label::R);
+                } else if y_empty {
+                    let (p, n) = (a_prev[t as usize], a_next[g as usize]);
+                    a_next[p as usize] = n;
+                    a_prev[n as usize] = p;
+                    gate = p;
+                    labels.push(Label::L);
+                } else {
+                    let (xf, xl) = (a_next[g as usize], a_prev[t as usize]);
+                    let (yf, yl) = (a_next[t as usize], a_prev[g as usize]);
+                    a_next[xl as usize] = xf;
+                    a_prev[xf as usize] = xl;
+                    a_next[yl as usize] = yf;
+                    a_prev[yf as usize] = yl;
+                    // Relabel the smaller part (walk both in lockstep) so the total work is
+                    // O(n log n).
+                    let (mut px, mut py) = (xf, yf);
+                    let x_smaller = loop {
+                        px = a_next[px as usize];
+                        if px == xf {
+                            break true;
+                        }
+                        py = a_next[py as usize];
+                        if py == yf {
+                            break false;
+                        }
+                    };
+                    let id = next_id;
+                    next_id += 1;
+                    let relabel_from = if x_smaller { xf } else { yf };
+                    let mut x = relabel_from;
+                    loop {
+                        loop_of[x as usize] = id;
+                        x = a_next[x as usize];
+                        if x == relabel_from {
+                            break;
+                        }
+                    }
+                    if x_smaller {
+                        stack.push((cur, yl));
+                        cur = id;
+                    } else {
+                        stack.push((id, yl));
+                    }
+                    gate = xl;
+                    labels.push(Label::S);
+                }
+            } else {
+                let idx = stack
+                    .iter()
+                    .rposition(|&(id, _)| id == lt)
+                    .expect("boundary of the gate's twin is on the stack");
+                let i = (stack.len() - 1 - idx) as u32;
+                let (_, bgate) = stack.remove(idx);
+                let mut x = bgate;
+                let mut pos = 0u32;
+                let mut k = 0u32;
+                loop {
+                    if x == t {
+                        k = pos;
+                    }
+                    loop_of[x as usize] = cur;
+                    pos += 1;
+                    x = a_next[x as usize];
+                    if x == bgate {
+                        break;
+                    }
+                }
+                loop_of[t as usize] = NONE;
+                let l = pos;
+                let (pg, ng) = (a_prev[g as usize], a_next[g as usize]);
+                let (pt, nt) = (a_prev[t as usize], a_next[t as usize]);
+                a_next[pg as usize] = nt;
+                a_prev[nt as usize] = pg;
+                a_next[pt as usize] = ng;
+                a_prev[ng as usize] = pt;
+                gate = pg;
+                labels.push(Label::M { i, k, l });
+            }
         }
-        true
     }
-
-    /// S: zipping `g` with `t` elsewhere on the current loop splits it in two; the part
-    /// after the gate stays current, the other is suspended.
-    fn split(&mut self, g: u32, t: u32) {
-        let (xf, xl) = (self.loops.next[g as usize], self.loops.prev[t as usize]);
-        let (yf, yl) = (self.loops.next[t as usize], self.loops.prev[g as usize]);
-        self.loops.link(xl, xf);
-        self.loops.link(yl, yf);
-        // Relabel the smaller part (walk both in lockstep) so the total work is O(n log n).
-        let (mut px, mut py) = (xf, yf);
-        let x_smaller = loop {
-            px = self.loops.next[px as usize];
-            if px == xf {
-                break true;
-            }
-            py = self.loops.next[py as usize];
-            if py == yf {
-                break false;
-            }
-        };
-        let id = self.next_id;
-        self.next_id += 1;
-        let relabel_from = if x_smaller { xf } else { yf };
-        let mut x = relabel_from;
-        loop {
-            self.loop_of[x as usize] = id;
-            x = self.loops.next[x as usize];
-            if x == relabel_from {
-                break;
-            }
-        }
-        if x_smaller {
-            self.stack.push((self.cur, yl));
-            self.cur = id;
-        } else {
-            self.stack.push((id, yl));
-        }
-        self.gate = xl;
-        self.labels.push(Label::S);
-    }
-
-    /// M: the gate's twin `t` is on the suspended loop `lt`, which is taken off the stack and
-    /// joined into the current loop; the label gives its depth in the stack, the offset of
-    /// `t` from its gate and its length.
-    fn merge(&mut self, g: u32, t: u32, lt: u32) {
-        let idx = self
-            .stack
-            .iter()
-            .rposition(|&(id, _)| id == lt)
-            .expect("boundary of the gate's twin is on the stack");
-        let i = (self.stack.len() - 1 - idx) as u32;
-        let (_, bgate) = self.stack.remove(idx);
-        let mut x = bgate;
-        let mut pos = 0u32;
-        let mut k = 0u32;
-        loop {
-            if x == t {
-                k = pos;
-            }
-            self.loop_of[x as usize] = self.cur;
-            pos += 1;
-            x = self.loops.next[x as usize];
-            if x == bgate {
-                break;
-            }
-        }
-        self.loop_of[t as usize] = NONE;
-        let l = pos;
-        let (pg, ng) = (self.loops.prev[g as usize], self.loops.next[g as usize]);
-        let (pt, nt) = (self.loops.prev[t as usize], self.loops.next[t as usize]);
-        self.loops.link(pg, nt);
-        self.loops.link(pt, ng);
-        self.gate = pg;
-        self.labels.push(Label::M { i, k, l });
-    }
+    Traversal { labels, faces }
 }
 
 /// One face of the rebuilt structure.
@@ -332,27 +251,8 @@ fn bad(field: &'static str, detail: impl Into<String>) -> Error {
 /// Undoes the labels (face-fixer.md §4). Every precondition is checked, so arbitrary label
 /// sequences give an error, never a panic.
 pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
-    let components = split_components(labels)?;
-    let mut undo = Undo::new(labels, components.face_of_label, components.face_count);
-    for &(s, e) in &components.ranges {
-        undo.component(s, e)?;
-    }
-    undo.finish()
-}
-
-/// The labels cut into connected components, and the face each F or H label creates.
-struct Components {
-    /// Label ranges `start..end`, one per component.
-    ranges: Vec<(usize, usize)>,
-    /// Face number of every F and H label in label order; `NONE` for the others.
-    face_of_label: Vec<u32>,
-    face_count: u32,
-}
-
-/// Forward pass over the labels: a component starts with F and ends when its open
-/// boundaries (one more per S, one fewer per M or E) reach zero.
-fn split_components(labels: &[Label]) -> Result<Components> {
-    let mut ranges = Vec::new();
+    // Forward pass: split into components by counting open boundaries, and number faces.
+    let mut comps = Vec::new();
     let mut open = 0u64;
     let mut start = 0usize;
     let mut face_of_label = vec![NONE; labels.len()];
@@ -379,330 +279,245 @@ fn split_components(labels: &[Label]) -> Result<Components> {
             nfaces += 1;
         }
         if open == 0 {
-            ranges.push((start, j + 1));
+            comps.push((start, j + 1));
         }
     }
     if open != 0 {
         return Err(bad("labels", "the last component does not end with E"));
     }
-    Ok(Components {
-        ranges,
-        face_of_label,
-        face_count: nfaces,
-    })
-}
 
-/// The half-edge structure while the labels are undone: half-edges in creation order (each
-/// label creates one edge, as a pair of twins), the faces finished so far, and the
-/// boundaries still open as linked loops.
-struct Undo<'a> {
-    labels: &'a [Label],
-    face_of_label: Vec<u32>,
-    next: Vec<u32>,
-    twin: Vec<u32>,
-    face: Vec<u32>,
-    boundary: Loops,
-    faces: Vec<RebuiltFace>,
-    label_edge: Vec<u32>,
-}
-
-/// The active boundary of the component being rebuilt: its gate (`NONE` before the first
-/// undone label), its length, and the suspended boundaries as (gate, length).
-struct ActiveBoundary {
-    gate: u32,
-    len: u64,
-    stack: Vec<(u32, u64)>,
-}
-
-impl<'a> Undo<'a> {
-    /// No half-edges yet; `face_of_label` and `face_count` as [`split_components`] found.
-    fn new(labels: &'a [Label], face_of_label: Vec<u32>, face_count: u32) -> Self {
-        Undo {
-            labels,
-            face_of_label,
-            next: Vec::new(),
-            twin: Vec::new(),
-            face: Vec::new(),
-            boundary: Loops {
-                next: Vec::new(),
-                prev: Vec::new(),
-            },
-            faces: vec![
-                RebuiltFace {
-                    first: NONE,
-                    degree: 0,
-                    hole: false,
-                    start: false
-                };
-                face_count as usize
-            ],
-            label_edge: vec![NONE; labels.len()],
-        }
-    }
-
-    /// A new edge: two twin half-edges `(g, t)`, in no face or boundary yet.
-    fn new_pair(&mut self) -> Result<(u32, u32)> {
-        let g = self.next.len();
+    let mut next: Vec<u32> = Vec::new();
+    let mut twin: Vec<u32> = Vec::new();
+    let mut face: Vec<u32> = Vec::new();
+    let mut a_next: Vec<u32> = Vec::new();
+    let mut a_prev: Vec<u32> = Vec::new();
+    let mut faces = vec![
+        RebuiltFace {
+            first: NONE,
+            degree: 0,
+            hole: false,
+            start: false
+        };
+        nfaces as usize
+    ];
+    let mut label_edge = vec![NONE; labels.len()];
+    let new_pair = |next: &mut Vec<u32>,
+                    twin: &mut Vec<u32>,
+                    face: &mut Vec<u32>,
+                    a_next: &mut Vec<u32>,
+                    a_prev: &mut Vec<u32>|
+     -> Result<(u32, u32)> {
+        let g = next.len();
         if g + 2 >= NONE as usize {
             return Err(bad("labels", "too many half-edges"));
         }
         for _ in 0..2 {
-            self.next.push(NONE);
-            self.face.push(NONE);
-            self.boundary.next.push(NONE);
-            self.boundary.prev.push(NONE);
+            next.push(NONE);
+            face.push(NONE);
+            a_next.push(NONE);
+            a_prev.push(NONE);
         }
-        self.twin.push(g as u32 + 1);
-        self.twin.push(g as u32);
+        twin.push(g as u32 + 1);
+        twin.push(g as u32);
         Ok((g as u32, g as u32 + 1))
-    }
+    };
 
-    /// Undoes the labels `s..e` of one component, last first, then closes its start face.
-    fn component(&mut self, s: usize, e: usize) -> Result<()> {
-        let mut b = ActiveBoundary {
-            gate: NONE,
-            len: 0,
-            stack: Vec::new(),
-        };
+    for &(s, e) in &comps {
+        let mut gate = NONE;
+        let mut len = 0u64;
+        let mut stack: Vec<(u32, u64)> = Vec::new();
         for j in (s + 1..e).rev() {
-            let lab = self.labels[j];
-            let g = match lab {
-                Label::E => self.undo_end(&mut b)?,
-                Label::R | Label::L => self.undo_zip(&mut b, j, lab)?,
-                Label::S => self.undo_split(&mut b, j)?,
-                Label::M { i, k, l } => self.undo_merge(&mut b, j, i, k, l)?,
-                Label::F(l) | Label::H(l) => self.undo_face(&mut b, j, lab, l)?,
-            };
-            // The half-edge of the label's edge that lies on the boundary is the new gate.
-            b.gate = g;
-            self.label_edge[j] = g;
-        }
-        self.close_start_face(&b, s)
-    }
-
-    /// E: a new boundary of one edge; the active one (if any) is suspended.
-    fn undo_end(&mut self, b: &mut ActiveBoundary) -> Result<u32> {
-        if b.gate != NONE {
-            b.stack.push((b.gate, b.len));
-        }
-        let (g, t) = self.new_pair()?;
-        self.boundary.link(g, t);
-        self.boundary.link(t, g);
-        b.len = 2;
-        Ok(g)
-    }
-
-    /// R or L: a new edge inserted after the gate, its gate half-edge first (R) or second (L).
-    fn undo_zip(&mut self, b: &mut ActiveBoundary, j: usize, lab: Label) -> Result<u32> {
-        if b.gate == NONE {
-            return Err(bad(
-                "labels",
-                format!("label {j} ({lab:?}) on an empty boundary"),
-            ));
-        }
-        let (g, t) = self.new_pair()?;
-        let (first, second) = if lab == Label::R { (g, t) } else { (t, g) };
-        let n = self.boundary.next[b.gate as usize];
-        self.boundary.link(b.gate, first);
-        self.boundary.link(first, second);
-        self.boundary.link(second, n);
-        b.len += 2;
-        Ok(g)
-    }
-
-    /// S: the top suspended boundary is joined to the active one by a new edge.
-    fn undo_split(&mut self, b: &mut ActiveBoundary, j: usize) -> Result<u32> {
-        let Some((gy, leny)) = b.stack.pop() else {
-            return Err(bad(
-                "labels",
-                format!("label {j} (S) without a suspended boundary"),
-            ));
-        };
-        if b.gate == NONE {
-            return Err(bad("labels", format!("label {j} (S) on an empty boundary")));
-        }
-        let (g, t) = self.new_pair()?;
-        let xf = self.boundary.next[b.gate as usize];
-        let yf = self.boundary.next[gy as usize];
-        self.boundary.link(g, xf);
-        self.boundary.link(b.gate, t);
-        self.boundary.link(t, yf);
-        self.boundary.link(gy, g);
-        b.len += leny + 2;
-        Ok(g)
-    }
-
-    /// M(i, k, l): a new edge cuts the `l - 1` elements after the gate off the active
-    /// boundary; they and the edge's twin form a boundary of length `l`, suspended at depth
-    /// `i` with its gate `k` elements from the twin.
-    fn undo_merge(
-        &mut self,
-        b: &mut ActiveBoundary,
-        j: usize,
-        i: u32,
-        k: u32,
-        l: u32,
-    ) -> Result<u32> {
-        let gate = b.gate;
-        if gate == NONE
-            || l < 2
-            || k >= l
-            || u64::from(l) > b.len.saturating_sub(1) + 1
-            || b.len < u64::from(l)
-            || i as usize > b.stack.len()
-        {
-            return Err(bad(
-                "labels",
-                format!(
-                    "label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {}, stack depth {})",
-                    b.len,
-                    b.stack.len()
-                ),
-            ));
-        }
-        let (g, t) = self.new_pair()?;
-        // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the gate.
-        let b1 = self.boundary.next[gate as usize];
-        let mut blast = gate;
-        for _ in 0..l - 1 {
-            blast = self.boundary.next[blast as usize];
-        }
-        let a_first = self.boundary.next[blast as usize];
-        // B = [t, b1 .. blast]
-        self.boundary.link(t, b1);
-        self.boundary.link(blast, t);
-        // A = [g, a_first .. gate]
-        self.boundary.link(g, a_first);
-        self.boundary.link(gate, g);
-        let mut bgate = t;
-        for _ in 0..(l - k) % l {
-            bgate = self.boundary.next[bgate as usize];
-        }
-        let at = b.stack.len() - i as usize;
-        b.stack.insert(at, (bgate, u64::from(l)));
-        b.len = b.len - u64::from(l - 1) + 1;
-        Ok(g)
-    }
-
-    /// F(l) or H(l): the face (or hole) of the label is the gate and the `l - 2` boundary
-    /// elements before it, closed by a new edge whose other half-edge replaces them.
-    fn undo_face(&mut self, b: &mut ActiveBoundary, j: usize, lab: Label, l: u32) -> Result<u32> {
-        let gate = b.gate;
-        if gate == NONE || l < 3 || b.len < u64::from(l) {
-            return Err(bad(
-                "labels",
-                format!(
-                    "label {j} ({lab:?}) does not fit the boundary (length {})",
-                    b.len
-                ),
-            ));
-        }
-        let f = self.face_of_label[j];
-        let (g, t) = self.new_pair()?;
-        let mut u1 = gate;
-        for _ in 0..l - 2 {
-            u1 = self.boundary.prev[u1 as usize];
-        }
-        let (p, n) = (
-            self.boundary.prev[u1 as usize],
-            self.boundary.next[gate as usize],
-        );
-        // Face cycle t -> u1 -> ... -> gate -> t.
-        self.next[t as usize] = u1;
-        self.face[t as usize] = f;
-        let mut x = u1;
-        loop {
-            self.face[x as usize] = f;
-            if x == gate {
-                self.next[x as usize] = t;
-                break;
+            let lab = labels[j];
+            match lab {
+                Label::E => {
+                    if gate != NONE {
+                        stack.push((gate, len));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    a_next[g as usize] = t;
+                    a_prev[t as usize] = g;
+                    a_next[t as usize] = g;
+                    a_prev[g as usize] = t;
+                    gate = g;
+                    len = 2;
+                    label_edge[j] = g;
+                }
+                Label::R | Label::L => {
+                    if gate == NONE {
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} ({lab:?}) on an empty boundary"),
+                        ));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    let (first, second) = if lab == Label::R { (g, t) } else { (t, g) };
+                    let n = a_next[gate as usize];
+                    a_next[gate as usize] = first;
+                    a_prev[first as usize] = gate;
+                    a_next[first as usize] = second;
+                    a_prev[second as usize] = first;
+                    a_next[second as usize] = n;
+                    a_prev[n as usize] = second;
+                    gate = g;
+                    len += 2;
+                    label_edge[j] = g;
+                }
+                Label::S => {
+                    let Some((gy, leny)) = stack.pop() else {
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} (S) without a suspended boundary"),
+                        ));
+                    };
+                    if gate == NONE {
+                        return Err(bad("labels", format!("label {j} (S) on an empty boundary")));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    let xf = a_next[gate as usize];
+                    let yf = a_next[gy as usize];
+                    a_next[g as usize] = xf;
+                    a_prev[xf as usize] = g;
+                    a_next[gate as usize] = t;
+                    a_prev[t as usize] = gate;
+                    a_next[t as usize] = yf;
+                    a_prev[yf as usize] = t;
+                    a_next[gy as usize] = g;
+                    a_prev[g as usize] = gy;
+                    gate = g;
+                    len += leny + 2;
+                    label_edge[j] = g;
+                }
+                Label::M { i, k, l } => {
+                    if gate == NONE
+                        || l < 2
+                        || k >= l
+                        || u64::from(l) > len.saturating_sub(1) + 1
+                        || len < u64::from(l)
+                        || i as usize > stack.len()
+                    {
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {len}, stack depth {})", stack.len()),
+                        ));
+                    }
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the gate.
+                    let b1 = a_next[gate as usize];
+                    let mut blast = gate;
+                    for _ in 0..l - 1 {
+                        blast = a_next[blast as usize];
+                    }
+                    let a_first = a_next[blast as usize];
+                    // B = [t, b1 .. blast]
+                    a_next[t as usize] = b1;
+                    a_prev[b1 as usize] = t;
+                    a_next[blast as usize] = t;
+                    a_prev[t as usize] = blast;
+                    // A = [g, a_first .. gate]
+                    a_next[g as usize] = a_first;
+                    a_prev[a_first as usize] = g;
+                    a_next[gate as usize] = g;
+                    a_prev[g as usize] = gate;
+                    let mut bgate = t;
+                    for _ in 0..(l - k) % l {
+                        bgate = a_next[bgate as usize];
+                    }
+                    let at = stack.len() - i as usize;
+                    stack.insert(at, (bgate, u64::from(l)));
+                    gate = g;
+                    len = len - u64::from(l - 1) + 1;
+                    label_edge[j] = g;
+                }
+                Label::F(l) | Label::H(l) => {
+                    if gate == NONE || l < 3 || len < u64::from(l) {
+                        return Err(bad(
+                            "labels",
+                            format!("label {j} ({lab:?}) does not fit the boundary (length {len})"),
+                        ));
+                    }
+                    let f = face_of_label[j];
+                    let (g, t) =
+                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
+                    let mut u1 = gate;
+                    for _ in 0..l - 2 {
+                        u1 = a_prev[u1 as usize];
+                    }
+                    let (p, n) = (a_prev[u1 as usize], a_next[gate as usize]);
+                    // Face cycle t -> u1 -> ... -> gate -> t.
+                    next[t as usize] = u1;
+                    face[t as usize] = f;
+                    let mut x = u1;
+                    loop {
+                        face[x as usize] = f;
+                        if x == gate {
+                            next[x as usize] = t;
+                            break;
+                        }
+                        next[x as usize] = a_next[x as usize];
+                        x = a_next[x as usize];
+                    }
+                    a_next[p as usize] = g;
+                    a_prev[g as usize] = p;
+                    a_next[g as usize] = n;
+                    a_prev[n as usize] = g;
+                    faces[f as usize] = RebuiltFace {
+                        first: t,
+                        degree: l,
+                        hole: matches!(lab, Label::H(_)),
+                        start: false,
+                    };
+                    gate = g;
+                    len = len - u64::from(l - 1) + 1;
+                    label_edge[j] = g;
+                }
             }
-            self.next[x as usize] = self.boundary.next[x as usize];
-            x = self.boundary.next[x as usize];
         }
-        self.boundary.link(p, g);
-        self.boundary.link(g, n);
-        self.faces[f as usize] = RebuiltFace {
-            first: t,
-            degree: l,
-            hole: matches!(lab, Label::H(_)),
-            start: false,
-        };
-        b.len = b.len - u64::from(l - 1) + 1;
-        Ok(g)
-    }
-
-    /// What is left of a component's boundary must be exactly its start face (label `s`).
-    fn close_start_face(&mut self, b: &ActiveBoundary, s: usize) -> Result<()> {
-        let Label::F(l0) = self.labels[s] else {
+        let Label::F(l0) = labels[s] else {
             unreachable!("component start checked above")
         };
-        if !b.stack.is_empty() || b.len != u64::from(l0) || l0 < 3 {
+        if !stack.is_empty() || len != u64::from(l0) || l0 < 3 {
             return Err(bad(
                 "labels",
-                format!("component starting at label {s}: boundary of length {} (stack {}) does not match the start face F{l0}", b.len, b.stack.len()),
+                format!("component starting at label {s}: boundary of length {len} (stack {}) does not match the start face F{l0}", stack.len()),
             ));
         }
-        let f = self.face_of_label[s];
-        let mut x = b.gate;
+        let f = face_of_label[s];
+        let mut x = gate;
         for _ in 0..l0 {
-            self.face[x as usize] = f;
-            self.next[x as usize] = self.boundary.next[x as usize];
-            x = self.boundary.next[x as usize];
+            face[x as usize] = f;
+            next[x as usize] = a_next[x as usize];
+            x = a_next[x as usize];
         }
-        self.faces[f as usize] = RebuiltFace {
-            first: b.gate,
+        faces[f as usize] = RebuiltFace {
+            first: gate,
             degree: l0,
             hole: false,
             start: true,
         };
-        Ok(())
     }
-
-    /// Checks that every half-edge ended up in a face and derives `prev` and the vertices.
-    fn finish(self) -> Result<Rebuilt> {
-        let nh = self.next.len();
-        if let Some(h) = self.next.iter().position(|&n| n == NONE) {
-            return Err(bad("labels", format!("half-edge {h} ends up in no face")));
-        }
-        let mut prev = vec![NONE; nh];
-        for h in 0..nh {
-            prev[self.next[h] as usize] = h as u32;
-        }
-        let vertices = number_vertices(&self.next, &self.twin, &self.faces)?;
-        Ok(Rebuilt {
-            next: self.next,
-            prev,
-            twin: self.twin,
-            face: self.face,
-            vertex: vertices.of_half_edge,
-            faces: self.faces,
-            label_edge: self.label_edge,
-            vertex_count: vertices.count,
-            vertex_out: vertices.out,
-        })
-    }
-}
-
-/// The vertices of a rebuilt structure.
-struct Vertices {
-    /// Tail vertex of every half-edge.
-    of_half_edge: Vec<u32>,
-    count: usize,
-    /// One outgoing half-edge per vertex.
-    out: Vec<u32>,
-}
-
-/// Finds the vertices as classes of half-edge tails (`next(h)` and `twin(h)` both start at
-/// the head of `h`) and numbers them by first appearance walking the mesh faces in order.
-fn number_vertices(next: &[u32], twin: &[u32], faces: &[RebuiltFace]) -> Result<Vertices> {
     let nh = next.len();
-    let mut parent: Vec<u32> = (0..nh as u32).collect();
+    if let Some(h) = next.iter().position(|&n| n == NONE) {
+        return Err(bad("labels", format!("half-edge {h} ends up in no face")));
+    }
+    let mut prev = vec![NONE; nh];
     for h in 0..nh {
-        let (a, b) = (
-            find_root(&mut parent, next[h]),
-            find_root(&mut parent, twin[h]),
-        );
+        prev[next[h] as usize] = h as u32;
+    }
+    // Vertices: union-find over half-edge tails; next(h) and twin(h) both start at head(h).
+    let mut parent: Vec<u32> = (0..nh as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for h in 0..nh {
+        let (a, b) = (find(&mut parent, next[h]), find(&mut parent, twin[h]));
         if a != b {
             parent[a.max(b) as usize] = a.min(b);
         }
@@ -714,7 +529,7 @@ fn number_vertices(next: &[u32], twin: &[u32], faces: &[RebuiltFace]) -> Result<
     for rf in faces.iter().filter(|f| !f.hole) {
         let mut h = rf.first;
         for _ in 0..rf.degree {
-            let r = find_root(&mut parent, h) as usize;
+            let r = find(&mut parent, h) as usize;
             if id_of_root[r] == NONE {
                 id_of_root[r] = vertex_count;
                 vertex_count += 1;
@@ -724,26 +539,23 @@ fn number_vertices(next: &[u32], twin: &[u32], faces: &[RebuiltFace]) -> Result<
         }
     }
     for (h, vh) in vertex.iter_mut().enumerate() {
-        let r = find_root(&mut parent, h as u32) as usize;
+        let r = find(&mut parent, h as u32) as usize;
         if id_of_root[r] == NONE {
             return Err(bad("labels", "a vertex lies on hole faces only"));
         }
         *vh = id_of_root[r];
     }
-    Ok(Vertices {
-        of_half_edge: vertex,
-        count: vertex_count as usize,
-        out: vertex_out,
+    Ok(Rebuilt {
+        next,
+        prev,
+        twin,
+        face,
+        vertex,
+        faces,
+        label_edge,
+        vertex_count: vertex_count as usize,
+        vertex_out,
     })
-}
-
-/// Union-find root of `x`, halving the path on the way.
-fn find_root(p: &mut [u32], mut x: u32) -> u32 {
-    while p[x as usize] != x {
-        p[x as usize] = p[p[x as usize] as usize];
-        x = p[x as usize];
-    }
-    x
 }
 
 #[cfg(test)]

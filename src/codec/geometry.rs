@@ -571,189 +571,167 @@ pub fn walk(
     q: &mut [[i32; 3]],
     coder: &mut impl ResidualCoder,
 ) -> Result<()> {
-    let mut walk = VertexWalk {
-        rb,
-        face_plane_group,
-        crease,
-        arcs,
-        max_q: ((1u32 << bits) - 1) as i32,
-        known: vec![false; q.len()],
-        level: vec![0u8; rb.vertex_count],
-        buckets: vec![Vec::new(); MAX_LEVEL + 1],
-        planes: vec![PlaneState::default(); plane_groups],
-        prev_vertex: None,
-        last_class: 0,
-        next_seed: 0,
-        out_edges: Vec::new(),
-        incident: Vec::new(),
-        cands: Vec::new(),
-        scratch: Vec::new(),
-        axes_near: Vec::new(),
-    };
-    while let Some(v) = walk.next_vertex() {
-        walk.code_vertex(v, q, coder)?;
-    }
-    walk.code_isolated(q, coder)
-}
-
-/// What encoder and decoder both know during [`walk`]: which vertices are coded, how many
-/// coded neighbours the others have (the visiting order), the plane of every planar group so
-/// far, and the previous vertex and residual class (prediction and contexts).
-struct VertexWalk<'a> {
-    rb: &'a Rebuilt,
-    face_plane_group: &'a [u32],
-    crease: Option<&'a [bool]>,
-    arcs: Option<&'a ArcAxes<'a>>,
-    max_q: i32,
-    known: Vec<bool>,
-    /// Coded neighbours of every traversal vertex, capped at `MAX_LEVEL`.
-    level: Vec<u8>,
-    /// Vertices by level; entries whose level has since changed are stale and skipped.
-    buckets: Vec<Vec<u32>>,
-    planes: Vec<PlaneState>,
-    prev_vertex: Option<u32>,
-    last_class: u32,
-    /// No vertex below this starts a new component any more.
-    next_seed: usize,
-    // Per-vertex buffers, kept between vertices to reuse their allocations.
-    out_edges: Vec<u32>,
-    incident: Vec<u32>,
-    cands: Vec<[i64; 3]>,
-    scratch: Vec<u32>,
-    axes_near: Vec<u32>,
-}
-
-impl VertexWalk<'_> {
-    /// Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
-    /// lowest uncoded traversal vertex (a new component); `None` when all are coded.
-    fn next_vertex(&mut self) -> Option<u32> {
-        for lv in (1..=MAX_LEVEL).rev() {
-            while let Some(v) = self.buckets[lv].pop() {
-                if !self.known[v as usize] && usize::from(self.level[v as usize]) == lv {
-                    return Some(v);
+    let max_q = ((1u32 << bits) - 1) as i32;
+    let nt = rb.vertex_count;
+    let mut known = vec![false; q.len()];
+    let mut level = vec![0u8; nt];
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); MAX_LEVEL + 1];
+    let mut planes = vec![PlaneState::default(); plane_groups];
+    let mut prev_vertex: Option<u32> = None;
+    let mut last_class = 0u32;
+    let mut incident: Vec<u32> = Vec::new();
+    let mut out_edges: Vec<u32> = Vec::new();
+    let mut cands: Vec<[i64; 3]> = Vec::new();
+    let mut scratch: Vec<u32> = Vec::new();
+    let mut axes_near: Vec<u32> = Vec::new();
+    let mut next_seed = 0usize;
+    loop {
+        // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
+        // lowest undecoded vertex (a new component).
+        let mut pick = None;
+        'search: for lv in (1..=MAX_LEVEL).rev() {
+            while let Some(v) = buckets[lv].pop() {
+                if !known[v as usize] && usize::from(level[v as usize]) == lv {
+                    pick = Some(v);
+                    break 'search;
                 }
             }
         }
-        let nt = self.rb.vertex_count;
-        while self.next_seed < nt && self.known[self.next_seed] {
-            self.next_seed += 1;
+        let v = match pick {
+            Some(v) => v,
+            None => {
+                while next_seed < nt && known[next_seed] {
+                    next_seed += 1;
+                }
+                if next_seed == nt {
+                    break;
+                }
+                next_seed as u32
+            }
+        };
+        rotation(rb, v, &mut out_edges);
+        let kn = |w: u32| known[w as usize];
+        let p = |w: u32| q[w as usize].map(i64::from);
+        // Predictions along a crease (version 2), else parallelogram-type predictions in
+        // rotation order; each as twice its value.
+        cands.clear();
+        let mut arc = false;
+        if let Some(cr) = crease {
+            arc = crease_candidates(
+                rb,
+                cr,
+                arcs,
+                v,
+                &out_edges,
+                &known,
+                q,
+                &mut scratch,
+                &mut axes_near,
+                &mut cands,
+            );
         }
-        (self.next_seed < nt).then_some(self.next_seed as u32)
-    }
-
-    /// Predicts traversal vertex `v` and codes its residuals.
-    fn code_vertex(
-        &mut self,
-        v: u32,
-        q: &mut [[i32; 3]],
-        coder: &mut impl ResidualCoder,
-    ) -> Result<()> {
-        rotation(self.rb, v, &mut self.out_edges);
-        let (n_crease, arc) = self.collect_candidates(v, q);
-        let count = self.cands.len();
-        let (fallback, kind) = if count > 0 {
+        let n_crease = cands.len();
+        let mut add2 = |pr2: [i64; 3]| {
+            if cands.len() < MAX_CANDIDATES {
+                cands.push(pr2);
+            }
+        };
+        for &h in out_edges.iter().filter(|_| n_crease == 0) {
+            let f = rb.face[h as usize] as usize;
+            let rf = rb.faces[f];
+            if rf.hole {
+                continue;
+            }
+            let vert = |k: u32| {
+                let mut x = h;
+                for _ in 0..k {
+                    x = rb.next[x as usize];
+                }
+                rb.vertex[x as usize]
+            };
+            let d = rf.degree;
+            if d == 3 {
+                let (a, b) = (vert(1), vert(2));
+                if !(kn(a) && kn(b)) {
+                    continue;
+                }
+                let tw = rb.twin[rb.next[h as usize] as usize];
+                let kf = rb.faces[rb.face[tw as usize] as usize];
+                if kf.hole {
+                    continue;
+                }
+                let k2 = rb.vertex[rb.next[rb.next[tw as usize] as usize] as usize];
+                let kl = rb.vertex[rb.prev[tw as usize] as usize];
+                if !(kn(k2) && kn(kl)) {
+                    continue;
+                }
+                let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
+                add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
+            } else {
+                let (a, b, c3) = (vert(1), vert(2), vert(3));
+                if kn(a) && kn(b) && kn(c3) {
+                    let (pa, pb, pc) = (p(a), p(b), p(c3));
+                    add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                }
+                if d >= 5 {
+                    let (a, b, c3) = (vert(d - 1), vert(d - 2), vert(d - 3));
+                    if kn(a) && kn(b) && kn(c3) {
+                        let (pa, pb, pc) = (p(a), p(b), p(c3));
+                        add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                    }
+                }
+            }
+        }
+        let count = cands.len();
+        let (pred, kind) = if count > 0 {
             let kind = match n_crease {
                 0 => count.min(3),
                 _ if arc => KIND_ARC,
                 1 => KIND_CREASE_ONE,
                 _ => KIND_CREASE_MORE,
             };
-            (None, kind)
+            (Vec::new(), kind)
         } else {
-            let (pred, kind) = self.fallback_prediction(q);
-            (Some(pred), kind)
-        };
-        let plane = self.best_plane();
-        let pred = match fallback {
-            Some(pred) => pred,
-            None => self.predict_from_candidates(q[v as usize], plane.map(|p| p.1), coder)?,
-        };
-        let mut slot = q[v as usize];
-        self.code_residuals(&mut slot, pred, kind, plane, coder)?;
-        q[v as usize] = slot;
-        self.mark_coded(v, slot);
-        Ok(())
-    }
-
-    /// Fills `cands` with the predictions along a crease (version 2), else the
-    /// parallelogram-type ones in rotation order; each as twice its value. Returns how many
-    /// are crease predictions and whether any of them is an arc.
-    fn collect_candidates(&mut self, v: u32, q: &[[i32; 3]]) -> (usize, bool) {
-        self.cands.clear();
-        let mut arc = false;
-        if let Some(cr) = self.crease {
-            arc = crease_candidates(
-                self.rb,
-                cr,
-                self.arcs,
-                v,
-                &self.out_edges,
-                &self.known,
-                q,
-                &mut self.scratch,
-                &mut self.axes_near,
-                &mut self.cands,
-            );
-        }
-        let n_crease = self.cands.len();
-        if n_crease == 0 {
-            parallelogram_candidates(self.rb, &self.out_edges, &self.known, q, &mut self.cands);
-        }
-        (n_crease, arc)
-    }
-
-    /// Prediction without candidates: the mean of the coded neighbours, else the previous
-    /// vertex (or the grid centre for the first one); with its prediction class.
-    fn fallback_prediction(&self, q: &[[i32; 3]]) -> ([i32; 3], usize) {
-        let rb = self.rb;
-        let mut sum = [0i64; 3];
-        let mut n = 0i64;
-        for &h in &self.out_edges {
-            let w = rb.vertex[rb.next[h as usize] as usize];
-            if self.known[w as usize] {
-                let pw = q[w as usize].map(i64::from);
-                for c in 0..3 {
-                    sum[c] += pw[c];
+            let mut sum = [0i64; 3];
+            let mut n = 0i64;
+            for &h in &out_edges {
+                let w = rb.vertex[rb.next[h as usize] as usize];
+                if kn(w) {
+                    let pw = p(w);
+                    for c in 0..3 {
+                        sum[c] += pw[c];
+                    }
+                    n += 1;
                 }
-                n += 1;
             }
-        }
-        let (pred, kind) = if n > 0 {
-            (
-                sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64),
-                KIND_NEIGHBOURS,
-            )
-        } else {
-            let pr = match self.prev_vertex {
-                Some(w) => q[w as usize].map(i64::from),
-                None => [i64::from(self.max_q / 2); 3],
-            };
-            (pr, KIND_START)
+            if n > 0 {
+                (
+                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64)
+                        .to_vec(),
+                    KIND_NEIGHBOURS,
+                )
+            } else {
+                let pr = match prev_vertex {
+                    Some(w) => p(w),
+                    None => [i64::from(max_q / 2); 3],
+                };
+                (pr.to_vec(), KIND_START)
+            }
         };
-        (pred.map(|c| c.clamp(0, i64::from(self.max_q)) as i32), kind)
-    }
-
-    /// Collects the plane groups of the faces around the vertex into `incident` and returns
-    /// the one with the largest defining triangle, with its normal's dominant axis (the
-    /// coordinate predicted from the plane, not from the parallelograms).
-    fn best_plane(&mut self) -> Option<(u32, usize)> {
         // Plane groups around v (each once, ascending ids) -> the plane with the largest
         // defining triangle.
-        self.incident.clear();
-        for &h in &self.out_edges {
-            let pg = self
-                .face_plane_group
-                .get(self.rb.face[h as usize] as usize)
+        incident.clear();
+        for &h in &out_edges {
+            let pg = face_plane_group
+                .get(rb.face[h as usize] as usize)
                 .copied()
                 .unwrap_or(NONE);
-            if pg != NONE && !self.incident.contains(&pg) {
-                self.incident.push(pg);
+            if pg != NONE && !incident.contains(&pg) {
+                incident.push(pg);
             }
         }
-        let planes = &self.planes;
         // (No sort needed: ties on the area are broken by the group id.)
-        let best = self
-            .incident
+        let best = incident
             .iter()
             .filter(|&&g| planes[g as usize].n == 3)
             .max_by(|&&a, &&b| {
@@ -763,248 +741,132 @@ impl VertexWalk<'_> {
                     .then(b.cmp(&a))
             })
             .copied();
-        best.map(|g| {
+        // The plane's dominant axis (predicted from the plane, not from the parallelograms).
+        let plane_axis = best.map(|g| {
             let n = planes[g as usize].normal;
-            let axis = (0..3)
-                .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
-                .unwrap_or(0);
-            (g, axis)
-        })
-    }
-
-    /// Prediction from the candidates: the average of a subset of them, all of them unless
-    /// the encoder signals otherwise (spec §8.2). The encoder, which knows the vertex's
-    /// position `actual`, picks the subset that predicts it best off the plane axis.
-    fn predict_from_candidates(
-        &self,
-        actual: [i32; 3],
-        plane_axis: Option<usize>,
-        coder: &mut impl ResidualCoder,
-    ) -> Result<[i32; 3]> {
-        let count = self.cands.len();
-        let mut mask = (1usize << count) - 1;
-        if count >= 2 {
-            if coder.encoding() {
-                mask = self.best_subset(actual, plane_axis);
-            }
-            mask = code_subset_flags(coder, count, mask)?;
-        }
-        Ok(self.average(mask))
-    }
-
-    /// The candidate subset (bit mask) whose average is nearest to `actual` in the
-    /// coordinates other than `plane_axis` (L1); all candidates unless a subset is strictly
-    /// nearer.
-    fn best_subset(&self, actual: [i32; 3], plane_axis: Option<usize>) -> usize {
-        let full = (1usize << self.cands.len()) - 1;
-        let cost = |m: usize| -> u32 {
-            let p = self.average(m);
             (0..3)
-                .filter(|&k| Some(k) != plane_axis)
-                .map(|k| (actual[k] - p[k]).unsigned_abs())
-                .sum()
-        };
-        let mut mask = full;
-        let mut best_cost = cost(full);
-        for m in 1..full {
-            let c = cost(m);
-            if c < best_cost {
-                best_cost = c;
-                mask = m;
-            }
-        }
-        mask
-    }
-
-    /// Average of the candidates in `mask` (each stored twice its value), on the grid.
-    fn average(&self, mask: usize) -> [i32; 3] {
-        let mut sum = [0i64; 3];
-        let mut n = 0i64;
-        for (i, c) in self.cands.iter().enumerate() {
-            if mask & (1 << i) != 0 {
-                for k in 0..3 {
-                    sum[k] += c[k];
+                .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
+                .unwrap_or(0)
+        });
+        let pred: [i32; 3] = if count == 0 {
+            [pred[0], pred[1], pred[2]].map(|c| c.clamp(0, i64::from(max_q)) as i32)
+        } else {
+            // Subset of the parallelograms to average: all of them unless the encoder signals
+            // otherwise with one flag per candidate (spec §8.2); the last flag is implied when
+            // all earlier ones are 0.
+            let average = |mask: usize| -> [i32; 3] {
+                let mut sum = [0i64; 3];
+                let mut n = 0i64;
+                for (i, c) in cands.iter().enumerate() {
+                    if mask & (1 << i) != 0 {
+                        for k in 0..3 {
+                            sum[k] += c[k];
+                        }
+                        n += 1;
+                    }
                 }
-                n += 1;
+                sum.map(|s| {
+                    (div_round(i128::from(s), i128::from(2 * n)) as i64).clamp(0, i64::from(max_q))
+                        as i32
+                })
+            };
+            let full = (1usize << count) - 1;
+            let mut mask = full;
+            if count >= 2 {
+                if coder.encoding() {
+                    let actual = q[v as usize];
+                    let cost = |m: usize| -> u32 {
+                        let p = average(m);
+                        (0..3)
+                            .filter(|&k| Some(k) != plane_axis)
+                            .map(|k| (actual[k] - p[k]).unsigned_abs())
+                            .sum()
+                    };
+                    let mut best_cost = cost(full);
+                    for m in 1..full {
+                        let c = cost(m);
+                        if c < best_cost {
+                            best_cost = c;
+                            mask = m;
+                        }
+                    }
+                }
+                let base = (count.min(4) - 2) * 4;
+                let mut any = false;
+                for i in 0..count {
+                    if i + 1 == count && !any {
+                        mask |= 1 << i;
+                        break;
+                    }
+                    let mut bit = mask & (1 << i) != 0;
+                    coder.flag(base + i.min(3), &mut bit)?;
+                    if bit {
+                        mask |= 1 << i;
+                        any = true;
+                    } else {
+                        mask &= !(1 << i);
+                    }
+                }
             }
-        }
-        sum.map(|s| {
-            (div_round(i128::from(s), i128::from(2 * n)) as i64).clamp(0, i64::from(self.max_q))
-                as i32
-        })
-    }
-
-    /// Codes the three coordinates of `slot` against `pred`; on a plane, the plane's
-    /// dominant axis last, predicted from the plane and the other two coordinates.
-    fn code_residuals(
-        &mut self,
-        slot: &mut [i32; 3],
-        pred: [i32; 3],
-        kind: usize,
-        plane: Option<(u32, usize)>,
-        coder: &mut impl ResidualCoder,
-    ) -> Result<()> {
-        match plane {
+            average(mask)
+        };
+        let mut slot = q[v as usize];
+        match best {
             None => {
                 for c in 0..3 {
-                    let ctx = kind * 3 + bucket(self.last_class);
-                    self.last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+                    let ctx = kind * 3 + bucket(last_class);
+                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
                 }
             }
-            Some((g, k)) => {
+            Some(g) => {
+                let pl = planes[g as usize];
+                let n = pl.normal;
+                let k = plane_axis.unwrap_or(0);
                 for c in (0..3).filter(|&c| c != k) {
-                    let ctx = kind * 3 + bucket(self.last_class);
-                    self.last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+                    let ctx = kind * 3 + bucket(last_class);
+                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
                 }
-                let pk = plane_coordinate(&self.planes[g as usize], *slot, k, self.max_q);
-                let ctx = PLANE_CTX * 3 + bucket(self.last_class);
-                self.last_class = coder.code(ctx, pk, &mut slot[k])?;
+                let a = pl.pts[0];
+                let num: i128 = (0..3)
+                    .filter(|&c| c != k)
+                    .map(|c| i128::from(n[c]) * (i128::from(slot[c]) - i128::from(a[c])))
+                    .sum();
+                let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
+                let pk = pk.clamp(0, i128::from(max_q)) as i32;
+                let ctx = PLANE_CTX * 3 + bucket(last_class);
+                last_class = coder.code(ctx, pk, &mut slot[k])?;
             }
         }
-        Ok(())
-    }
-
-    /// Records coded vertex `v` at `slot`: it joins the planes around it and raises the
-    /// level of its uncoded neighbours.
-    fn mark_coded(&mut self, v: u32, slot: [i32; 3]) {
-        self.known[v as usize] = true;
-        self.prev_vertex = Some(v);
+        q[v as usize] = slot;
+        known[v as usize] = true;
+        prev_vertex = Some(v);
         let pt = slot.map(i64::from);
-        for &g in &self.incident {
-            self.planes[g as usize].add(pt);
+        for &g in &incident {
+            planes[g as usize].add(pt);
         }
-        for &h in &self.out_edges {
-            let w = self.rb.vertex[self.rb.next[h as usize] as usize] as usize;
-            if !self.known[w] && usize::from(self.level[w]) < MAX_LEVEL {
-                self.level[w] += 1;
-                self.buckets[usize::from(self.level[w])].push(w as u32);
+        for &h in &out_edges {
+            let w = rb.vertex[rb.next[h as usize] as usize] as usize;
+            if !known[w] && usize::from(level[w]) < MAX_LEVEL {
+                level[w] += 1;
+                buckets[usize::from(level[w])].push(w as u32);
             }
         }
     }
-
-    /// Isolated vertices (after the traversal's): delta from the previous vertex.
-    fn code_isolated(&mut self, q: &mut [[i32; 3]], coder: &mut impl ResidualCoder) -> Result<()> {
-        for v in self.rb.vertex_count..q.len() {
-            let pred = match self.prev_vertex {
-                Some(w) => q[w as usize],
-                None => [self.max_q / 2; 3],
-            };
-            let mut slot = q[v];
-            for c in 0..3 {
-                let ctx = KIND_START * 3 + bucket(self.last_class);
-                self.last_class = coder.code(ctx, pred[c], &mut slot[c])?;
-            }
-            q[v] = slot;
-            self.prev_vertex = Some(v as u32);
-        }
-        Ok(())
-    }
-}
-
-/// Parallelogram-type predictions (spec §8.2) from the mesh faces around a vertex (its
-/// outgoing half-edges `out_edges`, rotation order), as twice their value, at most
-/// `MAX_CANDIDATES`. A triangle `v a b` predicts `a + b` minus the mean of the two vertices
-/// next to `a` and `b` in the face across `a b`; a larger face predicts from the three
-/// vertices after `v` and, from degree 5, also from the three before it.
-fn parallelogram_candidates(
-    rb: &Rebuilt,
-    out_edges: &[u32],
-    known: &[bool],
-    q: &[[i32; 3]],
-    cands: &mut Vec<[i64; 3]>,
-) {
-    let kn = |w: u32| known[w as usize];
-    let p = |w: u32| q[w as usize].map(i64::from);
-    let mut add2 = |pr2: [i64; 3]| {
-        if cands.len() < MAX_CANDIDATES {
-            cands.push(pr2);
-        }
-    };
-    for &h in out_edges {
-        let f = rb.face[h as usize] as usize;
-        let rf = rb.faces[f];
-        if rf.hole {
-            continue;
-        }
-        let vert = |k: u32| {
-            let mut x = h;
-            for _ in 0..k {
-                x = rb.next[x as usize];
-            }
-            rb.vertex[x as usize]
+    // Isolated vertices: delta from the previous vertex.
+    for v in nt..q.len() {
+        let pred = match prev_vertex {
+            Some(w) => q[w as usize],
+            None => [max_q / 2; 3],
         };
-        let d = rf.degree;
-        if d == 3 {
-            let (a, b) = (vert(1), vert(2));
-            if !(kn(a) && kn(b)) {
-                continue;
-            }
-            let tw = rb.twin[rb.next[h as usize] as usize];
-            let kf = rb.faces[rb.face[tw as usize] as usize];
-            if kf.hole {
-                continue;
-            }
-            let k2 = rb.vertex[rb.next[rb.next[tw as usize] as usize] as usize];
-            let kl = rb.vertex[rb.prev[tw as usize] as usize];
-            if !(kn(k2) && kn(kl)) {
-                continue;
-            }
-            let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
-            add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
-        } else {
-            let (a, b, c3) = (vert(1), vert(2), vert(3));
-            if kn(a) && kn(b) && kn(c3) {
-                let (pa, pb, pc) = (p(a), p(b), p(c3));
-                add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
-            }
-            if d >= 5 {
-                let (a, b, c3) = (vert(d - 1), vert(d - 2), vert(d - 3));
-                if kn(a) && kn(b) && kn(c3) {
-                    let (pa, pb, pc) = (p(a), p(b), p(c3));
-                    add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
-                }
-            }
+        let mut slot = q[v];
+        for c in 0..3 {
+            let ctx = KIND_START * 3 + bucket(last_class);
+            last_class = coder.code(ctx, pred[c], &mut slot[c])?;
         }
+        q[v] = slot;
+        prev_vertex = Some(v as u32);
     }
-}
-
-/// Codes which of `count` (>= 2) candidates to average: one flag per candidate (in `mask`
-/// for the encoder), the last implied when all earlier ones are 0. Returns the mask.
-fn code_subset_flags(
-    coder: &mut impl ResidualCoder,
-    count: usize,
-    mut mask: usize,
-) -> Result<usize> {
-    let base = (count.min(4) - 2) * 4;
-    let mut any = false;
-    for i in 0..count {
-        if i + 1 == count && !any {
-            mask |= 1 << i;
-            break;
-        }
-        let mut bit = mask & (1 << i) != 0;
-        coder.flag(base + i.min(3), &mut bit)?;
-        if bit {
-            mask |= 1 << i;
-            any = true;
-        } else {
-            mask &= !(1 << i);
-        }
-    }
-    Ok(mask)
-}
-
-/// Coordinate `k` of the point on plane `pl` whose other two coordinates are those of
-/// `slot` (§8.3), rounded and clamped to the grid.
-fn plane_coordinate(pl: &PlaneState, slot: [i32; 3], k: usize, max_q: i32) -> i32 {
-    let n = pl.normal;
-    let a = pl.pts[0];
-    let num: i128 = (0..3)
-        .filter(|&c| c != k)
-        .map(|c| i128::from(n[c]) * (i128::from(slot[c]) - i128::from(a[c])))
-        .sum();
-    let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
-    pk.clamp(0, i128::from(max_q)) as i32
+    Ok(())
 }
 
 #[cfg(test)]

@@ -28,8 +28,8 @@ use std::collections::BTreeSet;
 use glam::DVec3;
 
 use self::bytes::{put_section, put_varint, read_section, Reader};
-use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt, Traversal};
-use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, GridAxis, Quantizer};
+use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
+use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, Quantizer};
 use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
 use crate::error::{Error, Result};
 use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
@@ -682,124 +682,6 @@ impl Recency {
     }
 }
 
-/// What encoder and decoder both know while coding face groups in encoding order (spec
-/// §6.4-§6.5): the groups of the faces so far and the candidate lists of the current face.
-struct GroupCoding<'a> {
-    rb: &'a Rebuilt,
-    /// Coded group of every rebuilt face so far (`NONE` for holes and later faces).
-    face_group: Vec<u32>,
-    prev_real: Option<usize>,
-    cands: Vec<u32>,
-    vcands: Vec<u32>,
-    /// Always kept by the encoder; by the decoder only for version-3 files with more than
-    /// one group, the only ones that name a group by its recency rank.
-    recency: Option<Recency>,
-}
-
-impl<'a> GroupCoding<'a> {
-    /// No face has a group yet.
-    fn new(rb: &'a Rebuilt, recency: Option<Recency>) -> Self {
-        GroupCoding {
-            rb,
-            face_group: vec![NONE; rb.faces.len()],
-            prev_real: None,
-            cands: Vec::new(),
-            vcands: Vec::new(),
-            recency,
-        }
-    }
-
-    /// Collects the edge candidates of mesh face `f` and returns its context class
-    /// (versions 1-2: by the number of candidates; version 3: [`group_class`]).
-    fn edge_candidates(&mut self, f: usize, groups_v3: bool) -> usize {
-        group_candidates(
-            self.rb,
-            f,
-            &self.face_group,
-            self.prev_real,
-            &mut self.cands,
-        );
-        if groups_v3 {
-            group_class(self.rb, f, &self.face_group, &self.cands)
-        } else {
-            self.cands.len().clamp(1, 3) - 1
-        }
-    }
-
-    /// The symbol naming group `g`, already used, for mesh face `f` (its edge candidates
-    /// collected): an edge candidate, else a vertex candidate, else its recency rank.
-    fn used_group_symbol(&mut self, f: usize, g: u32) -> GroupSym {
-        match self
-            .cands
-            .iter()
-            .take(GROUP_CANDIDATES)
-            .position(|&c| c == g)
-        {
-            Some(c) => GroupSym::Candidate(c as u8),
-            None => {
-                vertex_candidates(self.rb, f, &self.face_group, &self.cands, &mut self.vcands);
-                match self.vcands.iter().position(|&c| c == g) {
-                    Some(c) => GroupSym::Vertex(c as u8),
-                    None => {
-                        let recency = self.recency.as_ref();
-                        let recency = recency.expect("the encoder always tracks recency");
-                        GroupSym::Recent(recency.rank_of(g))
-                    }
-                }
-            }
-        }
-    }
-
-    /// The group a decoded symbol names for mesh face `f` (its edge candidates collected);
-    /// `next_group` is the next unused group id.
-    fn resolve(&mut self, f: usize, sym: GroupSym, next_group: &mut u32) -> Result<u32> {
-        let missing = |what: &str, c: u8, n: usize| {
-            Error::format(
-                "connectivity",
-                "group",
-                format!("face {f} refers to {what} candidate group {c} of {n}"),
-            )
-        };
-        Ok(match sym {
-            GroupSym::New => {
-                *next_group += 1;
-                *next_group - 1
-            }
-            GroupSym::Explicit(id) => id,
-            GroupSym::Candidate(c) => *self
-                .cands
-                .get(usize::from(c))
-                .ok_or_else(|| missing("edge", c, self.cands.len()))?,
-            GroupSym::Vertex(c) => {
-                vertex_candidates(self.rb, f, &self.face_group, &self.cands, &mut self.vcands);
-                *self
-                    .vcands
-                    .get(usize::from(c))
-                    .ok_or_else(|| missing("vertex", c, self.vcands.len()))?
-            }
-            GroupSym::Recent(r) => match &self.recency {
-                Some(rc) if r < rc.used => self.face_group[rc.face_of(r)],
-                _ => {
-                    return Err(Error::format(
-                        "connectivity",
-                        "group_rank",
-                        format!("rank {r} among the groups used so far"),
-                    ))
-                }
-            },
-        })
-    }
-
-    /// Records group `g` for mesh face `f`.
-    fn assign(&mut self, f: usize, g: u32) {
-        self.face_group[f] = g;
-        if let Some(rc) = &mut self.recency {
-            rc.assign(g, f);
-        }
-        self.prev_real = Some(f);
-    }
-}
-
 // ------------------------------------------------------------------------------------------
 // Crease coding (spec §7)
 
@@ -898,92 +780,6 @@ pub fn encode(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Vec<u8>> {
 /// re-merged by the decoder (`fixups` section); a non-manifold control mesh is an error.
 /// Every sharp edge must be an edge of the mesh.
 pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<u8>, EncodeMap)> {
-    let bits = check_options(opts)?;
-    mesh.validate()?;
-    if mesh.face_count() > 0 && mesh.groups.is_empty() {
-        return Err(Error::Mesh("faces but no groups".into()));
-    }
-    let input = ManifoldInput::of(mesh, opts.content == Content::RawMesh)?;
-    let work = input.cut.as_ref().unwrap_or(mesh);
-    let tr = encode_traversal(&input.he);
-    let rb = rebuild(&tr.labels).map_err(|e| internal_error(&e.to_string()))?;
-    if rb.faces.len() != tr.faces.len() {
-        return Err(internal_error("face count mismatch"));
-    }
-    let order = CodedOrder::new(&rb, &tr, &input, work.vertex_count())?;
-    let (rep_of_orig, merges) = merges_of_copies(&order.orig_of_coded, mesh.vertex_count());
-    let final_of_coded = final_numbering(order.coded_to_work.len(), &merges);
-    let groups = CodedGroups::new(mesh, &rb, &order.face_source);
-
-    let conn = connectivity_payload(&tr.labels, &groups.symbols, mesh.groups.len());
-    let quant = quantizer_for(mesh, opts, bits);
-    let (patches, group_axes) = patches::encode(&groups.groups, &quant)?;
-    let (creases, crease_he) = creases_payload(mesh, &rb, &order.orig_of_coded, &groups)?;
-    let geometry = geometry_payload(work, &rb, &order, &quant, &groups, &group_axes, &crease_he)?;
-    let store_names = opts.store_group_names && groups.groups.iter().any(|g| !g.name.is_empty());
-    let flags = header_flags(
-        opts.content,
-        &quant,
-        order.isolated,
-        !merges.is_empty(),
-        patches.is_some(),
-        store_names,
-    );
-    let header = header_payload(
-        mesh,
-        opts.content,
-        &quant,
-        flags,
-        order.isolated,
-        merges.len(),
-    );
-
-    let mut out = Vec::new();
-    out.extend_from_slice(&MAGIC);
-    out.push(FORMAT_VERSION_MAJOR);
-    out.push(FORMAT_VERSION_MINOR);
-    put_section(&mut out, SEC_HEADER, &header, false, true);
-    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
-    if let Some(p) = patches {
-        put_section(&mut out, SEC_PATCHES, &p, true, false);
-    }
-    put_section(&mut out, SEC_CREASES, &creases, true, false);
-    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
-    if !merges.is_empty() {
-        put_section(&mut out, SEC_FIXUPS, &fixups_payload(&merges), true, false);
-    }
-    if store_names {
-        let payload = names_payload(mesh, &groups.coded_of_input);
-        put_section(&mut out, SEC_NAMES, &payload, true, false);
-    }
-
-    let vertex: Vec<u32> = (0..mesh.vertex_count())
-        .map(|v| final_of_coded[rep_of_orig[v] as usize])
-        .collect();
-    let face = coded_face_numbers(&rb, &order.face_source, mesh.face_count());
-    // With names stored, the decoder restores the input's group order.
-    let group = if store_names {
-        (0..mesh.groups.len() as u32).collect()
-    } else {
-        groups.coded_of_input
-    };
-    Ok((
-        out,
-        EncodeMap {
-            vertex,
-            face,
-            group,
-        },
-    ))
-}
-
-/// An encoder failure that valid input cannot cause.
-fn internal_error(what: &str) -> Error {
-    Error::Mesh(format!("internal encoder error: {what}"))
-}
-
-/// Checks the encoder settings; returns the quantisation bits.
-fn check_options(opts: &EncodeOptions) -> Result<u8> {
     let bits = opts.quantization_bits;
     if !(4..=24).contains(&bits) {
         return Err(Error::Parameter(format!(
@@ -1003,249 +799,159 @@ fn check_options(opts: &EncodeOptions) -> Result<u8> {
             )));
         }
     }
-    Ok(bits)
-}
-
-/// The manifold mesh the encoder traverses: the input itself, or for a raw mesh that is not
-/// manifold, the input cut apart at its non-manifold edges and vertices.
-struct ManifoldInput {
-    /// The cut mesh, if the input had to be cut.
-    cut: Option<ControlMesh>,
-    /// Input vertex of every vertex of the traversed mesh.
-    source: Vec<u32>,
-    he: HalfEdgeMesh,
-}
-
-impl ManifoldInput {
-    /// Cuts `mesh` apart where it is not manifold if it is a raw mesh (`raw`); a control
-    /// mesh must be manifold as it is.
-    fn of(mesh: &ControlMesh, raw: bool) -> Result<Self> {
+    mesh.validate()?;
+    if mesh.face_count() > 0 && mesh.groups.is_empty() {
+        return Err(Error::Mesh("faces but no groups".into()));
+    }
+    let raw = opts.content == Content::RawMesh;
+    let (cut, source, he): (Option<ControlMesh>, Vec<u32>, HalfEdgeMesh) =
         match HalfEdgeMesh::build(mesh) {
-            Ok(he) => Ok(ManifoldInput {
-                cut: None,
-                source: (0..mesh.vertex_count() as u32).collect(),
-                he,
-            }),
+            Ok(he) => (None, (0..mesh.vertex_count() as u32).collect(), he),
             Err(e) if raw => {
                 let (c, s) = cut_non_manifold(mesh)?;
                 let he = HalfEdgeMesh::build(&c).map_err(|e2| {
                     Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
                 })?;
-                Ok(ManifoldInput {
-                    cut: Some(c),
-                    source: s,
-                    he,
-                })
+                (Some(c), s, he)
             }
-            Err(e) => Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
+            Err(e) => return Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
+        };
+    let work = cut.as_ref().unwrap_or(mesh);
+    let tr = encode_traversal(&he);
+    let internal = |what: &str| Error::Mesh(format!("internal encoder error: {what}"));
+    let rb = rebuild(&tr.labels).map_err(|e| internal(&e.to_string()))?;
+    if rb.faces.len() != tr.faces.len() {
+        return Err(internal("face count mismatch"));
+    }
+
+    // Map rebuilt (coded) vertices to work-mesh vertices.
+    let nw = work.vertex_count();
+    let mut coded_to_work = vec![NONE; nw];
+    let mut work_to_coded = vec![NONE; nw];
+    let mut rebuilt_face_source = vec![NONE; rb.faces.len()];
+    for (i, rf) in rb.faces.iter().enumerate() {
+        let (f, entry) = tr.faces[i];
+        rebuilt_face_source[i] = f;
+        let (mut hr, mut ho) = (rf.first, entry);
+        for _ in 0..rf.degree {
+            let (c, w) = (rb.vertex[hr as usize], he.origin[ho as usize]);
+            if coded_to_work[c as usize] == NONE && work_to_coded[w as usize] == NONE {
+                coded_to_work[c as usize] = w;
+                work_to_coded[w as usize] = c;
+            } else if coded_to_work[c as usize] != w {
+                return Err(internal("vertex mapping mismatch"));
+            }
+            hr = rb.next[hr as usize];
+            ho = he.next[ho as usize];
         }
     }
-}
-
-/// How the rebuilt (coded) structure maps onto the traversed mesh: coded vertices are the
-/// traversal's in rebuilt order, then the isolated vertices in mesh order.
-struct CodedOrder {
-    /// Traversed-mesh vertex of every coded vertex.
-    coded_to_work: Vec<u32>,
-    /// Input vertex of every coded vertex.
-    orig_of_coded: Vec<u32>,
-    /// Face of the traversed (and input) mesh of every rebuilt face.
-    face_source: Vec<u32>,
-    isolated: u64,
-}
-
-impl CodedOrder {
-    /// Matches rebuilt faces with the traversal's corner by corner; `nw` is the traversed
-    /// mesh's vertex count.
-    fn new(rb: &Rebuilt, tr: &Traversal, input: &ManifoldInput, nw: usize) -> Result<Self> {
-        let he = &input.he;
-        let mut coded_to_work = vec![NONE; nw];
-        let mut work_to_coded = vec![NONE; nw];
-        let mut face_source = vec![NONE; rb.faces.len()];
-        for (i, rf) in rb.faces.iter().enumerate() {
-            let (f, entry) = tr.faces[i];
-            face_source[i] = f;
-            let (mut hr, mut ho) = (rf.first, entry);
-            for _ in 0..rf.degree {
-                let (c, w) = (rb.vertex[hr as usize], he.origin[ho as usize]);
-                if coded_to_work[c as usize] == NONE && work_to_coded[w as usize] == NONE {
-                    coded_to_work[c as usize] = w;
-                    work_to_coded[w as usize] = c;
-                } else if coded_to_work[c as usize] != w {
-                    return Err(internal_error("vertex mapping mismatch"));
-                }
-                hr = rb.next[hr as usize];
-                ho = he.next[ho as usize];
-            }
+    let traversal_vertices = rb.vertex_count;
+    let mut isolated = 0u64;
+    let mut next_coded = traversal_vertices as u32;
+    for (w, wc) in work_to_coded.iter_mut().enumerate() {
+        if *wc == NONE {
+            *wc = next_coded;
+            coded_to_work[next_coded as usize] = w as u32;
+            next_coded += 1;
+            isolated += 1;
         }
-        let mut isolated = 0u64;
-        let mut next_coded = rb.vertex_count as u32;
-        for (w, wc) in work_to_coded.iter_mut().enumerate() {
-            if *wc == NONE {
-                *wc = next_coded;
-                coded_to_work[next_coded as usize] = w as u32;
-                next_coded += 1;
-                isolated += 1;
-            }
-        }
-        let orig_of_coded = coded_to_work
-            .iter()
-            .map(|&w| input.source[w as usize])
-            .collect();
-        Ok(CodedOrder {
-            coded_to_work,
-            orig_of_coded,
-            face_source,
-            isolated,
-        })
     }
-}
+    let coded_count = nw;
+    let orig_of_coded: Vec<u32> = coded_to_work.iter().map(|&w| source[w as usize]).collect();
 
-/// Every coded copy of an input vertex merges into the lowest coded copy. Returns that
-/// representative per input vertex and the `(copy, representative)` pairs, copies ascending.
-fn merges_of_copies(orig_of_coded: &[u32], input_vertices: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
-    let mut rep_of_orig = vec![NONE; input_vertices];
+    // Merges: every coded copy of an input vertex merges into the lowest coded copy.
+    let mut rep_of_orig = vec![NONE; mesh.vertex_count()];
     for (c, &o) in orig_of_coded.iter().enumerate() {
         if rep_of_orig[o as usize] == NONE {
             rep_of_orig[o as usize] = c as u32;
         }
     }
-    let merges = orig_of_coded
+    let merges: Vec<(u32, u32)> = orig_of_coded
         .iter()
         .enumerate()
         .filter(|&(c, &o)| rep_of_orig[o as usize] != c as u32)
         .map(|(c, &o)| (c as u32, rep_of_orig[o as usize]))
         .collect();
-    (rep_of_orig, merges)
-}
+    let final_of_coded = final_numbering(coded_count, &merges);
 
-/// The groups in coded order: renumbered by first appearance in encoding order, unused
-/// groups at the end; with the symbols that code them.
-struct CodedGroups {
-    /// Coded id of every input group.
-    coded_of_input: Vec<u32>,
-    /// Coded group of every rebuilt face (`NONE` for holes).
-    face_group: Vec<u32>,
-    /// The groups by coded id.
-    groups: Vec<Group>,
-    /// Per mesh face in encoding order: its group symbol, context class and the number of
-    /// groups used before it.
-    symbols: Vec<(GroupSym, usize, u32)>,
-}
-
-impl CodedGroups {
-    /// Numbers the groups of `mesh` in the order the rebuilt faces (input faces
-    /// `face_source`) first use them and picks each face's group symbol.
-    fn new(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> Self {
-        let mut coded_of_input = vec![NONE; mesh.groups.len()];
-        let mut next_group = 0u32;
-        let mut symbols = Vec::new();
-        let recency = Recency::new(mesh.groups.len(), rb.faces.len());
-        let mut coding = GroupCoding::new(rb, Some(recency));
-        for (i, rf) in rb.faces.iter().enumerate() {
-            if rf.hole {
-                continue;
-            }
-            let og = mesh.face_groups[face_source[i] as usize] as usize;
-            // The encoder writes the current version: version-3 classes and symbols.
-            let class = coding.edge_candidates(i, true);
-            let seen = next_group;
-            let sym = match coded_of_input[og] {
-                NONE => {
-                    coded_of_input[og] = next_group;
-                    next_group += 1;
-                    GroupSym::New
-                }
-                g => coding.used_group_symbol(i, g),
-            };
-            symbols.push((sym, class, seen));
-            coding.assign(i, coded_of_input[og]);
+    // Groups: renumbered by first appearance in encoding order; unused groups at the end.
+    let mut group_new = vec![NONE; mesh.groups.len()];
+    let mut next_group = 0u32;
+    let mut face_group_new = vec![NONE; rb.faces.len()];
+    let mut group_syms = Vec::new();
+    let mut prev_real = None;
+    let (mut cands, mut vcands) = (Vec::new(), Vec::new());
+    let mut recency = Recency::new(mesh.groups.len(), rb.faces.len());
+    for (i, rf) in rb.faces.iter().enumerate() {
+        if rf.hole {
+            continue;
         }
-        for g in coded_of_input.iter_mut().filter(|g| **g == NONE) {
-            *g = next_group;
+        let og = mesh.face_groups[rebuilt_face_source[i] as usize] as usize;
+        group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
+        let class = group_class(&rb, i, &face_group_new, &cands);
+        let seen = next_group;
+        let sym = if group_new[og] == NONE {
+            group_new[og] = next_group;
             next_group += 1;
-        }
-        let mut groups = vec![Group::default(); mesh.groups.len()];
-        for (og, &ng) in coded_of_input.iter().enumerate() {
-            groups[ng as usize] = mesh.groups[og].clone();
-        }
-        CodedGroups {
-            coded_of_input,
-            face_group: coding.face_group,
-            groups,
-            symbols,
-        }
+            GroupSym::New
+        } else {
+            let g = group_new[og];
+            match cands.iter().take(GROUP_CANDIDATES).position(|&c| c == g) {
+                Some(c) => GroupSym::Candidate(c as u8),
+                None => {
+                    vertex_candidates(&rb, i, &face_group_new, &cands, &mut vcands);
+                    match vcands.iter().position(|&c| c == g) {
+                        Some(c) => GroupSym::Vertex(c as u8),
+                        None => GroupSym::Recent(recency.rank_of(g)),
+                    }
+                }
+            }
+        };
+        group_syms.push((sym, class, seen));
+        face_group_new[i] = group_new[og];
+        recency.assign(group_new[og], i);
+        prev_real = Some(i);
     }
-}
+    for g in group_new.iter_mut().filter(|g| **g == NONE) {
+        *g = next_group;
+        next_group += 1;
+    }
+    let mut groups_new_order = vec![Group::default(); mesh.groups.len()];
+    for (og, &ng) in group_new.iter().enumerate() {
+        groups_new_order[ng as usize] = mesh.groups[og].clone();
+    }
+    let group_count = mesh.groups.len() as u64;
 
-/// The `connectivity` section's payload (§6): label count, then labels and (with more than
-/// one group) group symbols in one range-coded stream.
-fn connectivity_payload(
-    labels: &[Label],
-    symbols: &[(GroupSym, usize, u32)],
-    group_count: usize,
-) -> Vec<u8> {
+    // Connectivity section.
     let mut conn = Vec::new();
-    put_varint(&mut conn, labels.len() as u64);
-    let mut enc = RangeEncoder::new();
-    let mut models = ConnModels::new(true);
-    for &l in labels {
-        models.encode_label(&mut enc, l);
-    }
-    if group_count > 1 {
-        for &(sym, class, seen) in symbols {
-            models.encode_group(&mut enc, sym, class, seen);
+    put_varint(&mut conn, tr.labels.len() as u64);
+    {
+        let mut enc = RangeEncoder::new();
+        let mut models = ConnModels::new(true);
+        for &l in &tr.labels {
+            models.encode_label(&mut enc, l);
         }
+        if group_count > 1 {
+            for &(sym, class, seen) in &group_syms {
+                models.encode_group(&mut enc, sym, class, seen);
+            }
+        }
+        conn.extend_from_slice(&enc.finish());
     }
-    conn.extend_from_slice(&enc.finish());
-    conn
-}
 
-/// The position grid: over the positions, and the box `opts.grid_covers` if given.
-fn quantizer_for(mesh: &ControlMesh, opts: &EncodeOptions, bits: u8) -> Quantizer {
-    match opts.grid_covers {
+    // Patches section.
+    let quant = match opts.grid_covers {
         None => Quantizer::for_positions(&mesh.positions, bits, opts.step_scale),
         Some(corners) => {
             let mut covered = mesh.positions.clone();
             covered.extend(corners);
             Quantizer::for_positions(&covered, bits, opts.step_scale)
         }
-    }
-}
+    };
+    let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
 
-/// The `creases` section's payload (§7) and, per half-edge, whether its edge is a crease.
-fn creases_payload(
-    mesh: &ControlMesh,
-    rb: &Rebuilt,
-    orig_of_coded: &[u32],
-    groups: &CodedGroups,
-) -> Result<(Vec<u8>, Vec<bool>)> {
+    // Creases section.
     let edges = label_edges(&rb.label_edge);
-    let mut sharp = sharp_flags(mesh, rb, &edges, orig_of_coded)?;
-    let mut corner: Vec<bool> = orig_of_coded
-        .iter()
-        .map(|o| mesh.corners.contains(o))
-        .collect();
-    let mut enc = RangeEncoder::new();
-    let crease_he = code_creases(
-        rb,
-        &edges,
-        &groups.face_group,
-        &mut sharp,
-        &mut corner,
-        &mut enc,
-    )?;
-    Ok((enc.finish(), crease_he))
-}
-
-/// The sharp flag of every edge in label order; an error if a sharp edge of the mesh is
-/// not among them.
-fn sharp_flags(
-    mesh: &ControlMesh,
-    rb: &Rebuilt,
-    edges: &[u32],
-    orig_of_coded: &[u32],
-) -> Result<Vec<bool>> {
     let mut sharp = vec![false; edges.len()];
     let mut matched = BTreeSet::new();
     for (j, &h) in edges.iter().enumerate() {
@@ -1265,57 +971,51 @@ fn sharp_flags(
             "sharp edge {missing:?} is not an edge of the mesh"
         )));
     }
-    Ok(sharp)
-}
+    let mut corner: Vec<bool> = orig_of_coded
+        .iter()
+        .map(|o| mesh.corners.contains(o))
+        .collect();
+    let mut creases_enc = RangeEncoder::new();
+    let crease_he = code_creases(
+        &rb,
+        &edges,
+        &face_group_new,
+        &mut sharp,
+        &mut corner,
+        &mut creases_enc,
+    )?;
+    let creases = creases_enc.finish();
 
-/// The `geometry` section's payload (§8): the traversed mesh's positions on the grid,
-/// predicted and range-coded.
-fn geometry_payload(
-    work: &ControlMesh,
-    rb: &Rebuilt,
-    order: &CodedOrder,
-    quant: &Quantizer,
-    groups: &CodedGroups,
-    group_axes: &[Option<GridAxis>],
-    crease_he: &[bool],
-) -> Result<Vec<u8>> {
-    let mut q: Vec<[i32; 3]> = order
-        .coded_to_work
+    // Geometry section.
+    let mut q: Vec<[i32; 3]> = coded_to_work
         .iter()
         .map(|&w| quant.quantize(work.positions[w as usize]))
         .collect();
-    let face_plane_group = plane_groups_of_faces(&groups.face_group, &groups.groups);
-    let (face_axis, axes) = patches::face_axes(&groups.face_group, group_axes);
-    let mut enc = RangeEncoder::new();
-    let mut ge = GeomEncoder::new(&mut enc);
-    // The encoder writes the current version: predictions along creases, arcs round axes.
-    geometry::walk(
-        rb,
-        &face_plane_group,
-        groups.groups.len(),
-        quant.bits,
-        Some(crease_he),
-        (!axes.is_empty()).then_some(&ArcAxes {
-            face_axis: &face_axis,
-            axes: &axes,
-        }),
-        &mut q,
-        &mut ge,
-    )?;
-    Ok(enc.finish())
-}
+    let face_plane_group = plane_groups_of_faces(&face_group_new, &groups_new_order);
+    let (face_axis, axes) = patches::face_axes(&face_group_new, &group_axes);
+    let mut geom_enc = RangeEncoder::new();
+    {
+        let mut ge = GeomEncoder::new(&mut geom_enc);
+        // The encoder writes the current version: predictions along creases, arcs round axes.
+        geometry::walk(
+            &rb,
+            &face_plane_group,
+            groups_new_order.len(),
+            bits,
+            Some(&crease_he),
+            (!axes.is_empty()).then_some(&ArcAxes {
+                face_axis: &face_axis,
+                axes: &axes,
+            }),
+            &mut q,
+            &mut ge,
+        )?;
+    }
+    let geometry = geom_enc.finish();
 
-/// Header flag bits (§5) of a file with these contents.
-fn header_flags(
-    content: Content,
-    quant: &Quantizer,
-    isolated: u64,
-    merges: bool,
-    patches: bool,
-    names: bool,
-) -> u64 {
+    // Header.
     let mut flags = 0u64;
-    if let Content::ControlMesh { .. } = content {
+    if let Content::ControlMesh { .. } = opts.content {
         flags |= FLAG_CONTROL_MESH;
     }
     if !quant.as_f32 {
@@ -1324,42 +1024,31 @@ fn header_flags(
     if isolated > 0 {
         flags |= FLAG_ISOLATED;
     }
-    if merges {
+    if !merges.is_empty() {
         flags |= FLAG_MERGES;
     }
-    if patches {
+    if patches.is_some() {
         flags |= FLAG_PATCHES;
     }
-    if names {
+    let store_names = opts.store_group_names && groups_new_order.iter().any(|g| !g.name.is_empty());
+    if store_names {
         flags |= FLAG_NAMES;
     }
-    flags
-}
-
-/// The `header` section's payload (§5).
-fn header_payload(
-    mesh: &ControlMesh,
-    content: Content,
-    quant: &Quantizer,
-    flags: u64,
-    isolated: u64,
-    merge_count: usize,
-) -> Vec<u8> {
     let mut header = Vec::new();
     put_varint(&mut header, flags);
-    if let Content::ControlMesh { default_level } = content {
+    if let Content::ControlMesh { default_level } = opts.content {
         header.push(default_level);
     }
-    header.push(quant.bits);
+    header.push(bits);
     put_varint(&mut header, mesh.vertex_count() as u64);
     put_varint(&mut header, mesh.face_count() as u64);
     put_varint(&mut header, mesh.face_vertices.len() as u64);
-    put_varint(&mut header, mesh.groups.len() as u64);
+    put_varint(&mut header, group_count);
     if isolated > 0 {
         put_varint(&mut header, isolated);
     }
-    if merge_count > 0 {
-        put_varint(&mut header, merge_count as u64);
+    if !merges.is_empty() {
+        put_varint(&mut header, merges.len() as u64);
     }
     for v in quant.min.iter().chain(std::iter::once(&quant.extent)) {
         if quant.as_f32 {
@@ -1368,44 +1057,63 @@ fn header_payload(
             header.extend_from_slice(&v.to_le_bytes());
         }
     }
-    header
-}
 
-/// The `fixups` section's payload (§9 *Fixups*): per merge, the gap to the previous copy
-/// and the distance back to the representative.
-fn fixups_payload(merges: &[(u32, u32)]) -> Vec<u8> {
-    let mut fx = Vec::new();
-    let mut prev: i64 = -1;
-    for &(d, r) in merges {
-        put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
-        put_varint(&mut fx, u64::from(d - r - 1));
-        prev = i64::from(d);
+    let mut out = Vec::new();
+    out.extend_from_slice(&MAGIC);
+    out.push(FORMAT_VERSION_MAJOR);
+    out.push(FORMAT_VERSION_MINOR);
+    put_section(&mut out, SEC_HEADER, &header, false, true);
+    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
+    if let Some(p) = patches {
+        put_section(&mut out, SEC_PATCHES, &p, true, false);
     }
-    fx
-}
-
-/// The `names` section's payload (§9 *Names*): names in input group order, with the coded
-/// order.
-fn names_payload(mesh: &ControlMesh, coded_of_input: &[u32]) -> Vec<u8> {
-    let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
-    let mut input_of_coded = vec![0u32; coded_of_input.len()];
-    for (og, &ng) in coded_of_input.iter().enumerate() {
-        input_of_coded[ng as usize] = og as u32;
+    put_section(&mut out, SEC_CREASES, &creases, true, false);
+    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
+    if !merges.is_empty() {
+        let mut fx = Vec::new();
+        let mut prev: i64 = -1;
+        for &(d, r) in &merges {
+            put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
+            put_varint(&mut fx, u64::from(d - r - 1));
+            prev = i64::from(d);
+        }
+        put_section(&mut out, SEC_FIXUPS, &fx, true, false);
     }
-    names::write(&input_names, &input_of_coded)
-}
+    if store_names {
+        let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
+        let mut input_of_coded = vec![0u32; group_new.len()];
+        for (og, &ng) in group_new.iter().enumerate() {
+            input_of_coded[ng as usize] = og as u32;
+        }
+        let payload = names::write(&input_names, &input_of_coded);
+        put_section(&mut out, SEC_NAMES, &payload, true, false);
+    }
 
-/// Decoded face number of every input face: mesh faces in encoding order.
-fn coded_face_numbers(rb: &Rebuilt, face_source: &[u32], face_count: usize) -> Vec<u32> {
-    let mut face = vec![NONE; face_count];
+    let vertex: Vec<u32> = (0..mesh.vertex_count())
+        .map(|v| final_of_coded[rep_of_orig[v] as usize])
+        .collect();
+    let mut face = vec![NONE; mesh.face_count()];
     let mut next_face = 0u32;
     for (i, rf) in rb.faces.iter().enumerate() {
         if !rf.hole {
-            face[face_source[i] as usize] = next_face;
+            face[rebuilt_face_source[i] as usize] = next_face;
             next_face += 1;
         }
     }
-    face
+    // With names stored, the decoder restores the input's group order.
+    let group = if store_names {
+        (0..mesh.groups.len() as u32).collect()
+    } else {
+        group_new
+    };
+    Ok((
+        out,
+        EncodeMap {
+            vertex,
+            face,
+            group,
+        },
+    ))
 }
 
 /// Final vertex id of every coded vertex after the merges (`(copy, representative)` pairs,
@@ -1557,312 +1265,44 @@ fn parse_header(
     Ok((header, quant))
 }
 
-/// Decodes a file section by section: the mesh, and what [`inspect`] reports about it.
 fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     limit("input bytes", bytes.len() as u64, limits.max_input_bytes)?;
-    let file = FileSections::read(bytes, limits)?;
-    let counts = CodedCounts::of(&file.header)?;
-    let mut conn = file.connectivity(counts.traversal)?;
-    file.check_isolated_vertices_fit()?;
-    let (patch_kinds, grid_axes) = file.patches()?;
-    let creases = file.creases(&conn, counts.coded)?;
-    let q = file.geometry(&conn, &creases, &patch_kinds, &grid_axes, counts.coded)?;
-    let merges = file.fixups(counts.coded)?;
-    let final_of_coded = final_numbering(counts.coded, &merges);
-    let (names, input_of_coded) = file.names()?;
-    let patch_kinds = match &input_of_coded {
-        Some(order) => restore_input_group_order(order, &mut conn.face_group, &patch_kinds),
-        None => patch_kinds,
-    };
-    let mut positions = vec![DVec3::ZERO; file.header.vertex_count as usize];
-    for c in 0..counts.coded {
-        positions[final_of_coded[c] as usize] = file.quant.dequantize(q[c]);
+    let mut r = Reader::new(bytes, "file");
+    let magic = r.bytes(4, "magic")?;
+    if magic != MAGIC {
+        return Err(Error::format(
+            "file",
+            "magic",
+            "not an .scode file (bad magic bytes)",
+        ));
     }
-    let mesh = assemble_mesh(
-        &file.header,
-        &conn,
-        &creases,
-        &final_of_coded,
-        positions,
-        names,
-        &patch_kinds,
-    )?;
-    let info = FileInfo {
-        header: file.header.clone(),
-        sections: file.sections,
-        total_bytes: bytes.len(),
-        sharp_edge_count: mesh.sharp_edges.len(),
-        corner_count: mesh.corners.len(),
-        group_names: mesh.groups.iter().map(|g| g.name.clone()).collect(),
-        patch_kinds,
-        component_count: conn.rb.faces.iter().filter(|f| f.start).count(),
-        label_count: conn.label_count,
-        group_bits: conn.group_bits,
-    };
-    Ok((
-        Decoded {
-            header: file.header,
-            mesh,
-        },
-        info,
-    ))
-}
+    let major = r.u8("version_major")?;
+    let minor = r.u8("version_minor")?;
+    let features = features_for(major, minor)?;
+    let max_raw = limits.max_input_bytes;
+    let verify = limits.verify_checksums;
 
-/// A file split into its sections, with the parsed header: what the section decoders
-/// read.
-struct FileSections {
-    header: Header,
-    quant: Quantizer,
-    features: Features,
-    /// Payload of every known section present, by section id.
-    payloads: [Option<Vec<u8>>; 7],
-    sections: Vec<SectionInfo>,
-}
-
-impl FileSections {
-    /// Checks magic and version, parses the header and reads the other sections (ids
-    /// increasing; unknown skippable ones are ignored), checking the optional ones against
-    /// the header flags.
-    fn read(bytes: &[u8], limits: &Limits) -> Result<Self> {
-        let mut r = Reader::new(bytes, "file");
-        let magic = r.bytes(4, "magic")?;
-        if magic != MAGIC {
-            return Err(Error::format(
-                "file",
-                "magic",
-                "not an .scode file (bad magic bytes)",
-            ));
-        }
-        let major = r.u8("version_major")?;
-        let minor = r.u8("version_minor")?;
-        let features = features_for(major, minor)?;
-        let hs = read_section(
-            &mut r,
-            Some(0),
-            limits.verify_checksums,
-            limits.max_input_bytes,
-        )?;
-        if hs.id != SEC_HEADER {
-            return Err(Error::format(
-                "file",
-                "section",
-                "the first section must be the header",
-            ));
-        }
-        // The magic and version bytes count towards the header's size.
-        let mut sections = vec![SectionInfo {
-            name: "header",
-            stored_bytes: hs.stored_bytes + 6,
-            raw_bytes: hs.payload.len(),
-        }];
-        let (header, quant) = parse_header(&hs.payload, major, minor, limits)?;
-        let payloads = read_payloads(&mut r, limits, &mut sections)?;
-        check_optional_sections(&payloads, header.flags)?;
-        Ok(FileSections {
-            header,
-            quant,
-            features,
-            payloads,
-            sections,
-        })
+    let mut sections_info = Vec::new();
+    let hs = read_section(&mut r, Some(0), verify, max_raw)?;
+    if hs.id != SEC_HEADER {
+        return Err(Error::format(
+            "file",
+            "section",
+            "the first section must be the header",
+        ));
     }
+    sections_info.push(SectionInfo {
+        name: "header",
+        stored_bytes: hs.stored_bytes + 6,
+        raw_bytes: hs.payload.len(),
+    });
+    let (header, quant) = parse_header(&hs.payload, major, minor, limits)?;
 
-    /// The payload of section `id`, if the file has it.
-    fn optional(&self, id: u8) -> Option<&[u8]> {
-        self.payloads[id as usize].as_deref()
-    }
-
-    /// The payload of section `id`; an error naming the section if the file lacks it.
-    fn required(&self, id: u8) -> Result<&[u8]> {
-        self.optional(id).ok_or_else(|| {
-            Error::format(section_name(id), "section", "required section is missing")
-        })
-    }
-
-    /// Decodes the `connectivity` section: the labels, the structure they rebuild (checked
-    /// against the header's counts) and the face groups.
-    fn connectivity(&self, traversal_vertices: usize) -> Result<Connectivity> {
-        let header = &self.header;
-        let mut cr = Reader::new(self.required(SEC_CONNECTIVITY)?, "connectivity");
-        let label_count =
-            cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
-        // Each label is one frequency-model symbol: at least log2(8216 / 8207) bits (9 other
-        // symbols keep a count >= 1 out of a total <= 8192 + 24), i.e. < 6,400 labels per byte.
-        let coded = cr.rest();
-        if label_count > (coded.len() as u64 + 5) * 6_400 {
-            return Err(Error::format(
-                "connectivity",
-                "label_count",
-                format!(
-                    "{label_count} labels cannot fit in {} coded bytes",
-                    coded.len()
-                ),
-            ));
-        }
-        let mut dec = RangeDecoder::new(coded, "connectivity")?;
-        let mut models = ConnModels::new(self.features.groups_v3);
-        let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
-        let mut labels = Vec::new();
-        for _ in 0..label_count {
-            labels.push(models.decode_label(&mut dec, max_degree.max(3))?);
-        }
-        let rb = rebuild(&labels)?;
-        check_rebuilt_counts(&rb, header, traversal_vertices)?;
-        let face_group = decode_face_groups(
-            &rb,
-            &mut dec,
-            &mut models,
-            header.group_count as usize,
-            self.features.groups_v3,
-        )?;
-        dec.finish()?;
-        Ok(Connectivity {
-            rb,
-            face_group,
-            label_count: labels.len(),
-            group_bits: models.group_bits,
-        })
-    }
-
-    /// Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
-    /// their number by its size before allocating per-vertex arrays.
-    fn check_isolated_vertices_fit(&self) -> Result<()> {
-        let geometry_len = self.required(SEC_GEOMETRY)?.len();
-        let isolated = self.header.isolated_vertex_count;
-        if isolated.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
-            return Err(Error::format(
-                "geometry",
-                "isolated_vertex_count",
-                format!("{isolated} isolated vertices cannot fit in {geometry_len} coded bytes"),
-            ));
-        }
-        Ok(())
-    }
-
-    /// Decodes the optional `patches` section: patch kinds and grid axes per coded group
-    /// (all closed without it).
-    fn patches(&self) -> Result<patches::DecodedPatches> {
-        let group_count = self.header.group_count as usize;
-        match self.optional(SEC_PATCHES) {
-            Some(p) if LEGACY && !self.features.coded_patches => {
-                patches::decode_v1(p, group_count, &self.quant)
-            }
-            Some(p) => patches::decode(p, group_count, &self.quant),
-            None => Ok((
-                vec![PatchKind::Closed; group_count],
-                vec![None; group_count],
-            )),
-        }
-    }
-
-    /// Decodes the `creases` section: sharp flags per edge, corner flags per coded vertex.
-    fn creases(&self, conn: &Connectivity, coded_count: usize) -> Result<Creases> {
-        let rb = &conn.rb;
-        let edges = label_edges(&rb.label_edge);
-        let mut sharp = vec![false; edges.len()];
-        let mut corner = vec![false; coded_count];
-        let mut d = RangeDecoder::new(self.required(SEC_CREASES)?, "creases")?;
-        let crease_he = code_creases(
-            rb,
-            &edges,
-            &conn.face_group,
-            &mut sharp,
-            &mut corner,
-            &mut d,
-        )?;
-        d.finish()?;
-        Ok(Creases {
-            edges,
-            sharp,
-            corner,
-            crease_he,
-        })
-    }
-
-    /// Decodes the `geometry` section: the grid position of every coded vertex.
-    fn geometry(
-        &self,
-        conn: &Connectivity,
-        creases: &Creases,
-        patch_kinds: &[PatchKind],
-        grid_axes: &[Option<GridAxis>],
-        coded_count: usize,
-    ) -> Result<Vec<[i32; 3]>> {
-        let mut q = vec![[0i32; 3]; coded_count];
-        let groups_tmp: Vec<Group> = patch_kinds
-            .iter()
-            .map(|&patch| Group {
-                name: String::new(),
-                patch,
-            })
-            .collect();
-        let face_plane_group = plane_groups_of_faces(&conn.face_group, &groups_tmp);
-        let (face_axis, axes) = patches::face_axes(&conn.face_group, grid_axes);
-        let arcs = ArcAxes {
-            face_axis: &face_axis,
-            axes: &axes,
-        };
-        let features = &self.features;
-        let mut d = RangeDecoder::new(self.required(SEC_GEOMETRY)?, "geometry")?;
-        let mut gd = GeomDecoder::new(&mut d, self.quant.max_q());
-        geometry::walk(
-            &conn.rb,
-            &face_plane_group,
-            self.header.group_count as usize,
-            self.quant.bits,
-            features
-                .crease_prediction
-                .then_some(creases.crease_he.as_slice()),
-            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
-            &mut q,
-            &mut gd,
-        )?;
-        d.finish()?;
-        Ok(q)
-    }
-
-    /// Decodes the `fixups` section (present exactly when the header counts merged
-    /// vertices): the `(copy, representative)` pairs of coded vertices to merge.
-    fn fixups(&self, coded_count: usize) -> Result<Vec<(u32, u32)>> {
-        match (self.optional(SEC_FIXUPS), self.header.merged_vertex_count) {
-            (None, 0) => Ok(Vec::new()),
-            (Some(p), m) if m > 0 => read_merges(p, m, coded_count),
-            _ => Err(Error::format(
-                "fixups",
-                "section",
-                "section presence does not match the header's merged vertex count",
-            )),
-        }
-    }
-
-    /// Decodes the optional `names` section: the names by coded group and (version 2 on) the
-    /// input's group order, `input_of_coded[c]` for coded group `c`.
-    fn names(&self) -> Result<(Vec<String>, Option<Vec<u32>>)> {
-        let group_count = self.header.group_count as usize;
-        match self.optional(SEC_NAMES) {
-            None => Ok((vec![String::new(); group_count], None)),
-            Some(p) if LEGACY && !self.features.names_in_input_order => {
-                Ok((names::read_v1(p, group_count)?, None))
-            }
-            Some(p) => {
-                let (names, order) = names::read(p, group_count)?;
-                Ok((names, Some(order)))
-            }
-        }
-    }
-}
-
-/// Reads the sections after the header up to the end of the file, by id; records each
-/// known one in `sections`.
-fn read_payloads(
-    r: &mut Reader,
-    limits: &Limits,
-    sections: &mut Vec<SectionInfo>,
-) -> Result<[Option<Vec<u8>>; 7]> {
+    // Remaining sections, in increasing id order; unknown skippable ones are ignored.
     let mut payloads: [Option<Vec<u8>>; 7] = Default::default();
     let mut last_id = SEC_HEADER;
     while !r.is_empty() {
-        let s = read_section(r, None, limits.verify_checksums, limits.max_input_bytes)?;
+        let s = read_section(&mut r, None, verify, max_raw)?;
         if s.id <= last_id {
             return Err(Error::format(
                 "file",
@@ -1881,25 +1321,19 @@ fn read_payloads(
                 format!("unknown section id {}", s.id),
             ));
         }
-        sections.push(SectionInfo {
+        sections_info.push(SectionInfo {
             name: section_name(s.id),
             stored_bytes: s.stored_bytes,
             raw_bytes: s.payload.len(),
         });
         payloads[s.id as usize] = Some(s.payload);
     }
-    Ok(payloads)
-}
-
-/// The header flags say which optional sections are present, so a file cut at a section
-/// boundary is detected.
-fn check_optional_sections(payloads: &[Option<Vec<u8>>; 7], flags: u64) -> Result<()> {
     for (id, flag) in [
         (SEC_PATCHES, FLAG_PATCHES),
         (SEC_FIXUPS, FLAG_MERGES),
         (SEC_NAMES, FLAG_NAMES),
     ] {
-        if payloads[id as usize].is_some() != (flags & flag != 0) {
+        if payloads[id as usize].is_some() != (header.flags & flag != 0) {
             return Err(Error::format(
                 section_name(id),
                 "section",
@@ -1907,53 +1341,54 @@ fn check_optional_sections(payloads: &[Option<Vec<u8>>; 7], flags: u64) -> Resul
             ));
         }
     }
-    Ok(())
-}
+    let required = |id: u8| -> Result<&Vec<u8>> {
+        payloads[id as usize].as_ref().ok_or_else(|| {
+            Error::format(section_name(id), "section", "required section is missing")
+        })
+    };
 
-/// Vertex counts the header implies.
-struct CodedCounts {
-    /// Coded vertices: the decoded ones plus the copies the fixups merge away.
-    coded: usize,
-    /// Of those, the ones the traversal reaches (all but the isolated ones).
-    traversal: usize,
-}
-
-impl CodedCounts {
-    /// The counts, or an error if the header's vertex counts contradict each other.
-    fn of(header: &Header) -> Result<Self> {
-        let coded = header
-            .vertex_count
-            .checked_add(header.merged_vertex_count)
-            .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
-            as usize;
-        let traversal = coded
-            .checked_sub(header.isolated_vertex_count as usize)
-            .ok_or_else(|| {
-                Error::format(
-                    "header",
-                    "isolated_vertex_count",
-                    "exceeds the vertex count",
-                )
-            })?;
-        Ok(CodedCounts { coded, traversal })
-    }
-}
-
-/// The decoded `connectivity` section.
-struct Connectivity {
-    rb: Rebuilt,
-    /// Group of every rebuilt face (`NONE` for holes): coded ids, input ids once
-    /// [`restore_input_group_order`] has run.
-    face_group: Vec<u32>,
-    label_count: usize,
-    /// Bits spent on face groups (for `inspect`).
-    group_bits: f64,
-}
-
-/// The labels must rebuild exactly the faces, corners and traversal vertices the header
-/// announces.
-fn check_rebuilt_counts(rb: &Rebuilt, header: &Header, traversal_vertices: usize) -> Result<()> {
     let nf = header.face_count as usize;
+    let coded_count = header
+        .vertex_count
+        .checked_add(header.merged_vertex_count)
+        .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
+        as usize;
+    let traversal_vertices = coded_count
+        .checked_sub(header.isolated_vertex_count as usize)
+        .ok_or_else(|| {
+            Error::format(
+                "header",
+                "isolated_vertex_count",
+                "exceeds the vertex count",
+            )
+        })?;
+    let group_count = header.group_count as usize;
+
+    // Connectivity.
+    let conn = required(SEC_CONNECTIVITY)?;
+    let mut cr = Reader::new(conn, "connectivity");
+    let label_count = cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
+    // Each label is one frequency-model symbol: at least log2(8216 / 8207) bits (9 other
+    // symbols keep a count >= 1 out of a total <= 8192 + 24), i.e. < 6,400 labels per byte.
+    let coded = cr.rest();
+    if label_count > (coded.len() as u64 + 5) * 6_400 {
+        return Err(Error::format(
+            "connectivity",
+            "label_count",
+            format!(
+                "{label_count} labels cannot fit in {} coded bytes",
+                coded.len()
+            ),
+        ));
+    }
+    let mut dec = RangeDecoder::new(coded, "connectivity")?;
+    let mut models = ConnModels::new(features.groups_v3);
+    let mut labels = Vec::new();
+    let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
+    for _ in 0..label_count {
+        labels.push(models.decode_label(&mut dec, max_degree.max(3))?);
+    }
+    let rb = rebuild(&labels)?;
     let real_faces = rb.faces.iter().filter(|f| !f.hole).count();
     let real_corners: u64 = rb
         .faces
@@ -1981,21 +1416,13 @@ fn check_rebuilt_counts(rb: &Rebuilt, header: &Header, traversal_vertices: usize
             ),
         ));
     }
-    Ok(())
-}
-
-/// Decodes the group of every mesh face in encoding order (spec §6.5); with at most one
-/// group nothing is coded.
-fn decode_face_groups(
-    rb: &Rebuilt,
-    dec: &mut RangeDecoder,
-    models: &mut ConnModels,
-    group_count: usize,
-    groups_v3: bool,
-) -> Result<Vec<u32>> {
-    let recency = (groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
-    let mut coding = GroupCoding::new(rb, recency);
+    // Resolve groups in encoding order.
+    let mut face_group = vec![NONE; rb.faces.len()];
     let mut next_group = 0u32;
+    let mut prev_real = None;
+    let (mut cands, mut vcands) = (Vec::new(), Vec::new());
+    let mut recency =
+        (features.groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
     for i in 0..rb.faces.len() {
         if rb.faces[i].hole {
             continue;
@@ -2003,9 +1430,45 @@ fn decode_face_groups(
         let g = if group_count <= 1 {
             0
         } else {
-            let class = coding.edge_candidates(i, groups_v3);
-            let sym = models.decode_group(dec, next_group, class)?;
-            coding.resolve(i, sym, &mut next_group)?
+            group_candidates(&rb, i, &face_group, prev_real, &mut cands);
+            let class = if features.groups_v3 {
+                group_class(&rb, i, &face_group, &cands)
+            } else {
+                cands.len().clamp(1, 3) - 1
+            };
+            let missing = |what: &str, c: u8, n: usize| {
+                Error::format(
+                    "connectivity",
+                    "group",
+                    format!("face {i} refers to {what} candidate group {c} of {n}"),
+                )
+            };
+            match models.decode_group(&mut dec, next_group, class)? {
+                GroupSym::New => {
+                    next_group += 1;
+                    next_group - 1
+                }
+                GroupSym::Explicit(id) => id,
+                GroupSym::Candidate(c) => *cands
+                    .get(usize::from(c))
+                    .ok_or_else(|| missing("edge", c, cands.len()))?,
+                GroupSym::Vertex(c) => {
+                    vertex_candidates(&rb, i, &face_group, &cands, &mut vcands);
+                    *vcands
+                        .get(usize::from(c))
+                        .ok_or_else(|| missing("vertex", c, vcands.len()))?
+                }
+                GroupSym::Recent(r) => match &recency {
+                    Some(rc) if r < rc.used => face_group[rc.face_of(r)],
+                    _ => {
+                        return Err(Error::format(
+                            "connectivity",
+                            "group_rank",
+                            format!("rank {r} among the groups used so far"),
+                        ))
+                    }
+                },
+            }
         };
         if g as usize >= group_count {
             return Err(Error::format(
@@ -2014,88 +1477,156 @@ fn decode_face_groups(
                 format!("group {g} of {group_count}"),
             ));
         }
-        coding.assign(i, g);
+        face_group[i] = g;
+        if let Some(rc) = &mut recency {
+            rc.assign(g, i);
+        }
+        prev_real = Some(i);
     }
-    Ok(coding.face_group)
-}
+    dec.finish()?;
 
-/// The decoded `creases` section, by edge in label order and by coded vertex.
-struct Creases {
-    /// One half-edge per edge.
-    edges: Vec<u32>,
-    sharp: Vec<bool>,
-    corner: Vec<bool>,
-    /// Per half-edge: whether its edge is sharp or on the mesh boundary.
-    crease_he: Vec<bool>,
-}
+    // Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
+    // their number by its size before allocating per-vertex arrays.
+    let geometry_len = required(SEC_GEOMETRY)?.len();
+    if header.isolated_vertex_count.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
+        return Err(Error::format(
+            "geometry",
+            "isolated_vertex_count",
+            format!(
+                "{} isolated vertices cannot fit in {geometry_len} coded bytes",
+                header.isolated_vertex_count
+            ),
+        ));
+    }
 
-/// Reads `m` merges: each copy as the gap after the previous one, its representative as the
-/// distance back; every copy must exist and every representative precede its copy and not
-/// be a copy itself.
-fn read_merges(payload: &[u8], m: u64, coded_count: usize) -> Result<Vec<(u32, u32)>> {
-    let mut fr = Reader::new(payload, "fixups");
-    let mut merges = Vec::new();
-    let mut prev: u64 = 0;
-    let mut is_copy = vec![false; coded_count];
-    for i in 0..m {
-        let gap = fr.varint("copy")?;
-        let d = if i == 0 {
-            gap
-        } else {
-            prev.saturating_add(gap).saturating_add(1)
+    // Patches.
+    let (patch_kinds, grid_axes) = match &payloads[SEC_PATCHES as usize] {
+        Some(p) if LEGACY && !features.coded_patches => patches::decode_v1(p, group_count, &quant)?,
+        Some(p) => patches::decode(p, group_count, &quant)?,
+        None => (
+            vec![PatchKind::Closed; group_count],
+            vec![None; group_count],
+        ),
+    };
+
+    // Creases.
+    let edges = label_edges(&rb.label_edge);
+    let mut sharp = vec![false; edges.len()];
+    let mut corner = vec![false; coded_count];
+    let crease_he = {
+        let mut d = RangeDecoder::new(required(SEC_CREASES)?, "creases")?;
+        let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
+        d.finish()?;
+        crease
+    };
+
+    // Geometry.
+    let mut q = vec![[0i32; 3]; coded_count];
+    {
+        let groups_tmp: Vec<Group> = patch_kinds
+            .iter()
+            .map(|&patch| Group {
+                name: String::new(),
+                patch,
+            })
+            .collect();
+        let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
+        let (face_axis, axes) = patches::face_axes(&face_group, &grid_axes);
+        let arcs = ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
         };
-        if d >= coded_count as u64 {
-            return Err(fr.err("copy", format!("vertex {d} does not exist")));
-        }
-        let back = fr.varint("representative")?;
-        if back >= d {
-            return Err(fr.err("representative", "must precede the copy"));
-        }
-        let rep = d - back - 1;
-        if is_copy[rep as usize] {
-            return Err(fr.err("representative", "is itself a copy"));
-        }
-        is_copy[d as usize] = true;
-        merges.push((d as u32, rep as u32));
-        prev = d;
+        let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
+        let mut gd = GeomDecoder::new(&mut d, quant.max_q());
+        geometry::walk(
+            &rb,
+            &face_plane_group,
+            group_count,
+            quant.bits,
+            features.crease_prediction.then_some(crease_he.as_slice()),
+            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
+            &mut q,
+            &mut gd,
+        )?;
+        d.finish()?;
     }
-    fr.expect_end()?;
-    Ok(merges)
-}
 
-/// Renumbers the face groups from coded to input order (`order[c]` is the input id of coded
-/// group `c`) and returns the patch kinds in input order.
-fn restore_input_group_order(
-    order: &[u32],
-    face_group: &mut [u32],
-    patch_kinds: &[PatchKind],
-) -> Vec<PatchKind> {
-    for g in face_group.iter_mut() {
-        if let Some(&o) = order.get(*g as usize) {
-            *g = o;
+    // Fixups.
+    let mut merges = Vec::new();
+    match (&payloads[SEC_FIXUPS as usize], header.merged_vertex_count) {
+        (None, 0) => {}
+        (Some(p), m) if m > 0 => {
+            let mut fr = Reader::new(p, "fixups");
+            let mut prev: u64 = 0;
+            let mut is_copy = vec![false; coded_count];
+            for i in 0..m {
+                let gap = fr.varint("copy")?;
+                let d = if i == 0 {
+                    gap
+                } else {
+                    prev.saturating_add(gap).saturating_add(1)
+                };
+                if d >= coded_count as u64 {
+                    return Err(fr.err("copy", format!("vertex {d} does not exist")));
+                }
+                let back = fr.varint("representative")?;
+                if back >= d {
+                    return Err(fr.err("representative", "must precede the copy"));
+                }
+                let rep = d - back - 1;
+                if is_copy[rep as usize] {
+                    return Err(fr.err("representative", "is itself a copy"));
+                }
+                is_copy[d as usize] = true;
+                merges.push((d as u32, rep as u32));
+                prev = d;
+            }
+            fr.expect_end()?;
+        }
+        _ => {
+            return Err(Error::format(
+                "fixups",
+                "section",
+                "section presence does not match the header's merged vertex count",
+            ))
         }
     }
-    let mut kinds = vec![PatchKind::Closed; patch_kinds.len()];
-    for (c, &o) in order.iter().enumerate() {
-        kinds[o as usize] = patch_kinds[c];
-    }
-    kinds
-}
+    let final_of_coded = final_numbering(coded_count, &merges);
 
-/// Builds the decoded mesh in final vertex numbering and checks it (merges of a malformed
-/// file can make it invalid).
-fn assemble_mesh(
-    header: &Header,
-    conn: &Connectivity,
-    creases: &Creases,
-    final_of_coded: &[u32],
-    positions: Vec<DVec3>,
-    names: Vec<String>,
-    patch_kinds: &[PatchKind],
-) -> Result<ControlMesh> {
-    let rb = &conn.rb;
+    // Names, and (version 2) the input's group order: coded group `c` becomes group
+    // `input_of_coded[c]`.
+    let mut names = vec![String::new(); group_count];
+    let mut input_of_coded: Option<Vec<u32>> = None;
+    if let Some(p) = &payloads[SEC_NAMES as usize] {
+        if LEGACY && !features.names_in_input_order {
+            names = names::read_v1(p, group_count)?;
+        } else {
+            let (n, order) = names::read(p, group_count)?;
+            names = n;
+            input_of_coded = Some(order);
+        }
+    }
+    let mut patch_kinds = patch_kinds;
+    if let Some(order) = &input_of_coded {
+        for g in face_group.iter_mut() {
+            if let Some(&o) = order.get(*g as usize) {
+                *g = o;
+            }
+        }
+        let mut kinds = vec![PatchKind::Closed; group_count];
+        for (c, &o) in order.iter().enumerate() {
+            kinds[o as usize] = patch_kinds[c];
+        }
+        patch_kinds = kinds;
+    }
+
+    // Assemble.
     let mut mesh = ControlMesh::new();
-    mesh.positions = positions;
+    let final_count = header.vertex_count as usize;
+    mesh.positions = vec![DVec3::ZERO; final_count];
+    for c in 0..coded_count {
+        mesh.positions[final_of_coded[c] as usize] = quant.dequantize(q[c]);
+    }
     mesh.face_vertices
         .reserve(header.face_corner_count as usize);
     let mut buf = Vec::new();
@@ -2105,15 +1636,15 @@ fn assemble_mesh(
         }
         buf.clear();
         buf.extend(rb.face_vertices(i).map(|v| final_of_coded[v as usize]));
-        mesh.push_face(&buf, conn.face_group[i]);
+        mesh.push_face(&buf, face_group[i]);
     }
     mesh.groups = names
         .into_iter()
-        .zip(patch_kinds)
+        .zip(&patch_kinds)
         .map(|(name, &patch)| Group { name, patch })
         .collect();
-    for (j, &h) in creases.edges.iter().enumerate() {
-        if creases.sharp[j] {
+    for (j, &h) in edges.iter().enumerate() {
+        if sharp[j] {
             let t = rb.twin[h as usize];
             mesh.sharp_edges.insert(edge_key(
                 final_of_coded[rb.vertex[h as usize] as usize],
@@ -2121,14 +1652,27 @@ fn assemble_mesh(
             ));
         }
     }
-    for (c, &is) in creases.corner.iter().enumerate() {
+    for (c, &is) in corner.iter().enumerate() {
         if is {
             mesh.corners.insert(final_of_coded[c]);
         }
     }
     mesh.validate()
         .map_err(|e| Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}")))?;
-    Ok(mesh)
+
+    let info = FileInfo {
+        header: header.clone(),
+        sections: sections_info,
+        total_bytes: bytes.len(),
+        sharp_edge_count: mesh.sharp_edges.len(),
+        corner_count: mesh.corners.len(),
+        group_names: mesh.groups.iter().map(|g| g.name.clone()).collect(),
+        patch_kinds,
+        component_count: rb.faces.iter().filter(|f| f.start).count(),
+        label_count: labels.len(),
+        group_bits: models.group_bits,
+    };
+    Ok((Decoded { header, mesh }, info))
 }
 
 #[cfg(test)]
