@@ -1,4 +1,4 @@
-//! Steps 3 and 4 of the fit: the round's control mesh topology, from the plan's chain
+//! Step 3 of the fit: the round's control mesh topology, from the plan's chain
 //! control points and decimation thresholds.
 
 use std::collections::BTreeMap;
@@ -26,7 +26,7 @@ pub(super) struct Built {
     pub edge_chain: BTreeMap<(u32, u32), usize>,
 }
 
-/// Steps 3 and 4: control points on chains, then one constrained decimation of the whole
+/// Step 3: control points on chains, then one constrained decimation of the whole
 /// mesh: chain vertices that are not control points slide away along their chain, boundary
 /// patches lose every interior vertex, closed patches are simplified while their quadric
 /// error allows. Sharp edges are the group boundaries, corners the B-rep vertices (and the

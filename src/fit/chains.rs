@@ -1,4 +1,4 @@
-//! Steps 2 and 3 of the fit: the curve network (corners, and the boundary chains between
+//! Step 2 of the fit: the curve network (corners, and the boundary chains between
 //! them that adjacent faces share) and the control points each chain keeps: a few of its
 //! vertices, Douglas-Peucker within the chain's tolerance; on cylinders and cones at most an
 //! angle step apart about the axis.

@@ -1,4 +1,4 @@
-//! Step 5 of the fit: control points placed so the *limit* surface computed by
+//! Step 4 of the fit: control points placed so the *limit* surface computed by
 //! [`crate::subdiv`] (the decoder's own rules) matches the input: first the Cartesian crease
 //! curves against their chain polylines, then the interiors of closed patches against their
 //! faces, by linearised least squares with re-projected targets (moved on to the faces' exact
@@ -81,7 +81,7 @@ impl SampleSources {
 /// Level of the refined mesh whose vertices' limit positions the fit samples.
 const LEVEL: u32 = 2;
 
-/// Step 5: least-squares fit of the Cartesian crease curves, then of closed-patch interiors.
+/// Step 4: least-squares fit of the Cartesian crease curves, then of closed-patch interiors.
 pub(super) fn fit_geometry(
     built: &mut Built,
     mesh: &ControlMesh,
