@@ -9,7 +9,7 @@
 //! are bit-identical.
 
 use super::masks::{eclass, vclass};
-use super::topology::{Base, Level, NONE};
+use super::topology::{edge_vertex_class, Base, Level, NONE};
 
 /// What the subdivision and limit masks read of one level's connectivity.
 pub(crate) trait Connectivity {
@@ -219,14 +219,7 @@ impl Connectivity for NextLevel<'_> {
         if v < l.nv {
             return l.vclass[v];
         }
-        let c = l.eclass[v - l.nv];
-        if c & eclass::CREASE != 0 {
-            vclass::CREASE_REGULAR
-        } else if c & eclass::RULE_MASK == eclass::LINEAR {
-            vclass::FIXED
-        } else {
-            vclass::SMOOTH
-        }
+        edge_vertex_class(l.eclass[v - l.nv])
     }
 
     #[inline]

@@ -542,15 +542,7 @@ pub(crate) fn refine_level(l: &Level, base: &Base, j: u32) -> Level {
     // Classes.
     let mut vcls = Vec::with_capacity(nv2);
     vcls.extend_from_slice(&l.vclass);
-    vcls.extend(l.eclass.iter().map(|&c| {
-        if c & eclass::CREASE != 0 {
-            vclass::CREASE_REGULAR
-        } else if c & eclass::RULE_MASK == eclass::LINEAR {
-            vclass::FIXED
-        } else {
-            vclass::SMOOTH
-        }
-    }));
+    vcls.extend(l.eclass.iter().map(|&c| edge_vertex_class(c)));
     let mut ecls = vec![0u8; ne2];
     {
         let (old_c, new_c) = ecls.split_at_mut(2 * ne);
@@ -679,5 +671,18 @@ pub(crate) fn build_rings(l: &Level) -> Rings {
     Rings {
         offsets: ring_offsets,
         edges: ring_edges,
+    }
+}
+
+/// The class of the vertex a level inserts on an edge of class `c`: a regular crease vertex
+/// on a crease, fixed on a linear (boundary-patch) edge, smooth elsewhere.
+#[inline]
+pub(crate) fn edge_vertex_class(c: u8) -> u8 {
+    if c & eclass::CREASE != 0 {
+        vclass::CREASE_REGULAR
+    } else if c & eclass::RULE_MASK == eclass::LINEAR {
+        vclass::FIXED
+    } else {
+        vclass::SMOOTH
     }
 }
