@@ -19,6 +19,7 @@ use glam::DVec3;
 
 use super::allowance::OwnFaces;
 use super::encoder::FitError;
+use super::map_ordered;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
@@ -162,6 +163,9 @@ pub(crate) struct ErrorMeter<'a> {
     /// Random decoded samples per group (besides its vertices), by the input face's share of
     /// the input's area: fixed, so an unchanged face keeps its samples.
     group_samples: Vec<usize>,
+    /// Bounding box of each input group's triangles (which hold its samples): a lower
+    /// bound of its samples' distances to any decoded face ([`search_orders`]).
+    group_boxes: Vec<(DVec3, DVec3)>,
     tol: f64,
     /// Behind a lock only so the meter can be shared by the parallel queries; one
     /// measurement at a time holds it.
@@ -213,19 +217,6 @@ fn top_k<T: Ord + Copy>(values: impl Iterator<Item = (f64, T)>, k: usize) -> Vec
     ids
 }
 
-/// Maps `f` over `items` (in parallel with the `parallel` feature), results in order.
-fn map_ordered<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync + Send) -> Vec<R> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        items.par_iter().map(f).collect()
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        items.iter().map(f).collect()
-    }
-}
-
 /// Calls `f(i, item)` for every item (in parallel with the `parallel` feature).
 fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
     #[cfg(feature = "parallel")]
@@ -259,10 +250,15 @@ impl<'a> ErrorMeter<'a> {
             0x5C0D_E000_0000_0001,
         );
         let mut area = vec![0.0f64; mesh.groups.len()];
+        let mut group_boxes = vec![(DVec3::INFINITY, DVec3::NEG_INFINITY); mesh.groups.len()];
         for (t, g) in triangles.iter().zip(&mesh.face_groups) {
             let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
             if let Some(x) = area.get_mut(*g as usize) {
                 *x += 0.5 * (b - a).cross(c - a).length();
+            }
+            if let Some((lo, hi)) = group_boxes.get_mut(*g as usize) {
+                *lo = lo.min(a).min(b).min(c);
+                *hi = hi.max(a).max(b).max(c);
             }
         }
         let total: f64 = area.iter().sum();
@@ -283,6 +279,7 @@ impl<'a> ErrorMeter<'a> {
             chord,
             own_faces,
             group_samples,
+            group_boxes,
             tol,
             cache: Default::default(),
         }
@@ -307,48 +304,32 @@ impl<'a> ErrorMeter<'a> {
         )
     }
 
-    /// Distance from input sample `p` (of input group `own`) to the decoded surface, and the
-    /// group holding the nearest point: among `candidates` (all groups when `None`), its own
-    /// group first, then every other group whose box is nearer than the best so far; `best`
-    /// is a distance already reached (infinite for none).
+    /// Distance from input sample `p` to the decoded surface, and the group holding the
+    /// nearest point, searching the groups of `order` (the sample's input group's
+    /// [`search_orders`] entry) while their lower bound is below the best distance so far;
+    /// `best` is a distance already reached (infinite for none).
     fn nearest_decoded(
         p: DVec3,
-        own: usize,
         groups: &[&GroupDecoded],
-        candidates: Option<&[usize]>,
+        order: &[(f64, u32)],
         mut best: (f64, u32),
     ) -> (f64, u32) {
-        let try_group = |g: usize, best: &mut (f64, u32)| {
-            let gd = groups[g];
-            if gd.box_distance(p) > best.0 {
-                return;
+        for &(bound, g) in order {
+            if bound > best.0 {
+                break;
             }
-            let Some(s) = &gd.surface else { return };
+            let gd = groups[g as usize];
+            if gd.box_distance(p) > best.0 {
+                continue;
+            }
+            let Some(s) = &gd.surface else { continue };
             let hit = if best.0.is_finite() {
                 s.closest_point_within(p, best.0 * (1.0 + 1e-9) + 1e-300)
             } else {
                 Some(s.closest_point(p))
             };
             if let Some(h) = hit.filter(|h| h.distance < best.0) {
-                *best = (h.distance, g as u32);
-            }
-        };
-        match candidates {
-            Some(list) => {
-                if list.binary_search(&own).is_ok() {
-                    try_group(own, &mut best);
-                }
-                for &g in list.iter().filter(|&&g| g != own) {
-                    try_group(g, &mut best);
-                }
-            }
-            None => {
-                if own < groups.len() {
-                    try_group(own, &mut best);
-                }
-                for g in (0..groups.len()).filter(|&g| g != own) {
-                    try_group(g, &mut best);
-                }
+                best = (h.distance, g);
             }
         }
         best
@@ -472,14 +453,22 @@ impl<'a> ErrorMeter<'a> {
             .collect();
         let n_in = self.input_samples.len();
         let reuse = cache.in_hits.len() == n_in;
+        let all: Vec<usize> = (0..groups.len()).collect();
+        let order_all = self.search_orders(&groups, &all);
+        let order_changed = self.search_orders(&groups, changed);
         let in_hit = |i: usize| -> (f64, u32) {
             let s = &self.input_samples[i];
             let own = self.mesh.face_groups[s.triangle as usize] as usize;
             match cache.in_hits.get(i) {
                 Some(&hit) if reuse && changed.binary_search(&(hit.1 as usize)).is_err() => {
-                    Self::nearest_decoded(s.point, own, &groups, Some(changed), hit)
+                    Self::nearest_decoded(s.point, &groups, &order_changed[own], hit)
                 }
-                _ => Self::nearest_decoded(s.point, own, &groups, None, (f64::INFINITY, u32::MAX)),
+                _ => Self::nearest_decoded(
+                    s.point,
+                    &groups,
+                    &order_all[own],
+                    (f64::INFINITY, u32::MAX),
+                ),
             }
         };
         if let Some(max_cap) = over {
@@ -493,6 +482,44 @@ impl<'a> ErrorMeter<'a> {
         }
         let indices: Vec<usize> = (0..n_in).collect();
         Some(map_ordered(&indices, |&i| in_hit(i)))
+    }
+
+    /// Per input group, the decoded groups among `candidates` (ascending) with a surface,
+    /// each with a lower bound of the distance from any of the input group's samples to it
+    /// (box to box): the group itself first (its samples are usually nearest to its own
+    /// decoded patch), then the others nearest first. A search along it stops at the first
+    /// bound beyond the best distance found, so a sample tests a few groups, not all.
+    fn search_orders(
+        &self,
+        groups: &[&GroupDecoded],
+        candidates: &[usize],
+    ) -> Vec<Vec<(f64, u32)>> {
+        let box_gap = |(lo, hi): (DVec3, DVec3), gd: &GroupDecoded| {
+            (gd.lo - hi).max(lo - gd.hi).max(DVec3::ZERO).length()
+        };
+        let own: Vec<usize> = (0..self.group_boxes.len()).collect();
+        map_ordered(&own, |&own| {
+            let mut order: Vec<(f64, u32)> = candidates
+                .iter()
+                .filter(|&&g| groups[g].surface.is_some())
+                // Zero is a lower bound too: the own group sorts first.
+                .map(|&g| {
+                    (
+                        if g == own {
+                            0.0
+                        } else {
+                            box_gap(self.group_boxes[own], groups[g])
+                        },
+                        g as u32,
+                    )
+                })
+                .collect();
+            order.sort_unstable_by(|a, b| {
+                let own_first = (b.1 as usize == own).cmp(&(a.1 as usize == own));
+                a.0.total_cmp(&b.0).then(own_first).then(a.1.cmp(&b.1))
+            });
+            order
+        })
     }
 
     /// Measures the samples of changed group `g` against the input.

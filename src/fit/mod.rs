@@ -28,6 +28,22 @@ mod solve;
 #[cfg(test)]
 pub(crate) mod test_support;
 
+/// Maps `f` over `items` (in parallel with the `parallel` feature), results in order.
+pub(crate) fn map_ordered<T: Sync, R: Send>(
+    items: &[T],
+    f: impl Fn(&T) -> R + Sync + Send,
+) -> Vec<R> {
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        items.par_iter().map(f).collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        items.iter().map(f).collect()
+    }
+}
+
 #[cfg(test)]
 mod robustness_tests {
     use glam::DVec3;
