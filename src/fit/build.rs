@@ -5,7 +5,9 @@ use std::collections::BTreeMap;
 
 use super::chains::{chain_controls, Chains};
 use super::classify::Faces;
-use super::decimate::{decimate, DecimateInput, GroupRule, SurfaceRef, VertexRole};
+use super::decimate::{
+    DecimateInput, FaceDecimation, FaceDecimator, GroupRule, SurfaceRef, VertexRole,
+};
 use super::domain::PlaneDomain;
 use super::plan::{chain_frame, Plan};
 use crate::mesh::{edge_key, ControlMesh, PatchKind};
@@ -24,19 +26,23 @@ pub(super) struct Built {
     pub control: ControlMesh,
     /// Control edge -> chain index, for sharp edges.
     pub edge_chain: BTreeMap<(u32, u32), usize>,
+    /// How the decimation went (faces redone).
+    pub decimation: FaceDecimation,
 }
 
-/// Step 3: control points on chains, then one constrained decimation of the whole
+/// Step 3: control points on chains, then the constrained decimation of the whole
 /// mesh: chain vertices that are not control points slide away along their chain, boundary
 /// patches lose every interior vertex, closed patches are simplified while their quadric
 /// error allows. Sharp edges are the group boundaries, corners the B-rep vertices (and the
-/// vertices of stuck chains): watertight by construction.
+/// vertices of stuck chains): watertight by construction. `decimator` keeps each face's
+/// decimation for the next round, which redoes only the faces whose problem changed.
 pub(super) fn build_topology(
     faces: &Faces,
     chains: &Chains,
     plan: &Plan,
     tol: f64,
     plane_domains: &[Option<PlaneDomain>],
+    decimator: &mut FaceDecimator,
 ) -> Built {
     let (mesh, tris, net) = (&faces.mesh, &faces.tris[..], &chains.net);
     let (plans, surfaces, vertex_cost) = (&plan.groups[..], &faces.surfaces, &plan.vertex_cost);
@@ -56,7 +62,7 @@ pub(super) fn build_topology(
             }
         })
         .collect();
-    let dec = decimate(&DecimateInput {
+    let (dec, decimation) = decimator.decimate(&DecimateInput {
         positions: &mesh.positions,
         triangles: tris,
         face_groups: &mesh.face_groups,
@@ -129,6 +135,7 @@ pub(super) fn build_topology(
     Built {
         control,
         edge_chain,
+        decimation,
     }
 }
 

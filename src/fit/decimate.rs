@@ -1,8 +1,11 @@
 //! Constrained edge-collapse decimation of a grouped triangle mesh: the step that turns a
 //! dense CAD tessellation into the topology of a coarse control mesh.
 //!
-//! The whole model is decimated as *one* mesh, so a boundary chain shared by two CAD faces
-//! is simplified once for both: the control mesh is watertight by construction. Collapses are
+//! [`decimate`] takes the whole model as *one* mesh, so a boundary chain shared by two CAD
+//! faces is simplified once for both: the control mesh is watertight by construction. The
+//! encoder's rounds use [`FaceDecimator`], which decimates each face on its own with the same
+//! rules (and joins the faces' chains), so a round redoes only the faces that changed; the
+//! one-mesh version is its fallback when the faces' results do not join. Collapses are
 //! half-edge collapses `u -> v` (the survivor keeps its input position, which lies on the
 //! CAD surface and is the starting point of the fit). What may collapse is decided by each
 //! vertex's [`VertexRole`] and each group's [`GroupRule`]:
@@ -26,6 +29,9 @@ use glam::DVec3;
 
 use super::domain::PlaneDomain;
 use crate::mesh::Axis;
+
+mod by_face;
+pub(crate) use by_face::{FaceDecimation, FaceDecimator};
 
 /// What decimation may do with a vertex.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -274,47 +280,54 @@ fn angle_about(axis: &Axis, a: DVec3, b: DVec3) -> f64 {
     (qa.dot(qb) / (la * lb)).clamp(-1.0, 1.0).acos()
 }
 
+/// Each vertex's quadric (the planes of its triangles, weighted by area), and the doubled-
+/// area floor below which a triangle counts as degenerate (relative to the mean area).
+fn vertex_quadrics(positions: &[DVec3], triangles: &[[u32; 3]]) -> (Vec<Quadric>, f64) {
+    let mut quadric = vec![Quadric::default(); positions.len()];
+    let mut total_area = 0.0;
+    for t in triangles {
+        let p = t.map(|i| positions[i as usize]);
+        let n2 = tri_normal(p);
+        let area = 0.5 * n2.length();
+        total_area += area;
+        if let Some(n) = n2.try_normalize() {
+            let q = Quadric::plane(n, -n.dot(p[0]), area);
+            for &i in t {
+                quadric[i as usize].add(&q);
+            }
+        }
+    }
+    let mean_area = total_area / triangles.len().max(1) as f64;
+    (quadric, (2.0 * mean_area * 1e-8).powi(2))
+}
+
+/// Which vertices are on an edge with a single triangle.
+fn open_boundary(nv: usize, triangles: &[[u32; 3]]) -> Vec<bool> {
+    let mut edges: Vec<(u32, u32)> = triangles
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+        .collect();
+    edges.sort_unstable();
+    let mut open = vec![false; nv];
+    for run in edges.chunk_by(|a, b| a == b) {
+        if run.len() == 1 {
+            open[run[0].0 as usize] = true;
+            open[run[0].1 as usize] = true;
+        }
+    }
+    open
+}
+
 impl<'a> State<'a> {
     fn new(input: &'a DecimateInput<'a>) -> Self {
         let nv = input.positions.len();
         let mut vfaces = vec![Vec::new(); nv];
-        let mut quadric = vec![Quadric::default(); nv];
-        let mut total_area = 0.0;
         for (f, t) in input.triangles.iter().enumerate() {
-            let p = t.map(|i| input.positions[i as usize]);
-            let n2 = tri_normal(p);
-            let area = 0.5 * n2.length();
-            total_area += area;
-            if let Some(n) = n2.try_normalize() {
-                let q = Quadric::plane(n, -n.dot(p[0]), area);
-                for &i in t {
-                    quadric[i as usize].add(&q);
-                }
-            }
             for &i in t {
                 vfaces[i as usize].push(f as u32);
             }
         }
-        let mean_area = total_area / input.triangles.len().max(1) as f64;
-        let mut edges: Vec<(u32, u32)> = input
-            .triangles
-            .iter()
-            .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
-            .collect();
-        edges.sort_unstable();
-        let mut open_boundary = vec![false; nv];
-        let mut i = 0;
-        while i < edges.len() {
-            let mut j = i + 1;
-            while j < edges.len() && edges[j] == edges[i] {
-                j += 1;
-            }
-            if j - i == 1 {
-                open_boundary[edges[i].0 as usize] = true;
-                open_boundary[edges[i].1 as usize] = true;
-            }
-            i = j;
-        }
+        let (quadric, min_area2) = vertex_quadrics(input.positions, input.triangles);
         State {
             input,
             tris: input.triangles.to_vec(),
@@ -323,9 +336,8 @@ impl<'a> State<'a> {
             quadric,
             removed: vec![false; nv],
             stamp: vec![0; nv],
-            open_boundary,
-            // Doubled-area floor below which a triangle counts as degenerate.
-            min_area2: (2.0 * mean_area * 1e-8).powi(2),
+            open_boundary: open_boundary(nv, input.triangles),
+            min_area2,
             cost_scale: input
                 .cost_scale
                 .map_or_else(|| vec![1.0; nv], |s| s.to_vec()),
@@ -656,11 +668,19 @@ impl<'a> State<'a> {
     }
 }
 
-/// Decimates `input` under its constraints. Never fails: vertices that cannot be removed
-/// are kept (and counted in the result).
+/// Decimates `input` under its constraints, as one mesh. Never fails: vertices that cannot
+/// be removed are kept (and counted in the result).
 pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
     let mut st = State::new(input);
-    let nv = input.positions.len();
+    collapse_while_allowed(&mut st);
+    finish(input, &st.tris, &st.alive, |v| {
+        !st.removed[v as usize] && !st.vfaces[v as usize].is_empty()
+    })
+}
+
+/// Collapses vertices, cheapest first, while any collapse is allowed.
+fn collapse_while_allowed(st: &mut State<'_>) {
+    let nv = st.input.positions.len();
     // One entry per vertex: its cheapest collapse, validity tested only when it reaches the
     // top (see `Candidate`).
     let mut heap = BinaryHeap::new();
@@ -724,16 +744,32 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
         }
         scratch.ring = ring;
     }
+}
+
+/// The result from the final triangles (`alive` ones of `tris`, input vertex ids and face
+/// order) and which vertices survive.
+fn finish(
+    input: &DecimateInput<'_>,
+    tris: &[[u32; 3]],
+    alive: &[bool],
+    survives: impl Fn(u32) -> bool,
+) -> Decimated {
     let mut triangles = Vec::new();
     let mut face_groups = Vec::new();
-    for (f, t) in st.tris.iter().enumerate() {
-        if st.alive[f] {
+    let mut first_group = vec![u32::MAX; input.positions.len()];
+    for (f, t) in tris.iter().enumerate() {
+        if alive[f] {
             triangles.push(*t);
             face_groups.push(input.face_groups[f]);
+            for &v in t {
+                if first_group[v as usize] == u32::MAX {
+                    first_group[v as usize] = input.face_groups[f];
+                }
+            }
         }
     }
-    let vertices: Vec<u32> = (0..nv as u32)
-        .filter(|&v| !st.removed[v as usize] && !st.vfaces[v as usize].is_empty())
+    let vertices: Vec<u32> = (0..input.positions.len() as u32)
+        .filter(|&v| survives(v))
         .collect();
     let kept_chain_drops = vertices
         .iter()
@@ -743,9 +779,10 @@ pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
         .iter()
         .filter(|&&v| {
             input.roles[v as usize] == VertexRole::Interior
-                && st.vfaces[v as usize].first().is_some_and(|&f| {
-                    input.rules[input.face_groups[f as usize] as usize].remove_all_interior
-                })
+                && input
+                    .rules
+                    .get(first_group[v as usize] as usize)
+                    .is_some_and(|r| r.remove_all_interior)
         })
         .count();
     Decimated {
@@ -958,6 +995,84 @@ mod tests {
             loose.vertices.len()
         );
         assert_eq!(euler(&loose.triangles), 1);
+    }
+
+    /// Two faces of a bumpy grid (one closed, one plane-like) sharing a seam chain: decimated
+    /// face by face, the seam keeps the same vertices on both sides, the result is one
+    /// watertight disk, and a second round with one face's rule changed redoes that face only.
+    #[test]
+    fn faces_decimated_apart_agree_on_their_chains_and_are_reused() {
+        let n = 10;
+        let (mut p, t, g) = grid(n, true);
+        for q in &mut p {
+            if q.x < 0.5 {
+                q.z = 0.05 * (6.0 * q.x).sin() * (5.0 * q.y).cos();
+            }
+        }
+        let roles: Vec<VertexRole> = p
+            .iter()
+            .map(|q| {
+                let seam = (q.x - 0.5).abs() < 1e-12;
+                let border = q.x == 0.0 || q.x == 1.0 || q.y == 0.0 || q.y == 1.0;
+                if (seam || border) && (q.y == 0.0 || q.y == 1.0 || q.x == 0.0 || q.x == 1.0) {
+                    VertexRole::Keep
+                } else if seam {
+                    VertexRole::ChainDrop
+                } else {
+                    VertexRole::Interior
+                }
+            })
+            .collect();
+        let closed = |max_cost: f64| GroupRule {
+            remove_all_interior: false,
+            max_cost,
+            surface: SurfaceRef::Free,
+            max_edge_angle: std::f64::consts::PI,
+        };
+        let input = |rules| DecimateInput {
+            positions: &p,
+            triangles: &t,
+            face_groups: &g,
+            roles: &roles,
+            rules,
+            cost_scale: None,
+            domain: None,
+        };
+        let rules = [closed(1e-4), plane_rule()];
+        let rules = &rules[..];
+        let mut decimator = FaceDecimator::default();
+        let (first, how) = decimator.decimate(&input(rules));
+        assert!(!how.whole_mesh);
+        assert_eq!(how.faces_redone, 2);
+        let whole = decimate(&input(rules));
+        assert_eq!(first.vertices, whole.vertices, "same survivors as one mesh");
+        assert_eq!(euler(&first.triangles), 1);
+        assert!(
+            first.vertices.len() < p.len() / 2,
+            "{}",
+            first.vertices.len()
+        );
+        // Every surviving seam vertex is a corner of triangles of both faces.
+        for &v in &first.vertices {
+            if (p[v as usize].x - 0.5).abs() < 1e-12 {
+                let sides: std::collections::BTreeSet<u32> = first
+                    .triangles
+                    .iter()
+                    .zip(&first.face_groups)
+                    .filter(|(t, _)| t.contains(&v))
+                    .map(|(_, &grp)| grp)
+                    .collect();
+                assert_eq!(sides.len(), 2, "seam vertex {v} on one side only");
+            }
+        }
+        let (again, how) = decimator.decimate(&input(rules));
+        assert_eq!(how.faces_redone, 0);
+        assert_eq!(again, first);
+        let looser = [closed(1e-2), plane_rule()];
+        let (out, how) = decimator.decimate(&input(&looser));
+        assert_eq!(how.faces_redone, 1);
+        assert!(out.vertices.len() < first.vertices.len());
+        assert_eq!(euler(&out.triangles), 1);
     }
 
     #[test]

@@ -8,9 +8,10 @@
 //! 2. **Chains** ([`super::chains`]). Corners and the boundary chains between them
 //!    ([`super::curves`]), and the few vertices of each chain that become control points,
 //!    shared by both adjacent faces.
-//! 3. **Build** ([`super::build`]). One constrained decimation of the whole mesh
-//!    ([`super::decimate`]) to the control mesh: sharp edges on the group boundaries,
-//!    corners at the B-rep vertices, watertight by construction.
+//! 3. **Build** ([`super::build`]). A constrained decimation ([`super::decimate`]) to the
+//!    control mesh, face by face (a round redoes only the faces whose problem changed):
+//!    sharp edges on the group boundaries, corners at the B-rep vertices, watertight by
+//!    construction.
 //! 4. **Solve** ([`super::solve`]). Control points placed so the limit surface under the
 //!    decoder's own rules matches the input, by linearised least squares.
 //! 5. **Measure** ([`super::measure`], against [`super::reference`]). The caller's

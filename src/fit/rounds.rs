@@ -7,6 +7,7 @@ use std::time::Instant;
 use super::build::{build_topology, Built};
 use super::chains::Chains;
 use super::classify::Faces;
+use super::decimate::FaceDecimator;
 use super::domain::PlaneDomain;
 use super::encoder::{with_faces_involved, FitError, FitOptions, FitReport, Reconstruct};
 use super::exact::ExactSurface;
@@ -16,12 +17,12 @@ use super::reference::Facets;
 use super::refine::{note_failures, refine_failing, relax_refined_groups, ChainReach, Relaxation};
 use super::solve::fit_geometry;
 use crate::error::{Error, Result};
-use crate::mesh::ControlMesh;
+use crate::mesh::{ControlMesh, PatchKind};
 
-/// When a round's worst excess stays above this fraction of the previous round's, adding
-/// control points has stopped paying and the fit moves to decode level 5 (once). A lower
-/// ratio moves models to level 5 that level 4 fits as well, at four times the triangles to
-/// measure.
+/// When a round's worst excess on closed patches stays above this fraction of the previous
+/// round's, adding control points has stopped paying and the fit moves to decode level 5
+/// (once). A lower ratio moves models to level 5 that level 4 fits as well, at four times the
+/// triangles to measure.
 const STALL_RATIO: f64 = 0.85;
 
 /// A fitted model within reach of the output: its error, control mesh, decode level and
@@ -85,6 +86,7 @@ impl Rounds<'_> {
         let mut prev_worst: Option<f64> = None;
         // Set once the model is within tolerance and refined patches are being coarsened again.
         let mut relaxing: Option<Relaxation> = None;
+        let mut decimator = FaceDecimator::default();
         for round in 0..opts.max_rounds.max(1) {
             report.rounds = round + 1;
             let level = levels_tried.unwrap_or(4);
@@ -93,7 +95,7 @@ impl Rounds<'_> {
                 measured,
                 level,
                 bytes,
-            } = self.round(plan, level, reconstruct, report)?;
+            } = self.round(plan, level, &mut decimator, reconstruct, report)?;
             let err = measured.error;
             let worst = err.max_beyond_chord;
             let ok = worst <= tol;
@@ -120,15 +122,22 @@ impl Rounds<'_> {
                 Next::Refine => {}
             }
             note_failures(&self.faces.mesh, &plan.groups, &measured, tol, report);
-            // When adding control points stops paying, the rest may be the piecewise-linear
-            // chord error of level 4: go to level 5 (4x the triangles) once.
+            // When adding control points to closed patches stops paying, the rest may be the
+            // piecewise-linear chord error of level 4: go to level 5 (4x the triangles) once.
+            // Boundary patches are left out: a failing one refines its chains, then becomes
+            // closed, and a finer level does not help it.
+            let worst_closed = (0..plan.groups.len())
+                .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
+                .map(|g| measured.group_excess[g].0)
+                .fold(0.0, f64::max);
             if opts.default_level.is_none()
                 && levels_tried.is_none()
-                && prev_worst.is_some_and(|p| worst > STALL_RATIO * p)
+                && worst_closed > tol
+                && prev_worst.is_some_and(|p| worst_closed > STALL_RATIO * p)
             {
                 levels_tried = Some(5);
             }
-            prev_worst = Some(worst);
+            prev_worst = Some(worst_closed);
             // Chains are refined only near where their groups fail (a plane with a hundred
             // holes failing at one of them keeps the other holes coarse); the last rounds,
             // and every round once the worst excess is within 1.5 tol, refine every chain of
@@ -167,11 +176,19 @@ impl Rounds<'_> {
         &self,
         plan: &Plan,
         level: u8,
+        decimator: &mut FaceDecimator,
         reconstruct: &mut Reconstruct<'_>,
         report: &mut FitReport,
     ) -> Result<Round> {
         let mut t = Instant::now();
-        let mut built = build_topology(self.faces, self.chains, plan, self.tol, self.plane_domains);
+        let mut built = build_topology(
+            self.faces,
+            self.chains,
+            plan,
+            self.tol,
+            self.plane_domains,
+            decimator,
+        );
         let t_top = t.elapsed().as_secs_f64();
         t = Instant::now();
         fit_geometry(
@@ -197,9 +214,12 @@ impl Rounds<'_> {
         report.timings.push(("fit", t_fit));
         report.timings.push(("measure", t.elapsed().as_secs_f64()));
         report.notes.push(format!(
-            "round {}: {} control vertices, level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}; {} of {} faces measured anew",
+            "round {}: {} control vertices ({} of {} faces decimated anew{}), level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}; {} of {} faces measured anew",
             report.rounds,
             built.control.vertex_count(),
+            built.decimation.faces_redone,
+            self.faces.mesh.groups.len(),
+            if built.decimation.whole_mesh { ", then the whole mesh as one" } else { "" },
             err.max,
             err.max / tol,
             err.max_beyond_chord / tol,
