@@ -223,12 +223,7 @@ pub(super) fn fit_geometry(
                     rows.push((row, target - limit[s]));
                 }
             }
-            let mean_diag = rows
-                .iter()
-                .map(|(r, _)| r.iter().map(|(_, w)| w * w).sum::<f64>())
-                .sum::<f64>()
-                / unknowns.len() as f64;
-            let delta = solve_increment(&rows, unknowns.len(), 1e-3 * mean_diag.max(1e-12));
+            let delta = solve_blocks(&rows, unknowns.len());
             for (k, &v) in unknowns.iter().enumerate() {
                 if delta[k].is_finite() {
                     control.positions[v] += delta[k];
@@ -237,6 +232,68 @@ pub(super) fn fit_geometry(
         }
     }
     Ok(())
+}
+
+/// [`solve_increment`] for each independent block of `rows`: the unknowns that share rows
+/// (a closed patch's interior, a chain's interior control points), each with its own
+/// damping. A patch's solution then depends on its own rows alone, so a patch whose
+/// topology, boundary and input did not change between rounds gets the same control points
+/// (and keeps its measurement).
+fn solve_blocks(rows: &[(Vec<(usize, f64)>, DVec3)], n_unknowns: usize) -> Vec<DVec3> {
+    // Union-find over the unknowns of each row.
+    let mut parent: Vec<usize> = (0..n_unknowns).collect();
+    fn root(parent: &mut [usize], mut k: usize) -> usize {
+        while parent[k] != k {
+            parent[k] = parent[parent[k]];
+            k = parent[k];
+        }
+        k
+    }
+    for (row, _) in rows {
+        if let Some(&(first, _)) = row.first() {
+            for &(k, _) in &row[1..] {
+                let (a, b) = (root(&mut parent, first), root(&mut parent, k));
+                if a != b {
+                    parent[a.max(b)] = a.min(b);
+                }
+            }
+        }
+    }
+    // Blocks in order of their first unknown; local column of each unknown.
+    let mut block_of = vec![usize::MAX; n_unknowns];
+    let mut local = vec![0usize; n_unknowns];
+    let mut sizes: Vec<usize> = Vec::new();
+    for k in 0..n_unknowns {
+        let r = root(&mut parent, k);
+        if block_of[r] == usize::MAX {
+            block_of[r] = sizes.len();
+            sizes.push(0);
+        }
+        let b = block_of[r];
+        block_of[k] = b;
+        local[k] = sizes[b];
+        sizes[b] += 1;
+    }
+    let mut block_rows: Vec<Vec<(Vec<(usize, f64)>, DVec3)>> = vec![Vec::new(); sizes.len()];
+    for (row, target) in rows {
+        if let Some(&(first, _)) = row.first() {
+            let local_row = row.iter().map(|&(k, w)| (local[k], w)).collect();
+            block_rows[block_of[first]].push((local_row, *target));
+        }
+    }
+    let blocks: Vec<usize> = (0..sizes.len()).collect();
+    let solved = super::map_ordered(&blocks, |&b| {
+        let rows = &block_rows[b];
+        let mean_diag = rows
+            .iter()
+            .map(|(r, _)| r.iter().map(|(_, w)| w * w).sum::<f64>())
+            .sum::<f64>()
+            / sizes[b] as f64;
+        solve_increment(rows, sizes[b], 1e-3 * mean_diag.max(1e-12))
+    });
+    (0..n_unknowns)
+        .map(|k| solved[block_of[k]][local[k]])
+        .collect()
 }
 
 /// Linearised least squares: find `delta` for the `unknowns` (control ids) minimising
