@@ -234,12 +234,15 @@ pub(super) fn fit_geometry(
     Ok(())
 }
 
+/// One least-squares row: (unknown, weight) pairs and the residual they should make up.
+type Row = (Vec<(usize, f64)>, DVec3);
+
 /// [`solve_increment`] for each independent block of `rows`: the unknowns that share rows
 /// (a closed patch's interior, a chain's interior control points), each with its own
 /// damping. A patch's solution then depends on its own rows alone, so a patch whose
 /// topology, boundary and input did not change between rounds gets the same control points
 /// (and keeps its measurement).
-fn solve_blocks(rows: &[(Vec<(usize, f64)>, DVec3)], n_unknowns: usize) -> Vec<DVec3> {
+fn solve_blocks(rows: &[Row], n_unknowns: usize) -> Vec<DVec3> {
     // Union-find over the unknowns of each row.
     let mut parent: Vec<usize> = (0..n_unknowns).collect();
     fn root(parent: &mut [usize], mut k: usize) -> usize {
@@ -274,7 +277,7 @@ fn solve_blocks(rows: &[(Vec<(usize, f64)>, DVec3)], n_unknowns: usize) -> Vec<D
         local[k] = sizes[b];
         sizes[b] += 1;
     }
-    let mut block_rows: Vec<Vec<(Vec<(usize, f64)>, DVec3)>> = vec![Vec::new(); sizes.len()];
+    let mut block_rows: Vec<Vec<Row>> = vec![Vec::new(); sizes.len()];
     for (row, target) in rows {
         if let Some(&(first, _)) = row.first() {
             let local_row = row.iter().map(|&(k, w)| (local[k], w)).collect();
@@ -299,7 +302,7 @@ fn solve_blocks(rows: &[(Vec<(usize, f64)>, DVec3)], n_unknowns: usize) -> Vec<D
 /// Linearised least squares: find `delta` for the `unknowns` (control ids) minimising
 /// `sum_r |sum_k w_rk delta_k - residual_r|^2 + mu |delta|^2`, by conjugate gradients on the
 /// normal equations (three right-hand sides, one matrix, Jacobi-preconditioned).
-fn solve_increment(rows: &[(Vec<(usize, f64)>, DVec3)], n_unknowns: usize, mu: f64) -> Vec<DVec3> {
+fn solve_increment(rows: &[Row], n_unknowns: usize, mu: f64) -> Vec<DVec3> {
     let mut diag = vec![mu; n_unknowns];
     for (row, _) in rows {
         for &(k, w) in row {
