@@ -65,7 +65,8 @@ pub(crate) struct FaceDecimator {
     kept: Vec<Vec<(FaceKey, FaceResult)>>,
 }
 
-/// How a [`FaceDecimator::decimate`] went: faces decimated anew, and whether the faces'
+/// How a [`FaceDecimator::decimate`] went: faces decimated anew (once or more, to agree on
+/// their chains), and whether the faces'
 /// results did not join into a manifold mesh, so the whole mesh was decimated as one.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct FaceDecimation {
@@ -83,11 +84,14 @@ impl FaceDecimator {
         }
         let mut roles = input.roles.to_vec();
         let mut report = FaceDecimation::default();
+        let mut redone = vec![false; n_groups];
         for pass in 0.. {
             let redo: Vec<usize> = (0..n_groups)
                 .filter(|&g| self.find(g, &self.key(input, &roles, g)).is_none())
                 .collect();
-            report.faces_redone += redo.len();
+            for &g in &redo {
+                redone[g] = true;
+            }
             let solved = map_ordered(&redo, |&g| {
                 let key = self.key(input, &roles, g);
                 let result = self.solve(input, &key, g);
@@ -110,6 +114,7 @@ impl FaceDecimator {
                 roles[v as usize] = VertexRole::Keep;
             }
         }
+        report.faces_redone = redone.iter().filter(|&&r| r).count();
         let results: Vec<Option<&FaceResult>> = (0..n_groups)
             .map(|g| self.find(g, &self.key(input, &roles, g)))
             .collect();
