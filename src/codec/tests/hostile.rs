@@ -2,7 +2,8 @@
 //! generator with the codec's own writers and coders, so CRCs and entropy coding are right and
 //! it is the decoder's logic that must reject the file; each test asserts the rejection and
 //! the decoder's own accounting (never wall time): at most 100 MB charged, the work within its
-//! bound. `write_hostile_files` (ignored) writes the full-size files for timing the CLI.
+//! bound. `write_hostile_files` (ignored) writes the full-size files for timing the CLI, and
+//! `spec/vectors/limits/` holds small ones, one per rule of spec §10.
 
 use super::super::bytes::{TAG_DEFLATED, TAG_SKIPPABLE};
 use super::*;
@@ -607,4 +608,85 @@ fn write_hostile_files() {
     write("isolated.scode", &isolated_vertices(50_000_000, true).1);
     write("names.scode", &repeated_names(100_000, 100_000).1);
     write("big_face.scode", &pillow(200_000));
+}
+
+/// The vectors of `spec/vectors/limits/` (spec §11): file name, bytes, and the error a decoder
+/// with the default limits gives (`LimitsExceeded` and the quantity, or `Format` and the
+/// section and field).
+fn limit_vectors() -> Vec<(&'static str, Vec<u8>, &'static str)> {
+    let run = Counts {
+        v: 3,
+        f: 1,
+        k: 3_000_000,
+        g: 1,
+        ..Counts::default()
+    };
+    vec![
+        (
+            "header_memory.scode",
+            isolated_vertices(50_000_000, false).1,
+            "LimitsExceeded decode memory the header's counts need (bytes)",
+        ),
+        (
+            "default_level.scode",
+            triangle_at_level(14),
+            "LimitsExceeded subdivided faces at the default level",
+        ),
+        (
+            "label_counts.scode",
+            label_run(run, run.k + run.f, Label::R),
+            "Format connectivity.labels",
+        ),
+        (
+            "merge_walk.scode",
+            merge_walk(1 << 16, 2000).1,
+            "LimitsExceeded decode work (walk steps)",
+        ),
+        (
+            "vertex_candidates.scode",
+            fan_vertex_groups(50_000).1,
+            "LimitsExceeded decode work (walk steps)",
+        ),
+        (
+            "group_names.scode",
+            repeated_names(100_000, 100_000).1,
+            "LimitsExceeded decode memory for group names (bytes)",
+        ),
+    ]
+}
+
+fn limit_vector_dir() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/limits")
+}
+
+#[test]
+fn limit_vectors_match_their_generators() {
+    for (name, bytes, _) in limit_vectors() {
+        let stored = std::fs::read(limit_vector_dir().join(name)).unwrap();
+        assert!(
+            stored == bytes,
+            "{name} differs from its generator: `cargo test --release --lib write_limit_vectors \
+             -- --ignored` writes it"
+        );
+        assert!(bytes.len() < 100_000, "{name}: {} bytes", bytes.len());
+    }
+}
+
+/// Writes `spec/vectors/limits/` and its `EXPECTED.txt` (only when a rule or the coders change
+/// deliberately).
+#[test]
+#[ignore]
+fn write_limit_vectors() {
+    let dir = limit_vector_dir();
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut expected = String::from(
+        "# file  bytes  error with the default limits: LimitsExceeded + quantity, or Format + \
+         section.field\n# Regenerate with `cargo test --release --lib write_limit_vectors -- \
+         --ignored`; checked by tests/spec_vectors.rs.\n",
+    );
+    for (name, bytes, error) in limit_vectors() {
+        std::fs::write(dir.join(name), &bytes).unwrap();
+        expected += &format!("{name} {} {error}\n", bytes.len());
+    }
+    std::fs::write(dir.join("EXPECTED.txt"), expected).unwrap();
 }
