@@ -300,3 +300,15 @@ fn a_file_over_max_bytes_is_refused_before_it_is_read() {
     }
     std::fs::remove_file(&file).unwrap();
 }
+
+#[test]
+fn max_work_per_element_sets_the_work_bound() {
+    // The CAD part's group candidates take a few walk steps: none are allowed here.
+    let part = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/cad_part.scode");
+    let part = part.to_str().unwrap();
+    let (ok, text) = scode(&["info", "--max-work-per-element", "0", part]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("limit exceeded: decode work"), "{text}");
+    let (ok, text) = scode(&["info", part]);
+    assert!(ok, "{text}");
+}

@@ -256,6 +256,11 @@ pub struct DecodeLimits {
     /// counts and the subdivided surface are charged against it before they are allocated.
     #[arg(long, value_name = "BYTES", default_value_t = Limits::default().max_memory)]
     pub max_memory: u64,
+    /// Work bound of the decode: steps of the walks whose length the file decides, per
+    /// vertex, face and face corner. Meshes with tens of thousands of handles (lattices) may
+    /// need more than the default.
+    #[arg(long, value_name = "N", default_value_t = Limits::default().max_work_per_element)]
+    pub max_work_per_element: u64,
 }
 
 impl DecodeLimits {
@@ -263,6 +268,7 @@ impl DecodeLimits {
         Limits {
             max_input_bytes: self.max_bytes,
             max_memory: self.max_memory,
+            max_work_per_element: self.max_work_per_element,
             ..Limits::default()
         }
     }
