@@ -4,14 +4,14 @@
 //! Each CAD face is decimated on its own triangles, in its own vertex numbering: its
 //! interior vertices collapse and its chain vertices that are not control points slide along
 //! its boundary, with the costs and tests of the one-mesh [`decimate`](super::decimate) (the
-//! quadrics start from all triangles around a vertex). Each face's link condition sees its
-//! own triangles only: the faces' results are joined and checked to be manifold (an edge
-//! that two faces both made between their shared vertices fails it, and the whole mesh is
-//! then decimated as one). A chain is shared by two
-//! faces and each slides it on its own; the control mesh is watertight when both dropped the
-//! same vertices of it (a chain's kept vertices, in chain order, are its control edges
-//! whichever way each vertex slid). A vertex that one face kept and the other dropped is made
-//! a control point of both, and those faces are decimated again.
+//! quadrics start from all triangles around a vertex). A chain is shared by two faces and
+//! each slides it on its own; the control mesh is watertight when both dropped the same
+//! vertices of it (a chain's kept vertices, in chain order, are its control edges whichever
+//! way each vertex slid). A vertex that one face kept and the other dropped is made a control
+//! point of both, and those faces are decimated again. Each face's link condition sees its
+//! own triangles only, so the joined result is checked to be manifold (an edge that two faces
+//! both made between their shared vertices fails it), and the whole mesh is decimated as one
+//! when it is not.
 //!
 //! A face's problem changes between rounds only through its vertices' roles and cost scales
 //! and its rule; the last two results of each face are kept with what they were made from,
