@@ -130,10 +130,6 @@ pub struct Decimated {
     pub face_groups: Vec<u32>,
     /// Surviving vertices, ascending.
     pub vertices: Vec<u32>,
-    /// Chain vertices that could not slide away (they became control points).
-    pub kept_chain_drops: usize,
-    /// Interior vertices of boundary patches that could not be removed.
-    pub kept_boundary_interior: usize,
 }
 
 /// Symmetric 4x4 quadric (Garland-Heckbert) with the total weight, stored as the 10 upper
@@ -669,7 +665,7 @@ impl<'a> State<'a> {
 }
 
 /// Decimates `input` under its constraints, as one mesh. Never fails: vertices that cannot
-/// be removed are kept (and counted in the result).
+/// be removed are kept.
 pub fn decimate(input: &DecimateInput<'_>) -> Decimated {
     let mut st = State::new(input);
     collapse_while_allowed(&mut st);
@@ -754,43 +750,19 @@ fn finish(
     alive: &[bool],
     survives: impl Fn(u32) -> bool,
 ) -> Decimated {
-    let mut triangles = Vec::new();
-    let mut face_groups = Vec::new();
-    let mut first_group = vec![u32::MAX; input.positions.len()];
-    for (f, t) in tris.iter().enumerate() {
-        if alive[f] {
-            triangles.push(*t);
-            face_groups.push(input.face_groups[f]);
-            for &v in t {
-                if first_group[v as usize] == u32::MAX {
-                    first_group[v as usize] = input.face_groups[f];
-                }
-            }
-        }
-    }
-    let vertices: Vec<u32> = (0..input.positions.len() as u32)
-        .filter(|&v| survives(v))
-        .collect();
-    let kept_chain_drops = vertices
+    let (triangles, face_groups) = tris
         .iter()
-        .filter(|&&v| input.roles[v as usize] == VertexRole::ChainDrop)
-        .count();
-    let kept_boundary_interior = vertices
-        .iter()
-        .filter(|&&v| {
-            input.roles[v as usize] == VertexRole::Interior
-                && input
-                    .rules
-                    .get(first_group[v as usize] as usize)
-                    .is_some_and(|r| r.remove_all_interior)
-        })
-        .count();
+        .zip(input.face_groups)
+        .zip(alive)
+        .filter(|x| *x.1)
+        .map(|((t, &g), _)| (*t, g))
+        .unzip();
     Decimated {
         triangles,
         face_groups,
-        vertices,
-        kept_chain_drops,
-        kept_boundary_interior,
+        vertices: (0..input.positions.len() as u32)
+            .filter(|&v| survives(v))
+            .collect(),
     }
 }
 
@@ -1014,7 +986,7 @@ mod tests {
             .map(|q| {
                 let seam = (q.x - 0.5).abs() < 1e-12;
                 let border = q.x == 0.0 || q.x == 1.0 || q.y == 0.0 || q.y == 1.0;
-                if (seam || border) && (q.y == 0.0 || q.y == 1.0 || q.x == 0.0 || q.x == 1.0) {
+                if border {
                     VertexRole::Keep
                 } else if seam {
                     VertexRole::ChainDrop

@@ -22,6 +22,9 @@ use super::{
     Decimated, GroupRule, Quadric, State, VertexRole,
 };
 use crate::fit::map_ordered;
+use crate::mesh::topology::HalfEdgeMesh;
+use crate::mesh::{ControlMesh, PatchKind};
+use glam::DVec3;
 
 /// How many times faces are decimated again to agree on their shared chains before the
 /// whole mesh is decimated as one instead (each time only makes more vertices control
@@ -44,7 +47,7 @@ struct FaceMesh {
 
 /// What of a face's problem changes between rounds; a result is reused while its key is
 /// bit-identical.
-#[derive(PartialEq)]
+#[derive(Clone, PartialEq)]
 struct FaceKey {
     roles: Vec<VertexRole>,
     cost_scale: Vec<u64>,
@@ -66,8 +69,8 @@ pub(crate) struct FaceDecimator {
 }
 
 /// How a [`FaceDecimator::decimate`] went: faces decimated anew (once or more, to agree on
-/// their chains), and whether the faces'
-/// results did not join into a manifold mesh, so the whole mesh was decimated as one.
+/// their chains), and whether the faces' results did not join into a manifold mesh, so the
+/// whole mesh was decimated as one.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct FaceDecimation {
     pub faces_redone: usize,
@@ -85,24 +88,21 @@ impl FaceDecimator {
         let mut roles = input.roles.to_vec();
         let mut report = FaceDecimation::default();
         let mut redone = vec![false; n_groups];
+        let mut keys: Vec<FaceKey> = (0..n_groups).map(|g| self.key(input, &roles, g)).collect();
         for pass in 0.. {
             let redo: Vec<usize> = (0..n_groups)
-                .filter(|&g| self.find(g, &self.key(input, &roles, g)).is_none())
+                .filter(|&g| self.find(g, &keys[g]).is_none())
                 .collect();
             for &g in &redo {
                 redone[g] = true;
             }
-            let solved = map_ordered(&redo, |&g| {
-                let key = self.key(input, &roles, g);
-                let result = self.solve(input, &key, g);
-                (key, result)
-            });
-            for (&g, entry) in redo.iter().zip(solved) {
+            let solved = map_ordered(&redo, |&g| self.solve(input, &keys[g], g));
+            for (&g, result) in redo.iter().zip(solved) {
                 let kept = &mut self.kept[g];
-                kept.insert(0, entry);
+                kept.insert(0, (keys[g].clone(), result));
                 kept.truncate(2);
             }
-            let disputed = self.disputed_chain_vertices(input, &roles);
+            let disputed = self.disputed_chain_vertices(&keys, input.positions.len());
             if disputed.is_empty() {
                 break;
             }
@@ -113,11 +113,11 @@ impl FaceDecimator {
             for v in disputed {
                 roles[v as usize] = VertexRole::Keep;
             }
+            keys = (0..n_groups).map(|g| self.key(input, &roles, g)).collect();
         }
         report.faces_redone = redone.iter().filter(|&&r| r).count();
-        let results: Vec<Option<&FaceResult>> = (0..n_groups)
-            .map(|g| self.find(g, &self.key(input, &roles, g)))
-            .collect();
+        let results: Vec<Option<&FaceResult>> =
+            (0..n_groups).map(|g| self.find(g, &keys[g])).collect();
         let mut tris = input.triangles.to_vec();
         let mut alive = vec![true; tris.len()];
         for (mesh, result) in self.meshes.iter().zip(&results) {
@@ -130,7 +130,7 @@ impl FaceDecimator {
                 tris[f as usize] = t;
             }
         }
-        if report.whole_mesh || !is_manifold(&tris, &alive) {
+        if report.whole_mesh || !is_manifold(input.positions, &tris, &alive) {
             report.whole_mesh = true;
             return (decimate(input), report);
         }
@@ -175,30 +175,34 @@ impl FaceDecimator {
         }
     }
 
-    /// Chain vertices (not control points under `roles`) that some faces dropped and others
-    /// kept, under each face's kept result for `roles`.
-    fn disputed_chain_vertices(&self, input: &DecimateInput<'_>, roles: &[VertexRole]) -> Vec<u32> {
-        let is_drop = |v: &u32| roles[*v as usize] == VertexRole::ChainDrop;
+    /// Chain vertices (not control points under the faces' `keys`) that some faces dropped
+    /// and others kept, under each face's kept result for its key.
+    fn disputed_chain_vertices(&self, keys: &[FaceKey], n_vertices: usize) -> Vec<u32> {
         // Per vertex: faces holding it, faces keeping it.
-        let mut holding = vec![0u8; input.positions.len()];
-        let mut keeping = vec![0u8; input.positions.len()];
+        let mut holding = vec![0u8; n_vertices];
+        let mut keeping = vec![0u8; n_vertices];
         let mut kept: Vec<u32> = Vec::new();
-        for (g, mesh) in self.meshes.iter().enumerate() {
-            for &v in mesh.vertices.iter().filter(|v| is_drop(v)) {
+        for (g, (mesh, key)) in self.meshes.iter().zip(keys).enumerate() {
+            let drops = || {
+                (mesh.vertices.iter().zip(&key.roles))
+                    .filter(|(_, &r)| r == VertexRole::ChainDrop)
+                    .map(|(&v, _)| v)
+            };
+            for v in drops() {
                 holding[v as usize] = holding[v as usize].saturating_add(1);
             }
-            let Some(result) = self.find(g, &self.key(input, roles, g)) else {
+            let Some(result) = self.find(g, key) else {
                 continue;
             };
             kept.clear();
-            kept.extend(result.iter().flat_map(|(_, t)| *t).filter(is_drop));
+            kept.extend(result.iter().flat_map(|(_, t)| *t));
             kept.sort_unstable();
             kept.dedup();
-            for &v in &kept {
+            for v in drops().filter(|v| kept.binary_search(v).is_ok()) {
                 keeping[v as usize] = keeping[v as usize].saturating_add(1);
             }
         }
-        (0..input.positions.len() as u32)
+        (0..n_vertices as u32)
             .filter(|&v| keeping[v as usize] > 0 && keeping[v as usize] < holding[v as usize])
             .collect()
     }
@@ -270,23 +274,15 @@ fn face_mesh(
     }
 }
 
-/// Whether no edge of the `alive` triangles has more than two of them or is used twice in
-/// one direction.
-fn is_manifold(tris: &[[u32; 3]], alive: &[bool]) -> bool {
-    let mut directed: Vec<(u32, u32)> = tris
-        .iter()
-        .zip(alive)
-        .filter(|x| *x.1)
-        .flat_map(|(t, _)| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
-        .collect();
-    directed.sort_unstable();
-    if directed.windows(2).any(|w| w[0] == w[1]) {
-        return false;
+/// Whether the `alive` triangles make a manifold mesh (the half-edge structure the codec
+/// builds accepts them): no edge with more than two of them or used twice in one direction,
+/// no vertex where two sheets touch.
+fn is_manifold(positions: &[DVec3], tris: &[[u32; 3]], alive: &[bool]) -> bool {
+    let mut mesh = ControlMesh::new();
+    mesh.positions = positions.to_vec();
+    let group = mesh.push_group("joined", PatchKind::Closed);
+    for (t, _) in tris.iter().zip(alive).filter(|x| *x.1) {
+        mesh.push_face(t, group);
     }
-    let mut undirected: Vec<(u32, u32)> = directed
-        .iter()
-        .map(|&(a, b)| (a.min(b), a.max(b)))
-        .collect();
-    undirected.sort_unstable();
-    !undirected.windows(3).any(|w| w[0] == w[2])
+    HalfEdgeMesh::build(&mesh).is_ok()
 }
