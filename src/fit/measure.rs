@@ -1,12 +1,16 @@
 //! The fit's error measurement: the decoded surface against the input (or a reference
 //! tessellation of the same faces), both ways, per CAD face.
 //!
-//! A refinement round changes a few faces and leaves the others' decoded triangles
-//! bit-identical, so the measurement is kept per face ([`GroupDecoded`]): a face whose decoded
+//! A refinement round changes a few faces and leaves the others' decoded surfaces as they
+//! were, so the measurement is kept per face ([`GroupDecoded`]): a face whose decoded
 //! triangles did not change keeps its closest-point index, its samples and their distances to
-//! the input, and only changed faces are indexed, sampled and queried again. Every reuse is
-//! exact: the distances are those a full measurement gives, so the encoder's decisions do not
-//! depend on what was cached.
+//! the input, and only changed faces are indexed, sampled and queried again. "Did not change"
+//! compares the triangles as a set, corners on a grid of 2^-32 of the model's size
+//! ([`block_fingerprint`]): when another face gains control points, the control mesh is
+//! numbered anew, and an unchanged face's triangles come out in another order and with
+//! other roundings in the last bits. The kept measurement is then one of a surface within
+//! that grid of the current one, far below any tolerance, and the encoder's decisions stay a
+//! function of its inputs alone (the same bytes on every run and thread count).
 //!
 //! At a fine level the decoded surface has millions of triangles, so nothing holds all of
 //! them twice: the surface is handed out face by face ([`UniformSurface`]), a changed face's
@@ -45,9 +49,10 @@ pub(crate) struct Measurement {
 /// function of the triangles' corners alone (and of the input, which never changes), so it
 /// is reused while the face decodes to bit-identical corners.
 struct GroupDecoded {
-    /// Closest-point index over the face's decoded triangles, in output order (which is
-    /// what identifies them: see [`GroupDecoded::same_triangles`]); `None` for a face
-    /// without any.
+    /// What identifies the face's decoded triangles: the [`block_fingerprint`] of each
+    /// control face's, sorted (the order in which control faces come out is not kept).
+    blocks: Vec<u64>,
+    /// Closest-point index over the face's decoded triangles; `None` for a face without any.
     surface: Option<TriangleSurface>,
     /// Bounding box of the corners: a point farther from it than a distance already found
     /// cannot find a nearer point on this face.
@@ -64,31 +69,51 @@ struct GroupDecoded {
     over_tolerance: Vec<(u32, DVec3)>,
 }
 
-/// Exact bits of a point, for identity (not equality of values: -0.0 and 0.0 differ).
-fn bits(p: DVec3) -> [u64; 3] {
-    p.to_array().map(f64::to_bits)
+/// What identifies one control face's decoded triangles as a set: each triangle's corners
+/// snapped to a grid of spacing `grid`, rotated to start at the smallest (orientation kept),
+/// hashed, and the hashes summed with the count, so the order of the triangles and last-bit
+/// roundings (a grid line crossed aside) do not change it. Equal fingerprints of different
+/// sets take a 64-bit coincidence.
+fn block_fingerprint(positions: &[DVec3], triangles: &[[u32; 3]], grid: f64) -> u64 {
+    let inv = 1.0 / grid;
+    // Truncation snaps as well as rounding does (grid lines at the integers), in one
+    // instruction: this runs over the decoded triangles of every measurement.
+    let snap = |p: DVec3| (p * inv).to_array().map(|x| x as i64);
+    let mut sum = mix(triangles.len() as u64);
+    for t in triangles {
+        let corners = t.map(|v| snap(positions[v as usize]));
+        let first = (0..3).min_by_key(|&k| corners[k]).unwrap_or(0);
+        let mut h: u64 = 0;
+        for k in 0..3 {
+            for x in corners[(first + k) % 3] {
+                h = (h.rotate_left(5) ^ x as u64).wrapping_mul(0x517C_C1B7_2722_0A95);
+            }
+        }
+        sum = sum.wrapping_add(mix(h));
+    }
+    sum
+}
+
+/// SplitMix64's finaliser: every input bit moves every output bit.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 impl GroupDecoded {
-    /// Whether the face's triangles are group `g`'s of `surface`, corner by corner, bit for
-    /// bit (stops making them at the first difference).
-    fn same_triangles(&self, surface: &UniformSurface, g: usize) -> bool {
-        let positions = surface.positions();
-        let Some(s) = &self.surface else {
-            return surface.visit_group_triangles(g, |t| t.is_empty());
-        };
-        let (mine, corners) = (s.triangles(), s.positions());
-        let mut next = 0;
+    /// Whether group `g` of `surface` decodes to the same triangles as this face, by the
+    /// fingerprints of its control faces' (stops making them at the first one not kept).
+    fn same_triangles(&self, surface: &UniformSurface, g: usize, grid: f64) -> bool {
+        let mut seen = Vec::with_capacity(self.blocks.len());
         let all = surface.visit_group_triangles(g, |tris| {
-            let Some(old) = mine.get(next..next + tris.len()) else {
-                return false;
-            };
-            next += tris.len();
-            old.iter().zip(tris).all(|(o, t)| {
-                (0..3).all(|k| bits(corners[o[k] as usize]) == bits(positions[t[k] as usize]))
-            })
+            let f = block_fingerprint(surface.positions(), tris, grid);
+            seen.push(f);
+            seen.len() <= self.blocks.len() && self.blocks.binary_search(&f).is_ok()
         });
-        all && next == mine.len()
+        seen.sort_unstable();
+        all && seen == self.blocks
     }
 
     /// Distance from `p` to the box (0 inside).
@@ -166,6 +191,8 @@ pub(crate) struct ErrorMeter<'a> {
     /// Bounding box of each input group's triangles (which hold its samples): a lower
     /// bound of its samples' distances to any decoded face ([`search_orders`]).
     group_boxes: Vec<(DVec3, DVec3)>,
+    /// Grid of the decoded faces' fingerprints: 2^-32 of the input's box diagonal.
+    grid: f64,
     tol: f64,
     /// Behind a lock only so the meter can be shared by the parallel queries; one
     /// measurement at a time holds it.
@@ -262,6 +289,17 @@ impl<'a> ErrorMeter<'a> {
             }
         }
         let total: f64 = area.iter().sum();
+        let (lo, hi) = group_boxes
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), b| {
+                (l.min(b.0), h.max(b.1))
+            });
+        let diagonal = (hi - lo).length();
+        let grid = if diagonal.is_finite() && diagonal > 0.0 {
+            diagonal * (-32f64).exp2()
+        } else {
+            1.0
+        };
         let group_samples = area
             .iter()
             .map(|&a| {
@@ -280,6 +318,7 @@ impl<'a> ErrorMeter<'a> {
             own_faces,
             group_samples,
             group_boxes,
+            grid,
             tol,
             cache: Default::default(),
         }
@@ -355,7 +394,7 @@ impl<'a> ErrorMeter<'a> {
         let unchanged = map_ordered(&groups, |&g| {
             cache.groups[g]
                 .as_ref()
-                .is_some_and(|c| c.same_triangles(&surface, g))
+                .is_some_and(|c| c.same_triangles(&surface, g, self.grid))
         });
         let changed: Vec<usize> = groups.into_iter().filter(|&g| !unchanged[g]).collect();
         if let Some(max_cap) = over {
@@ -367,9 +406,10 @@ impl<'a> ErrorMeter<'a> {
         for &g in &changed {
             cache.groups[g] = None;
         }
-        let mut fresh: Vec<GroupDecoded> = map_ordered(&changed, |&g| index_group(&surface, g))
-            .into_iter()
-            .collect::<Result<_>>()?;
+        let mut fresh: Vec<GroupDecoded> =
+            map_ordered(&changed, |&g| index_group(&surface, g, self.grid))
+                .into_iter()
+                .collect::<Result<_>>()?;
         drop(surface);
         let Some(in_hits) = self.input_to_decoded(&cache, &changed, &fresh, over) else {
             return Ok(None);
@@ -401,7 +441,7 @@ impl<'a> ErrorMeter<'a> {
         for run in cache.probe_out.chunk_by(|a, b| a.0 == b.0) {
             let g = run[0].0 as usize;
             if changed.binary_search(&g).is_ok() {
-                let local = localise(surface, g);
+                let local = localise(surface, g, self.grid);
                 if local.triangles.is_empty() {
                     continue;
                 }
@@ -645,10 +685,12 @@ struct LocalTriangles {
     triangles: Vec<[u32; 3]>,
     lo: DVec3,
     hi: DVec3,
+    /// The [`block_fingerprint`]s of its control faces' triangles, sorted.
+    blocks: Vec<u64>,
 }
 
-/// Group `g`'s decoded triangles over its own vertices.
-fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
+/// Group `g`'s decoded triangles over its own vertices, fingerprinted on a grid of `grid`.
+fn localise(surface: &UniformSurface, g: usize, grid: f64) -> LocalTriangles {
     let all = surface.positions();
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -656,7 +698,9 @@ fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
         Default::default();
     let mut positions = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
+    let mut blocks = Vec::new();
     surface.visit_group_triangles(g, |block| {
+        blocks.push(block_fingerprint(all, block, grid));
         triangles.extend(block.iter().map(|t| {
             t.map(|v| {
                 *local.entry(v).or_insert_with(|| {
@@ -670,22 +714,25 @@ fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
         }));
         true
     });
+    blocks.sort_unstable();
     LocalTriangles {
         positions,
         triangles,
         lo,
         hi,
+        blocks,
     }
 }
 
 /// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
-fn index_group(surface: &UniformSurface, g: usize) -> Result<GroupDecoded> {
+fn index_group(surface: &UniformSurface, g: usize, grid: f64) -> Result<GroupDecoded> {
     let LocalTriangles {
         mut positions,
         mut triangles,
         lo,
         hi,
-    } = localise(surface, g);
+        blocks,
+    } = localise(surface, g, grid);
     // Kept until the face changes: without the slack of growing by pushes.
     positions.shrink_to_fit();
     triangles.shrink_to_fit();
@@ -699,6 +746,7 @@ fn index_group(surface: &UniformSurface, g: usize) -> Result<GroupDecoded> {
         )?)
     };
     Ok(GroupDecoded {
+        blocks,
         surface,
         lo,
         hi,
@@ -772,6 +820,56 @@ mod tests {
     }
 
     /// The bounded heap keeps the k largest values, ties to the smaller id, in id order.
+    /// The same control mesh numbered the other way round: vertices reversed, faces
+    /// reversed, each face's corners rotated by one.
+    fn renumbered(mesh: &ControlMesh) -> ControlMesh {
+        let n = mesh.vertex_count() as u32;
+        let flip = |v: u32| n - 1 - v;
+        let mut out = ControlMesh {
+            positions: mesh.positions.iter().rev().copied().collect(),
+            face_offsets: vec![0],
+            face_vertices: Vec::new(),
+            face_groups: Vec::new(),
+            groups: mesh.groups.clone(),
+            sharp_edges: mesh
+                .sharp_edges
+                .iter()
+                .map(|&(a, b)| crate::mesh::edge_key(flip(a), flip(b)))
+                .collect(),
+            corners: mesh.corners.iter().map(|&v| flip(v)).collect(),
+            ..mesh.clone()
+        };
+        let faces: Vec<Vec<u32>> = mesh.faces().map(|f| f.to_vec()).collect();
+        for (f, g) in faces.iter().zip(&mesh.face_groups).rev() {
+            out.face_vertices
+                .extend(f.iter().cycle().skip(1).take(f.len()).map(|&v| flip(v)));
+            out.face_offsets.push(out.face_vertices.len() as u32);
+            out.face_groups.push(*g);
+        }
+        out
+    }
+
+    #[test]
+    fn a_renumbered_control_mesh_keeps_every_measurement() {
+        let input = grid_cube(6);
+        let (tris, surface, chord) = meter_parts(&input);
+        let meter = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
+        let mut first = grid_cube(2);
+        for p in &mut first.positions {
+            *p += DVec3::new(0.013, -0.007, 0.002) * (p.x * 3.1 + p.y * 1.7).sin();
+        }
+        let m0 = meter.measure(&first, 3).unwrap();
+        let other = renumbered(&first);
+        let m1 = meter.measure(&other, 3).unwrap();
+        assert_eq!(m1.changed_groups, 0);
+        assert_eq!(m1.error, m0.error);
+        // A fresh measurement of the renumbered mesh samples it elsewhere, on the same surface.
+        let fresh = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01)
+            .measure(&other, 3)
+            .unwrap();
+        assert!((fresh.error.max - m0.error.max).abs() < 0.05 * m0.error.max);
+    }
+
     #[test]
     fn top_k_keeps_the_largest_values_first_ids_on_ties() {
         let values = [3.0, 1.0, 3.0, f64::NAN, 2.0, 3.0, -1.0];
