@@ -837,7 +837,6 @@ mod tests {
                 .map(|&(a, b)| crate::mesh::edge_key(flip(a), flip(b)))
                 .collect(),
             corners: mesh.corners.iter().map(|&v| flip(v)).collect(),
-            ..mesh.clone()
         };
         let faces: Vec<Vec<u32>> = mesh.faces().map(|f| f.to_vec()).collect();
         for (f, g) in faces.iter().zip(&mesh.face_groups).rev() {
