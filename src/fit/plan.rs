@@ -14,6 +14,8 @@ pub(super) struct GroupPlan {
     pub cost_factor: f64,
     /// Rounds in which the group was out of tolerance.
     pub failures: u32,
+    /// Its excess over the tolerance when it last failed (0 before).
+    pub last_excess: f64,
 }
 
 impl GroupPlan {
@@ -23,6 +25,7 @@ impl GroupPlan {
             kind,
             cost_factor: INITIAL_CLOSED_COST,
             failures: 0,
+            last_excess: 0.0,
         }
     }
 }

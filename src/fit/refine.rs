@@ -104,9 +104,14 @@ pub(super) enum ChainReach {
     NearFailures,
 }
 
+/// A failing boundary patch whose excess stays above this fraction of its previous
+/// failure's becomes a closed patch.
+const BOUNDARY_STALL_RATIO: f64 = 0.9;
+
 /// Refines the plan of every group out of tolerance in `measured` (the measurement of
 /// `control`): a closed patch gets a lower decimation threshold (near its failures only with
-/// `local_refinement`), a boundary patch that failed four times becomes a closed patch, and
+/// `local_refinement`), a boundary patch that failed four times, or twice without its excess shrinking, becomes a
+/// closed patch, and
 /// the chains `reach` selects get finer.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn refine_failing(
@@ -161,6 +166,11 @@ pub(super) fn refine_failing(
         }
         let group = &mut plan.groups[g];
         group.failures += 1;
+        let excess = measured.group_excess[g].0;
+        // A boundary patch whose excess did not shrink since its last failure gains nothing
+        // from finer chains (its surface, not its outline, is off): closed at once.
+        let stalled = group.failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess;
+        group.last_excess = excess;
         if matches!(group.kind, PatchKind::Closed) {
             report.closed_refinements += 1;
             let radius = 2.0 * mean_group_edge(control, g as u32);
@@ -180,7 +190,7 @@ pub(super) fn refine_failing(
             if lowered == 0 {
                 group.cost_factor *= CLOSED_COST_STEP;
             }
-        } else if group.failures >= 4 {
+        } else if group.failures >= 4 || stalled {
             report.notes.push(format!(
                 "group {g} ({}) refitted as a closed patch",
                 kind_name(&group.kind)
