@@ -4,13 +4,19 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn scode(args: &[&str]) -> (bool, String) {
+    let (status, text) = scode_status(args);
+    (status == 0, text)
+}
+
+/// The exit status of `scode args` (-1 when killed by a signal) and its stdout + stderr.
+fn scode_status(args: &[&str]) -> (i32, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_scode"))
         .args(args)
         .output()
         .unwrap();
     let text =
         String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
+    (out.status.code().unwrap_or(-1), text)
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -107,7 +113,9 @@ fn the_mean_tolerance_is_reported() {
             .to_string()
     };
     assert!(mean_line(&text).ends_with(" met"), "{text}");
-    let (ok, text) = scode(&[
+    // A missed tolerance writes the file and exits with status 5.
+    std::fs::remove_file(out).unwrap();
+    let (status, text) = scode_status(&[
         "encode",
         &example(),
         out,
@@ -115,9 +123,11 @@ fn the_mean_tolerance_is_reported() {
         "1e-9",
         "--relative",
     ]);
-    assert!(ok, "{text}");
+    assert_eq!(status, 5, "{text}");
     assert!(mean_line(&text).contains("NOT met: the mean is"), "{text}");
-    let (ok, text) = scode(&[
+    assert!(text.contains("scode: error: tolerance NOT met"), "{text}");
+    assert!(Path::new(out).is_file());
+    let (status, text) = scode_status(&[
         "encode",
         "--raw",
         &example(),
@@ -125,7 +135,7 @@ fn the_mean_tolerance_is_reported() {
         "--mean-tolerance",
         "0.1",
     ]);
-    assert!(!ok, "{text}");
+    assert_eq!(status, 1, "{text}");
     assert!(text.contains("--mean-tolerance"), "{text}");
 }
 
@@ -220,4 +230,159 @@ fn a_closed_stdout_is_no_panic() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{:?}: {stderr}", out.status);
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// `scode --help` lists the exit statuses, and each kind of failure exits with its own.
+#[test]
+fn exit_statuses_are_listed_and_used() {
+    let (status, text) = scode_status(&["--help"]);
+    assert_eq!(status, 0, "{text}");
+    for line in [
+        "Exit status:",
+        "1  usage",
+        "2  input or I/O",
+        "5  encode: tolerance",
+    ] {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+    let (status, text) = scode_status(&["encode", "--no-such-option", &example()]);
+    assert_eq!(status, 1, "{text}");
+    let (status, text) = scode_status(&["decode", "/nonexistent/x.scode", "out.obj"]);
+    assert_eq!(status, 2, "{text}");
+    let garbage = tmp("status-garbage.scode");
+    std::fs::write(&garbage, b"not an scode file at all").unwrap();
+    let (status, text) = scode_status(&["decode", garbage.to_str().unwrap(), "out.obj"]);
+    assert_eq!(status, 3, "{text}");
+    let (status, text) = scode_status(&[
+        "decode",
+        "--max-bytes",
+        "4",
+        garbage.to_str().unwrap(),
+        "out.obj",
+    ]);
+    assert_eq!(status, 4, "{text}");
+}
+
+/// An OS error is printed once, after the path it is about.
+#[test]
+fn os_errors_are_printed_once() {
+    let (status, text) = scode_status(&["encode", "/nonexistent/in.obj", "out.scode"]);
+    assert_eq!(status, 2, "{text}");
+    let os = std::fs::read("/nonexistent/in.obj").unwrap_err().to_string();
+    assert_eq!(text.matches(&os).count(), 1, "{text}");
+    assert!(text.contains("/nonexistent/in.obj"), "{text}");
+}
+
+/// `scode encode x.obj x.obj` (and through another path, a symbolic or a hard link) is
+/// refused before anything is read or written, and the input stays as it was; an output
+/// whose extension names another format than the bytes written is refused too.
+#[test]
+fn the_output_may_not_be_the_input_or_another_format() {
+    let input = tmp("self.obj");
+    std::fs::copy(example(), &input).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let dotted = input
+        .parent()
+        .unwrap()
+        .join("../")
+        .join(input.parent().unwrap().file_name().unwrap())
+        .join("self.obj");
+    let mut aliases = vec![input.clone(), dotted];
+    #[cfg(unix)]
+    {
+        let link = tmp("self-link.scode");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        let hard = tmp("self-hard.scode");
+        let _ = std::fs::remove_file(&hard);
+        std::fs::hard_link(&input, &hard).unwrap();
+        aliases.extend([link, hard]);
+    }
+    for out in &aliases {
+        for raw in [false, true] {
+            let mut args = vec!["encode", input.to_str().unwrap(), out.to_str().unwrap()];
+            if raw {
+                args.insert(1, "--raw");
+            }
+            let (status, text) = scode_status(&args);
+            assert_eq!(status, 1, "{out:?}: {text}");
+            assert!(text.contains("is the input file"), "{text}");
+        }
+    }
+    let (status, text) = scode_status(&[
+        "segment",
+        input.to_str().unwrap(),
+        "-o",
+        input.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+    assert_eq!(
+        std::fs::read(&input).unwrap(),
+        before,
+        "the input was changed"
+    );
+
+    // .scode bytes under a mesh extension, a mesh under .scode.
+    let wrong = tmp("encoded.obj");
+    let (status, text) = scode_status(&[
+        "encode",
+        "--raw",
+        input.to_str().unwrap(),
+        "-o",
+        wrong.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+    assert!(text.contains("must end in .scode"), "{text}");
+    assert!(!wrong.exists());
+    let encoded = tmp("encoded.scode");
+    let (ok, text) = scode(&[
+        "encode",
+        "--raw",
+        input.to_str().unwrap(),
+        encoded.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let mesh_as_scode = tmp("decoded.scode");
+    let (status, text) = scode_status(&[
+        "decode",
+        encoded.to_str().unwrap(),
+        mesh_as_scode.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+    assert!(text.contains("writes a mesh"), "{text}");
+    assert!(!mesh_as_scode.exists());
+    let (status, text) = scode_status(&[
+        "decode",
+        encoded.to_str().unwrap(),
+        encoded.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+}
+
+/// A STEP file with a face the reader cannot read is not encoded (status 6, nothing
+/// written) unless `--allow-skipped` lets the rest be encoded.
+#[test]
+fn skipped_step_faces_need_allow_skipped() {
+    let step = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_offset_face.step");
+    let step = step.to_str().unwrap();
+    for raw in [false, true] {
+        let out = tmp(&format!("cube-raw-{raw}.scode"));
+        let _ = std::fs::remove_file(&out);
+        let mut args = vec!["encode", step, out.to_str().unwrap()];
+        if raw {
+            args.push("--raw");
+        }
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 6, "{text}");
+        assert!(
+            text.contains("OFFSET_SURFACE") && text.contains("--allow-skipped"),
+            "{text}"
+        );
+        assert!(!out.exists(), "{text}");
+        args.push("--allow-skipped");
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 0, "{text}");
+        assert!(text.contains("1 faces skipped"), "{text}");
+        assert!(out.is_file());
+    }
 }
