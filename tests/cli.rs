@@ -268,7 +268,9 @@ fn exit_statuses_are_listed_and_used() {
 fn os_errors_are_printed_once() {
     let (status, text) = scode_status(&["encode", "/nonexistent/in.obj", "out.scode"]);
     assert_eq!(status, 2, "{text}");
-    let os = std::fs::read("/nonexistent/in.obj").unwrap_err().to_string();
+    let os = std::fs::read("/nonexistent/in.obj")
+        .unwrap_err()
+        .to_string();
     assert_eq!(text.matches(&os).count(), 1, "{text}");
     assert!(text.contains("/nonexistent/in.obj"), "{text}");
 }
@@ -384,5 +386,36 @@ fn skipped_step_faces_need_allow_skipped() {
         assert_eq!(status, 0, "{text}");
         assert!(text.contains("1 faces skipped"), "{text}");
         assert!(out.is_file());
+    }
+}
+
+/// A STEP file with 50 000 nested parentheses is an input error (status 2) naming the
+/// line, not a stack overflow that aborts the process.
+#[test]
+fn deeply_nested_step_is_an_input_error() {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_offset_face.step"),
+    )
+    .unwrap();
+    let deep = text.replace(
+        "#1 = CARTESIAN_POINT('',(0.0,0.0,0.0));",
+        &format!(
+            "#1 = CARTESIAN_POINT('',{}0.0{});",
+            "(".repeat(50_000),
+            ")".repeat(50_000)
+        ),
+    );
+    let input = tmp("deep.step");
+    std::fs::write(&input, deep).unwrap();
+    for args in [
+        vec!["info", input.to_str().unwrap()],
+        vec!["encode", input.to_str().unwrap(), "deep.scode"],
+    ] {
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 2, "{text}");
+        assert!(
+            text.contains("#1 = CARTESIAN_POINT: parentheses nested deeper"),
+            "{text}"
+        );
     }
 }

@@ -19,6 +19,7 @@ use truck_stepio::r#in::{
 use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace};
 
 use super::analytic::Analytic;
+use super::check;
 use super::text::{self, Records};
 use super::{run_with_timeout, FaceSurface, SkippedFace};
 use crate::error::{Error, Result};
@@ -74,7 +75,11 @@ fn entity_ref<T>(p: &PlaceHolder<T>) -> Option<u64> {
 
 /// Parses the text and converts every body's faces. Errors only when nothing can be read.
 pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result<Loaded> {
+    check::check(raw).map_err(|p| Error::input(path, p.to_string()))?;
     let (text, pcurve, empty) = text::prepass(raw);
+    // The pre-pass keeps every line where it was (the parabola rewrite below does not), so
+    // a syntax error found in this text is on the line the user sees.
+    let prepassed = text.clone();
     let mut records = text::scan(&text);
     let mut notes = Vec::new();
     let (text, parabolas) = text::parabolas_to_bsplines(&text, &records);
@@ -128,8 +133,20 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
     } else {
         None
     };
-    let exchange = truck_stepio::r#in::ruststep::parser::parse(&text)
-        .map_err(|e| Error::input(path, format!("STEP syntax error: {e}")))?;
+    let exchange = truck_stepio::r#in::ruststep::parser::parse(&text).map_err(|e| {
+        let detail = match check::locate_syntax_error(&prepassed) {
+            Some(p) => format!("STEP syntax error at {p}"),
+            // ruststep's own message, on one line.
+            None => format!(
+                "STEP syntax error: {}",
+                e.to_string()
+                    .split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            ),
+        };
+        Error::input(path, detail)
+    })?;
     let Some(data) = exchange.data.first() else {
         return Err(Error::input(path, "no DATA section"));
     };

@@ -56,6 +56,7 @@
 
 mod analytic;
 mod brep;
+pub mod check;
 mod conform;
 mod tessellate;
 pub mod text;
