@@ -419,3 +419,49 @@ fn deeply_nested_step_is_an_input_error() {
         );
     }
 }
+
+/// A `.gltf` whose buffer names a file outside its folder is refused (status 2, the URI
+/// named), and nothing of that file reaches an output.
+#[test]
+fn gltf_buffers_outside_the_folder_are_refused() {
+    let dir = tmp("gltf-upload");
+    std::fs::create_dir_all(&dir).unwrap();
+    for uri in [
+        "/etc/passwd",
+        "../../../../../../etc/passwd",
+        "%2E%2E/secret.bin",
+    ] {
+        let gltf = dir.join("evil.gltf");
+        std::fs::write(
+            &gltf,
+            format!(
+                r#"{{"asset":{{"version":"2.0"}},
+                "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+                "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
+                    "min":[0,0,0],"max":[1,1,1]}}],
+                "bufferViews":[{{"buffer":0,"byteLength":36}}],
+                "buffers":[{{"uri":"{uri}","byteLength":36}}]}}"#
+            ),
+        )
+        .unwrap();
+        let out = tmp("evil.scode");
+        let _ = std::fs::remove_file(&out);
+        for args in [
+            vec!["info", gltf.to_str().unwrap()],
+            vec![
+                "encode",
+                "--raw",
+                gltf.to_str().unwrap(),
+                out.to_str().unwrap(),
+            ],
+        ] {
+            let (status, text) = scode_status(&args);
+            assert_eq!(status, 2, "{text}");
+            assert!(
+                text.contains(&format!("buffer URI `{uri}` refused")),
+                "{text}"
+            );
+            assert!(!out.exists());
+        }
+    }
+}
