@@ -420,6 +420,29 @@ fn deeply_nested_step_is_an_input_error() {
     }
 }
 
+/// Coordinates near f64::MAX are refused when the file is read (status 2, the file and the
+/// vertices' lines named), by the fitted and the raw path alike, instead of encoding a file
+/// the decoder refuses or an infinite tolerance.
+#[test]
+fn coordinates_whose_box_overflows_are_an_input_error() {
+    let input = tmp("huge.obj");
+    std::fs::write(&input, "v 0 0 0\nv 1.7e308 0 0\nv -1.7e308 1 0\nf 1 2 3\n").unwrap();
+    for raw in [false, true] {
+        let out = tmp(&format!("huge-{raw}.scode"));
+        let mut args = vec!["encode", input.to_str().unwrap(), out.to_str().unwrap()];
+        if raw {
+            args.push("--raw");
+        }
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 2, "{text}");
+        assert!(
+            text.contains("huge.obj: coordinates too large") && text.contains("(line 3)"),
+            "{text}"
+        );
+        assert!(!out.exists());
+    }
+}
+
 /// A `.gltf` whose buffer names a file outside its folder is refused (status 2, the URI
 /// named), and nothing of that file reaches an output.
 #[test]
