@@ -14,8 +14,10 @@
 //! | OFF  | polygons | yes | one group | no |
 //!
 //! # What every reader does after parsing (see [`repair`])
-//! 1. **Non-finite coordinates** (NaN, inf) and **out-of-range indices** are errors naming the
-//!    file and the line (text formats) or element (binary formats).
+//! 1. **Non-finite coordinates** (NaN, inf), **coordinates whose bounding box has no finite
+//!    diagonal** (near 1e154 and beyond: every distance the encoder measures would be
+//!    infinite) and **out-of-range indices** are errors naming the file and the line (text
+//!    formats) or element (binary formats).
 //! 2. **Weld** vertices with identical f64 coordinates (`-0.0 == 0.0`) where the stored mesh
 //!    is open (vertices on boundary edges, or used by no face); the first occurrence keeps its
 //!    place, so the result is deterministic. Coincident vertices inside closed surfaces
