@@ -1,5 +1,6 @@
 //! The `scode` command-line tool. Thin on purpose: it parses arguments, calls the library and
 //! prints; every algorithm lives in the `scode` library crate.
+#![forbid(unsafe_code)]
 
 mod cli;
 
@@ -13,13 +14,28 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+use cli::exit;
+
 fn main() -> ExitCode {
-    let args = cli::Cli::parse();
+    let args = match cli::Cli::try_parse() {
+        Ok(args) => args,
+        Err(e) => {
+            // `--help` and `--version` print to stdout and succeed; every other parse
+            // failure is a usage error with the status of all usage errors (clap's own
+            // would be 2, the input-error status here).
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() {
+                exit::USAGE
+            } else {
+                exit::OK
+            });
+        }
+    };
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("scode: error: {err:#}");
-            ExitCode::FAILURE
+            eprintln!("scode: error: {}", exit::message(&err));
+            ExitCode::from(exit::status(&err))
         }
     }
 }

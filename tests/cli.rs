@@ -4,13 +4,19 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn scode(args: &[&str]) -> (bool, String) {
+    let (status, text) = scode_status(args);
+    (status == 0, text)
+}
+
+/// The exit status of `scode args` (-1 when killed by a signal) and its stdout + stderr.
+fn scode_status(args: &[&str]) -> (i32, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_scode"))
         .args(args)
         .output()
         .unwrap();
     let text =
         String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
+    (out.status.code().unwrap_or(-1), text)
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -107,7 +113,9 @@ fn the_mean_tolerance_is_reported() {
             .to_string()
     };
     assert!(mean_line(&text).ends_with(" met"), "{text}");
-    let (ok, text) = scode(&[
+    // A missed tolerance writes the file and exits with status 5.
+    std::fs::remove_file(out).unwrap();
+    let (status, text) = scode_status(&[
         "encode",
         &example(),
         out,
@@ -115,9 +123,11 @@ fn the_mean_tolerance_is_reported() {
         "1e-9",
         "--relative",
     ]);
-    assert!(ok, "{text}");
+    assert_eq!(status, 5, "{text}");
     assert!(mean_line(&text).contains("NOT met: the mean is"), "{text}");
-    let (ok, text) = scode(&[
+    assert!(text.contains("scode: error: tolerance NOT met"), "{text}");
+    assert!(Path::new(out).is_file());
+    let (status, text) = scode_status(&[
         "encode",
         "--raw",
         &example(),
@@ -125,7 +135,7 @@ fn the_mean_tolerance_is_reported() {
         "--mean-tolerance",
         "0.1",
     ]);
-    assert!(!ok, "{text}");
+    assert_eq!(status, 1, "{text}");
     assert!(text.contains("--mean-tolerance"), "{text}");
 }
 
@@ -220,4 +230,261 @@ fn a_closed_stdout_is_no_panic() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{:?}: {stderr}", out.status);
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// `scode --help` lists the exit statuses, and each kind of failure exits with its own.
+#[test]
+fn exit_statuses_are_listed_and_used() {
+    let (status, text) = scode_status(&["--help"]);
+    assert_eq!(status, 0, "{text}");
+    for line in [
+        "Exit status:",
+        "1  usage",
+        "2  input or I/O",
+        "5  encode: tolerance",
+    ] {
+        assert!(text.contains(line), "{line}: {text}");
+    }
+    let (status, text) = scode_status(&["encode", "--no-such-option", &example()]);
+    assert_eq!(status, 1, "{text}");
+    let (status, text) = scode_status(&["decode", "/nonexistent/x.scode", "out.obj"]);
+    assert_eq!(status, 2, "{text}");
+    let garbage = tmp("status-garbage.scode");
+    std::fs::write(&garbage, b"not an scode file at all").unwrap();
+    let (status, text) = scode_status(&["decode", garbage.to_str().unwrap(), "out.obj"]);
+    assert_eq!(status, 3, "{text}");
+    let (status, text) = scode_status(&[
+        "decode",
+        "--max-bytes",
+        "4",
+        garbage.to_str().unwrap(),
+        "out.obj",
+    ]);
+    assert_eq!(status, 4, "{text}");
+}
+
+/// An OS error is printed once, after the path it is about.
+#[test]
+fn os_errors_are_printed_once() {
+    let (status, text) = scode_status(&["encode", "/nonexistent/in.obj", "out.scode"]);
+    assert_eq!(status, 2, "{text}");
+    let os = std::fs::read("/nonexistent/in.obj")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(text.matches(&os).count(), 1, "{text}");
+    assert!(text.contains("/nonexistent/in.obj"), "{text}");
+}
+
+/// `scode encode x.obj x.obj` (and through another path, a symbolic or a hard link) is
+/// refused before anything is read or written, and the input stays as it was; an output
+/// whose extension names another format than the bytes written is refused too.
+#[test]
+fn the_output_may_not_be_the_input_or_another_format() {
+    let input = tmp("self.obj");
+    std::fs::copy(example(), &input).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let dotted = input
+        .parent()
+        .unwrap()
+        .join("../")
+        .join(input.parent().unwrap().file_name().unwrap())
+        .join("self.obj");
+    let mut aliases = vec![input.clone(), dotted];
+    #[cfg(unix)]
+    {
+        let link = tmp("self-link.scode");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(&input, &link).unwrap();
+        let hard = tmp("self-hard.scode");
+        let _ = std::fs::remove_file(&hard);
+        std::fs::hard_link(&input, &hard).unwrap();
+        aliases.extend([link, hard]);
+    }
+    for out in &aliases {
+        for raw in [false, true] {
+            let mut args = vec!["encode", input.to_str().unwrap(), out.to_str().unwrap()];
+            if raw {
+                args.insert(1, "--raw");
+            }
+            let (status, text) = scode_status(&args);
+            assert_eq!(status, 1, "{out:?}: {text}");
+            assert!(text.contains("is the input file"), "{text}");
+        }
+    }
+    let (status, text) = scode_status(&[
+        "segment",
+        input.to_str().unwrap(),
+        "-o",
+        input.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+    assert_eq!(
+        std::fs::read(&input).unwrap(),
+        before,
+        "the input was changed"
+    );
+
+    // .scode bytes under a mesh extension, a mesh under .scode.
+    let wrong = tmp("encoded.obj");
+    let (status, text) = scode_status(&[
+        "encode",
+        "--raw",
+        input.to_str().unwrap(),
+        "-o",
+        wrong.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+    assert!(text.contains("must end in .scode"), "{text}");
+    assert!(!wrong.exists());
+    let encoded = tmp("encoded.scode");
+    let (ok, text) = scode(&[
+        "encode",
+        "--raw",
+        input.to_str().unwrap(),
+        encoded.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    let mesh_as_scode = tmp("decoded.scode");
+    let (status, text) = scode_status(&[
+        "decode",
+        encoded.to_str().unwrap(),
+        mesh_as_scode.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+    assert!(text.contains("writes a mesh"), "{text}");
+    assert!(!mesh_as_scode.exists());
+    let (status, text) = scode_status(&[
+        "decode",
+        encoded.to_str().unwrap(),
+        encoded.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 1, "{text}");
+}
+
+/// A STEP file with a face the reader cannot read is not encoded (status 6, nothing
+/// written) unless `--allow-skipped` lets the rest be encoded.
+#[test]
+fn skipped_step_faces_need_allow_skipped() {
+    let step = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_offset_face.step");
+    let step = step.to_str().unwrap();
+    for raw in [false, true] {
+        let out = tmp(&format!("cube-raw-{raw}.scode"));
+        let _ = std::fs::remove_file(&out);
+        let mut args = vec!["encode", step, out.to_str().unwrap()];
+        if raw {
+            args.push("--raw");
+        }
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 6, "{text}");
+        assert!(
+            text.contains("OFFSET_SURFACE") && text.contains("--allow-skipped"),
+            "{text}"
+        );
+        assert!(!out.exists(), "{text}");
+        args.push("--allow-skipped");
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 0, "{text}");
+        assert!(text.contains("1 faces skipped"), "{text}");
+        assert!(out.is_file());
+    }
+}
+
+/// A STEP file with 50 000 nested parentheses is an input error (status 2) naming the
+/// line, not a stack overflow that aborts the process.
+#[test]
+fn deeply_nested_step_is_an_input_error() {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_offset_face.step"),
+    )
+    .unwrap();
+    let deep = text.replace(
+        "#1 = CARTESIAN_POINT('',(0.0,0.0,0.0));",
+        &format!(
+            "#1 = CARTESIAN_POINT('',{}0.0{});",
+            "(".repeat(50_000),
+            ")".repeat(50_000)
+        ),
+    );
+    let input = tmp("deep.step");
+    std::fs::write(&input, deep).unwrap();
+    for args in [
+        vec!["info", input.to_str().unwrap()],
+        vec!["encode", input.to_str().unwrap(), "deep.scode"],
+    ] {
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 2, "{text}");
+        assert!(
+            text.contains("#1 = CARTESIAN_POINT: parentheses nested deeper"),
+            "{text}"
+        );
+    }
+}
+
+/// Coordinates near f64::MAX are refused when the file is read (status 2, the file and the
+/// vertices' lines named), by the fitted and the raw path alike, instead of encoding a file
+/// the decoder refuses or an infinite tolerance.
+#[test]
+fn coordinates_whose_box_overflows_are_an_input_error() {
+    let input = tmp("huge.obj");
+    std::fs::write(&input, "v 0 0 0\nv 1.7e308 0 0\nv -1.7e308 1 0\nf 1 2 3\n").unwrap();
+    for raw in [false, true] {
+        let out = tmp(&format!("huge-{raw}.scode"));
+        let mut args = vec!["encode", input.to_str().unwrap(), out.to_str().unwrap()];
+        if raw {
+            args.push("--raw");
+        }
+        let (status, text) = scode_status(&args);
+        assert_eq!(status, 2, "{text}");
+        assert!(
+            text.contains("huge.obj: coordinates too large") && text.contains("(line 3)"),
+            "{text}"
+        );
+        assert!(!out.exists());
+    }
+}
+
+/// A `.gltf` whose buffer names a file outside its folder is refused (status 2, the URI
+/// named), and nothing of that file reaches an output.
+#[test]
+fn gltf_buffers_outside_the_folder_are_refused() {
+    let dir = tmp("gltf-upload");
+    std::fs::create_dir_all(&dir).unwrap();
+    for uri in [
+        "/etc/passwd",
+        "../../../../../../etc/passwd",
+        "%2E%2E/secret.bin",
+    ] {
+        let gltf = dir.join("evil.gltf");
+        std::fs::write(
+            &gltf,
+            format!(
+                r#"{{"asset":{{"version":"2.0"}},
+                "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+                "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
+                    "min":[0,0,0],"max":[1,1,1]}}],
+                "bufferViews":[{{"buffer":0,"byteLength":36}}],
+                "buffers":[{{"uri":"{uri}","byteLength":36}}]}}"#
+            ),
+        )
+        .unwrap();
+        let out = tmp("evil.scode");
+        let _ = std::fs::remove_file(&out);
+        for args in [
+            vec!["info", gltf.to_str().unwrap()],
+            vec![
+                "encode",
+                "--raw",
+                gltf.to_str().unwrap(),
+                out.to_str().unwrap(),
+            ],
+        ] {
+            let (status, text) = scode_status(&args);
+            assert_eq!(status, 2, "{text}");
+            assert!(
+                text.contains(&format!("buffer URI `{uri}` refused")),
+                "{text}"
+            );
+            assert!(!out.exists());
+        }
+    }
 }

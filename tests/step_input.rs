@@ -532,3 +532,73 @@ fn slow_import_times_out_with_an_error() {
     let e = read_step(&fixture("cube_offset_face.step"), &opts).unwrap_err();
     assert!(e.to_string().contains("did not finish"), "{e}");
 }
+
+/// The line of the fixture that starts with `prefix` (1-based).
+fn line_of(text: &str, prefix: &str) -> usize {
+    text.lines().position(|l| l.starts_with(prefix)).unwrap() + 1
+}
+
+/// Hostile text is refused by name and line before ruststep or truck see it: 50 000
+/// nested parentheses (which overflowed the parse thread's stack and aborted the
+/// process), a coordinate that reads as infinity (which sent truck's tessellator into an
+/// endless division), and a damaged instance (reported at its own line, not at `DATA;`).
+#[test]
+fn hostile_text_is_refused_with_its_line() {
+    let text = std::fs::read_to_string(fixture("cube_offset_face.step")).unwrap();
+    let opts = StepOptions::default();
+    let p = Path::new("hostile.step");
+    let point = "#43 = CARTESIAN_POINT('',(0.0,0.0,0.0));";
+    assert!(text.contains(point));
+    let line = line_of(&text, "#43 =");
+
+    let deep = text.replace(
+        point,
+        &format!(
+            "#43 = CARTESIAN_POINT('',{}0.0{});",
+            "(".repeat(50_000),
+            ")".repeat(50_000)
+        ),
+    );
+    let e = read_step_bytes(p, deep.as_bytes(), &opts).unwrap_err();
+    assert!(matches!(e, scode::Error::Input { .. }), "{e}");
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with(&format!(
+            "hostile.step: line {line}: #43 = CARTESIAN_POINT: parentheses nested deeper"
+        )),
+        "{msg}"
+    );
+
+    let infinite = text.replace(point, "#43 = CARTESIAN_POINT('',(1.0E400,0.0,0.0));");
+    let msg = read_step_bytes(p, infinite.as_bytes(), &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains(&format!(
+            "line {line}: #43 = CARTESIAN_POINT: the number 1.0E400 is not finite"
+        )),
+        "{msg}"
+    );
+
+    let far = text.replace(point, "#43 = CARTESIAN_POINT('',(1.7E308,0.0,0.0));");
+    let far = far.replace(
+        "#1 = CARTESIAN_POINT('',(0.0,0.0,0.0));",
+        "#1 = CARTESIAN_POINT('',(-1.7E308,0.0,0.0));",
+    );
+    let msg = read_step_bytes(p, far.as_bytes(), &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("too large for f64"), "{msg}");
+
+    let damaged = text.replace("#33 = EDGE_CURVE(''", "#33 = EDGE_CURVE((''");
+    let msg = read_step_bytes(p, damaged.as_bytes(), &opts)
+        .unwrap_err()
+        .to_string();
+    let line = line_of(&text, "#33 =");
+    assert!(
+        msg.contains(&format!(
+            "STEP syntax error at line {line}: cannot parse `#33 = EDGE_CURVE(("
+        )),
+        "{msg}"
+    );
+}

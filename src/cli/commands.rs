@@ -3,14 +3,15 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::io::{self, ReadReport};
 use scode::mesh::{BoundarySurface, PatchKind};
 use scode::subdiv::{self, SubdivOptions};
 use scode::ControlMesh;
 
-use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, SubdivideArgs};
+use super::exit::CliError;
+use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, SubdivideArgs, Writes};
 use scode::fit::encoder::SurfaceHint;
 use scode::io::step;
 use scode::pipeline::{
@@ -87,6 +88,7 @@ fn read_step_input(args: &EncodeArgs) -> Result<ControlMesh> {
     bar.finish_and_clear();
     let model = result?;
     print_step_summary(&args.input, &model, args.verbose);
+    check_skipped(args, &model)?;
     Ok(model.mesh)
 }
 
@@ -117,12 +119,6 @@ fn print_step_summary(path: &Path, model: &step::StepModel, verbose: bool) {
     for s in &model.skipped {
         eprintln!("warning: skipped {s}");
     }
-    if !model.skipped.is_empty() {
-        eprintln!(
-            "warning: {} faces skipped; the rest of the model is encoded",
-            model.skipped.len()
-        );
-    }
     if verbose {
         for n in &model.notes {
             println!("  {n}");
@@ -130,8 +126,35 @@ fn print_step_summary(path: &Path, model: &step::StepModel, verbose: bool) {
     }
 }
 
+/// The error that ends an encode whose STEP input lost faces, unless `--allow-skipped`
+/// lets the rest be encoded (then a warning says how many are missing).
+fn check_skipped(args: &EncodeArgs, model: &step::StepModel) -> Result<()> {
+    let n = model.skipped.len();
+    if n == 0 {
+        return Ok(());
+    }
+    if args.allow_skipped {
+        eprintln!("warning: {n} faces skipped; the rest of the model is encoded (--allow-skipped)");
+        return Ok(());
+    }
+    Err(CliError::FacesSkipped(format!(
+        "{}: {n} faces could not be read (listed above); nothing written (--allow-skipped \
+         encodes the rest)",
+        args.input.display()
+    ))
+    .into())
+}
+
 pub fn encode(args: &EncodeArgs) -> Result<()> {
-    let output = args.output.path()?;
+    let output = args.output.checked(&args.input, Writes::Scode)?;
+    if args.raw && (args.tolerance.is_some() || args.mean_tolerance.is_some()) {
+        return Err(CliError::Usage(
+            "--tolerance and --mean-tolerance apply to fitting; with --raw use --bits to set \
+             the precision"
+                .into(),
+        )
+        .into());
+    }
     let t0 = Instant::now();
     let mut model_opts = ModelEncodeOptions {
         quantization_bits: args.bits,
@@ -150,6 +173,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         let (model, bytes, fit) =
             result.with_context(|| format!("cannot encode {}", args.input.display()))?;
         print_step_summary(&args.input, &model, args.verbose);
+        check_skipped(args, &model)?;
         (model.mesh, Some((bytes, fit)))
     } else if is_step {
         (read_step_input(args)?, None)
@@ -160,13 +184,9 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     };
     let t_read = t0.elapsed();
     let t1 = Instant::now();
+    // What the fit missed, reported once the file is written.
+    let mut missed: Vec<String> = Vec::new();
     let bytes = if args.raw {
-        if args.tolerance.is_some() || args.mean_tolerance.is_some() {
-            bail!(
-                "--tolerance and --mean-tolerance apply to fitting; with --raw use --bits to \
-                 set the precision"
-            );
-        }
         let opts = EncodeOptions {
             quantization_bits: args.bits.unwrap_or(10),
             content: Content::RawMesh,
@@ -222,6 +242,10 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
             if fit.error.max_beyond_chord <= fit.tolerance {
                 "met (beyond the input's own chord error)".to_string()
             } else {
+                missed.push(format!(
+                    "the max distance is {:.2}x the tolerance",
+                    fit.error.max_beyond_chord / fit.tolerance
+                ));
                 format!(
                     "NOT met: {:.2}x the tolerance beyond the input's chord error after {} rounds",
                     fit.error.max_beyond_chord / fit.tolerance,
@@ -235,6 +259,10 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
                 if fit.error.mean <= mt {
                     "met".to_string()
                 } else {
+                    missed.push(format!(
+                        "the mean distance is {:.2}x the mean tolerance",
+                        fit.error.mean / mt
+                    ));
                     format!(
                         "NOT met: the mean is {:.2}x it (lower --tolerance)",
                         fit.error.mean / mt
@@ -277,11 +305,20 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
             t_encode.as_secs_f64() * 1e3
         );
     }
+    if !missed.is_empty() {
+        return Err(CliError::ToleranceNotMet(format!(
+            "tolerance NOT met for {} ({}); {} is written",
+            args.input.display(),
+            missed.join(", "),
+            output.display()
+        ))
+        .into());
+    }
     Ok(())
 }
 
 pub fn decode(args: &DecodeArgs) -> Result<()> {
-    let output = args.output.path()?;
+    let output = args.output.checked(&args.input, Writes::Mesh)?;
     let bytes = read_file(&args.input)?;
     let mut limits = Limits::default();
     if let Some(max) = args.max_bytes {
@@ -323,7 +360,7 @@ fn boundary_output(dense: bool) -> subdiv::BoundaryPatchOutput {
 }
 
 pub fn subdivide(args: &SubdivideArgs) -> Result<()> {
-    let output = args.output.path()?;
+    let output = args.output.checked(&args.input, Writes::Mesh)?;
     let (control, _) = load_control_mesh(&args.input)?;
     let opts = SubdivOptions {
         limit: args.limit,
@@ -351,6 +388,12 @@ pub fn subdivide(args: &SubdivideArgs) -> Result<()> {
 fn step_info(args: &InfoArgs) -> Result<()> {
     let model = step::read_step(&args.file, &step::StepOptions::default())?;
     print_step_summary(&args.file, &model, true);
+    if !model.skipped.is_empty() {
+        eprintln!(
+            "warning: {} faces skipped; `scode encode` encodes the rest only with --allow-skipped",
+            model.skipped.len()
+        );
+    }
     let kind = |f: &step::FaceSurface| match scode::pipeline::hint_for(&f.surface) {
         SurfaceHint::Plane => "boundary patch (plane)",
         SurfaceHint::Cylinder => "boundary patch (cylinder, exact axis)",
@@ -539,7 +582,7 @@ pub fn info(args: &InfoArgs) -> Result<()> {
 }
 
 pub fn segment(args: &SegmentArgs) -> Result<()> {
-    let output = args.output.path()?;
+    let output = args.output.checked(&args.input, Writes::Mesh)?;
     let (mesh, report) = io::read_mesh(&args.input)?;
     print_read_report(&args.input, &report);
     let opts = scode::fit::segment::SegmentOptions {
@@ -617,7 +660,10 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     };
     if let Some(t) = &args.tolerances {
         if t.is_empty() || t.iter().any(|&t| !(t > 0.0 && t < 1.0)) {
-            bail!("--tolerances must be fractions of the diagonal in (0, 1)");
+            return Err(CliError::Usage(
+                "--tolerances must be fractions of the diagonal in (0, 1)".into(),
+            )
+            .into());
         }
         opts.tolerances = t.clone();
     }

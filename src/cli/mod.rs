@@ -11,6 +11,7 @@ macro_rules! println {
 }
 
 mod commands;
+pub mod exit;
 mod view;
 
 /// Writes one line to stdout; a closed pipe is not an error (see `println!` above), any
@@ -27,9 +28,11 @@ pub(crate) fn print_line(args: std::fmt::Arguments) {
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 
+use exit::CliError;
+use scode::io::MeshFormat;
 use scode::pipeline::Effort;
 use scode::Tolerance;
 
@@ -41,7 +44,14 @@ use scode::Tolerance;
 ///
 /// Mesh files are read and written by extension: .obj .ply .stl .glb .gltf (read) .off (read).
 #[derive(Parser, Debug)]
-#[command(name = "scode", version, about, long_about, propagate_version = true)]
+#[command(
+    name = "scode",
+    version,
+    about,
+    long_about,
+    propagate_version = true,
+    after_help = exit::HELP
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -65,7 +75,11 @@ pub enum Command {
     /// tolerance of them. The file is tessellated once (analytic faces more coarsely,
     /// since their exact surfaces are the reference); --effort max fits five
     /// tessellations and keeps the smallest file (--verbose says which). Faces the
-    /// reader cannot handle are named and skipped; `scode info part.step` shows the plan.
+    /// reader cannot handle are named; the file is only encoded without them with
+    /// --allow-skipped (else exit status 6). `scode info part.step` shows the plan.
+    ///
+    /// A decoded surface that misses --tolerance (or --mean-tolerance) is still written,
+    /// and scode exits with status 5.
     ///
     /// With --raw the input mesh itself is stored as the control mesh (no fitting): a
     /// Draco-class lossy-by-quantisation coder. Faces keep their degree (quads and n-gons are
@@ -146,16 +160,84 @@ pub struct OutputArg {
 impl OutputArg {
     pub fn path(&self) -> Result<&Path> {
         match (&self.output, &self.output_flag) {
-            (Some(a), Some(b)) if a != b => {
-                bail!(
-                    "two different outputs given ({} and -o {}); give one",
-                    a.display(),
-                    b.display()
-                )
-            }
+            (Some(a), Some(b)) if a != b => Err(CliError::Usage(format!(
+                "two different outputs given ({} and -o {}); give one",
+                a.display(),
+                b.display()
+            ))
+            .into()),
             (Some(a), _) | (None, Some(a)) => Ok(a),
-            (None, None) => bail!("no output file given: add OUTPUT or -o OUTPUT"),
+            (None, None) => {
+                Err(CliError::Usage("no output file given: add OUTPUT or -o OUTPUT".into()).into())
+            }
         }
+    }
+
+    /// The output path of a command that reads `input` and writes `writes`: refused when
+    /// it is the input (writing would destroy what is being read) or when its extension
+    /// names another format than the bytes written (a `.obj` holding `.scode` bytes is read
+    /// back as a broken mesh).
+    pub fn checked(&self, input: &Path, writes: Writes) -> Result<&Path> {
+        let output = self.path()?;
+        if same_file(input, output) {
+            return Err(CliError::Usage(format!(
+                "the output {} is the input file; give another output",
+                output.display()
+            ))
+            .into());
+        }
+        let ext = output
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match writes {
+            Writes::Scode if ext.as_deref() != Some("scode") => Err(CliError::Usage(format!(
+                "the output {} must end in .scode: this command writes a .scode file",
+                output.display()
+            ))
+            .into()),
+            Writes::Mesh if ext.as_deref() == Some("scode") => Err(CliError::Usage(format!(
+                "the output {} ends in .scode, but this command writes a mesh; give a mesh \
+                 extension (.obj .ply .stl .glb .gltf .off)",
+                output.display()
+            ))
+            .into()),
+            Writes::Mesh => match MeshFormat::from_path(output) {
+                Ok(_) => Ok(output),
+                Err(e) => Err(CliError::Usage(e.to_string()).into()),
+            },
+            Writes::Scode => Ok(output),
+        }
+    }
+}
+
+/// What a command writes, which its output's extension must name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Writes {
+    /// A `.scode` file.
+    Scode,
+    /// A mesh file, its format chosen by the extension.
+    Mesh,
+}
+
+/// Whether `a` and `b` name one existing file, through symbolic links, `..` and (on unix)
+/// hard links, which share the device and inode but not the path.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) else {
+        return false;
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if ma.dev() == mb.dev() && ma.ino() == mb.ino() {
+            return true;
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = (ma, mb);
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
     }
 }
 
@@ -201,6 +283,11 @@ pub struct EncodeArgs {
     /// Do not store group (CAD face) names; groups themselves are always kept.
     #[arg(long)]
     pub no_names: bool,
+    /// Encode a STEP file even when some of its faces cannot be read (each is named on
+    /// stderr) and leave them out. Without it such a file is not encoded and scode exits
+    /// with status 6, so a model with holes is never written unnoticed.
+    #[arg(long)]
+    pub allow_skipped: bool,
     /// Print what the reader repaired and per-stage timings.
     #[arg(short, long)]
     pub verbose: bool,

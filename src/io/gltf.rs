@@ -2,8 +2,10 @@
 //!
 //! # Reading
 //! The `gltf` crate (without its `import` feature) parses and validates the JSON; buffers are
-//! resolved here: the GLB `BIN` chunk, external files relative to the `.gltf` file (percent-
-//! encoded URIs are decoded), and base64 `data:` URIs. Accessor data is read here too, with
+//! resolved here: the GLB `BIN` chunk, external files in the `.gltf` file's folder or below
+//! it (percent-encoded URIs are decoded; absolute paths, schemes, `..` and links out of the
+//! folder are refused, and [`ReadOptions::external_files`] refuses external files
+//! altogether), and base64 `data:` URIs. Accessor data is read here too, with
 //! every offset, stride and count checked against the buffer, so malformed files give errors
 //! rather than panics.
 //!
@@ -26,14 +28,14 @@
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::io::{self, Write};
-use std::path::Path;
+use std::path::{Component, Path};
 
 use glam::{DMat4, DVec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
-use super::fan_triangles;
 use super::repair::RawMesh;
+use super::{fan_triangles, ReadOptions};
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
@@ -42,9 +44,14 @@ const MAX_NODE_DEPTH: usize = 64;
 /// Most mesh instances read (guards against node graphs that share children exponentially).
 const MAX_INSTANCES: usize = 100_000;
 
-/// Parses a `.glb` or `.gltf` file. `path` names the file in errors and is the base for
-/// relative buffer URIs.
+/// Parses a `.glb` or `.gltf` file with the default [`ReadOptions`]. `path` names the file
+/// in errors and its folder holds the external buffer files.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
+    parse_with(bytes, path, &ReadOptions::default())
+}
+
+/// [`parse`] with `opts` (whether external buffer files may be read at all).
+pub fn parse_with(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<RawMesh> {
     let input_err = |detail: String| Error::input(path, detail);
     let gltf =
         gltf::Gltf::from_slice(bytes).map_err(|e| input_err(format!("invalid glTF: {e}")))?;
@@ -69,7 +76,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                     buffer.index()
                 ))
             })?),
-            gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(uri, path)?),
+            gltf::buffer::Source::Uri(uri) => Cow::Owned(load_uri(uri, path, opts)?),
         };
         if data.len() < buffer.length() {
             return Err(input_err(format!(
@@ -241,8 +248,11 @@ fn visit<'a>(
     Ok(())
 }
 
-/// Loads a buffer URI: a base64 `data:` URI or a file relative to the glTF file.
-fn load_uri(uri: &str, path: &Path) -> Result<Vec<u8>> {
+/// Loads a buffer URI: a base64 `data:` URI, or a file in the glTF file's folder (or below
+/// it). A file named by an absolute path, a scheme (`file:`, `http://`), a `..` component
+/// or a link leading out of the folder is refused: a `.gltf` from an upload would otherwise
+/// copy any file the process can read (`/etc/passwd`) into the encoded output.
+fn load_uri(uri: &str, path: &Path, opts: &ReadOptions) -> Result<Vec<u8>> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (meta, data) = rest
             .split_once(',')
@@ -253,19 +263,47 @@ fn load_uri(uri: &str, path: &Path) -> Result<Vec<u8>> {
         return base64_decode(data)
             .ok_or_else(|| Error::input(path, "data: URI is not valid base64"));
     }
-    if uri.contains("://") {
-        return Err(Error::input(
-            path,
-            format!("buffer URI `{uri}` is not a local file"),
+    let refuse = |why: &str| Error::input(path, format!("buffer URI `{uri}` refused: {why}"));
+    if !opts.external_files {
+        return Err(refuse(
+            "external buffer files are not read (ReadOptions::external_files is false)",
+        ));
+    }
+    // A relative reference has no scheme, and a `:` in its first segment would be one
+    // (`file:`, `http:`, a drive letter).
+    if uri.contains(':') {
+        return Err(refuse(
+            "not a relative file name (it has a scheme or a drive)",
         ));
     }
     let relative = percent_decode(uri)
         .ok_or_else(|| Error::input(path, format!("buffer URI `{uri}` is malformed")))?;
-    let file = path
-        .parent()
-        .unwrap_or_else(|| Path::new(""))
-        .join(relative);
-    std::fs::read(&file).map_err(|e| Error::io(file, e))
+    let relative = Path::new(&relative);
+    for part in relative.components() {
+        match part {
+            Component::Normal(_) | Component::CurDir => {}
+            Component::ParentDir => {
+                return Err(refuse("`..` leads out of the glTF file's folder"));
+            }
+            Component::RootDir | Component::Prefix(_) => {
+                return Err(refuse("absolute paths are not read"));
+            }
+        }
+    }
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let file = folder.join(relative);
+    // Links inside the folder may point out of it: compare where both really are.
+    let real_folder = folder.canonicalize().map_err(|e| Error::io(folder, e))?;
+    let real_file = file.canonicalize().map_err(|e| Error::io(&file, e))?;
+    if !real_file.starts_with(&real_folder) {
+        return Err(refuse(
+            "it leads out of the glTF file's folder through a link",
+        ));
+    }
+    std::fs::read(&real_file).map_err(|e| Error::io(file, e))
 }
 
 /// Decodes standard base64 (with or without `=` padding; whitespace not allowed).
@@ -700,6 +738,79 @@ mod tests {
         let err = read_mesh(&path).unwrap_err().to_string();
         assert!(err.contains("my data.bin"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A `.gltf` whose one buffer is `uri` (a triangle's positions must be at its start).
+    fn gltf_with_buffer_uri(uri: &str) -> String {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
+                "min":[0,0,0],"max":[1,1,0]}}],
+            "bufferViews":[{{"buffer":0,"byteLength":36}}],
+            "buffers":[{{"uri":"{uri}","byteLength":36}}]}}"#
+        )
+    }
+
+    /// Buffer URIs may only name files in the glTF file's folder or below it: absolute
+    /// paths, schemes, `..` (also percent-encoded) and links out of the folder are refused
+    /// with the URI named, before anything outside is read; `external_files: false`
+    /// refuses every file but keeps `data:` URIs.
+    #[test]
+    fn buffer_uris_stay_in_the_files_folder() {
+        let root = std::env::temp_dir().join(format!("scode-gltf-uri-{}", std::process::id()));
+        let dir = root.join("upload");
+        std::fs::create_dir_all(dir.join("sub")).unwrap();
+        let triangle: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+            .iter()
+            .flat_map(|c| c.to_le_bytes())
+            .collect();
+        std::fs::write(dir.join("sub/tri.bin"), &triangle).unwrap();
+        std::fs::write(root.join("secret.bin"), &triangle).unwrap();
+        let read_uri = |uri: &str, opts: &ReadOptions| {
+            let path = dir.join("model.gltf");
+            std::fs::write(&path, gltf_with_buffer_uri(uri)).unwrap();
+            crate::io::read_mesh_with(&path, opts).map(|(m, _)| m)
+        };
+        let default = ReadOptions::default();
+        assert_eq!(read_uri("sub/tri.bin", &default).unwrap().face_count(), 1);
+        assert_eq!(read_uri("./sub/tri.bin", &default).unwrap().face_count(), 1);
+        let mut refused = vec![
+            "/etc/passwd",
+            "../secret.bin",
+            "sub/../../secret.bin",
+            "%2e%2e/secret.bin",
+            "%2Fetc%2Fpasswd",
+            "file:///etc/passwd",
+            "file:../secret.bin",
+            "C:/Windows/win.ini",
+        ];
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink(root.join("secret.bin"), dir.join("link.bin")).unwrap();
+            std::os::unix::fs::symlink(&root, dir.join("up")).unwrap();
+            refused.extend(["link.bin", "up/secret.bin"]);
+        }
+        for uri in refused {
+            let e = read_uri(uri, &default).unwrap_err();
+            assert!(matches!(e, Error::Input { .. }), "{uri}: {e}");
+            let msg = e.to_string();
+            assert!(
+                msg.contains(&format!("buffer URI `{uri}` refused")) && msg.contains("model.gltf"),
+                "{msg}"
+            );
+        }
+        let none = ReadOptions {
+            external_files: false,
+        };
+        let msg = read_uri("sub/tri.bin", &none).unwrap_err().to_string();
+        assert!(msg.contains("external_files"), "{msg}");
+        let data = format!(
+            "data:application/octet-stream;base64,{}",
+            base64_encode(&triangle)
+        );
+        assert_eq!(read_uri(&data, &none).unwrap().face_count(), 1);
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

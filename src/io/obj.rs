@@ -98,6 +98,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
                     }
                 }
                 raw.positions.push(DVec3::from(xyz));
+                raw.vertex_lines.push(line_no as u32);
             }
             b"f" | b"fo" => {
                 polygon.clear();

@@ -104,6 +104,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
             }
         }
         raw.positions.push(DVec3::from(xyz));
+        raw.vertex_lines.push(line as u32);
     }
     let mut face = Vec::new();
     for f in 0..nf {

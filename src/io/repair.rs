@@ -27,6 +27,8 @@ pub struct RawMesh {
     pub group_names: Vec<String>,
     /// Source line of each face (text formats) for messages; empty when not known.
     pub face_lines: Vec<u32>,
+    /// Source line of each vertex (text formats) for messages; empty when not known.
+    pub vertex_lines: Vec<u32>,
     /// Sharp edges as vertex pairs in file numbering.
     pub sharp_edges: Vec<[u32; 2]>,
     pub corners: Vec<u32>,
@@ -72,6 +74,14 @@ impl RawMesh {
 
     fn face(&self, f: usize) -> &[u32] {
         &self.face_vertices[self.face_offsets[f] as usize..self.face_offsets[f + 1] as usize]
+    }
+
+    /// "vertex 3 (line 5)" or "vertex 3": how messages name a vertex of the file.
+    fn describe_vertex(&self, v: usize) -> String {
+        match self.vertex_lines.get(v) {
+            Some(line) => format!("vertex {v} (line {line})"),
+            None => format!("vertex {v}"),
+        }
     }
 
     /// "face 12 (line 40)" or "face 12": how messages name a face of the file.
@@ -124,6 +134,46 @@ impl Examples {
     }
 }
 
+/// An error when the positions' bounding box has no finite diagonal, naming the vertices at
+/// the ends of its longest side. The encoder measures every distance, tolerance and
+/// quantisation step from coordinate differences squared: finite coordinates near 1e154 or
+/// beyond make them infinite, and the encoded file would hold a grid the decoder refuses.
+fn check_extent(raw: &RawMesh, path: &Path) -> Result<()> {
+    let Some(first) = raw.positions.first() else {
+        return Ok(());
+    };
+    let (mut lo, mut hi) = ([0usize; 3], [0usize; 3]);
+    let (mut lo_p, mut hi_p) = (*first, *first);
+    for (i, p) in raw.positions.iter().enumerate() {
+        for k in 0..3 {
+            if p[k] < lo_p[k] {
+                (lo_p[k], lo[k]) = (p[k], i);
+            }
+            if p[k] > hi_p[k] {
+                (hi_p[k], hi[k]) = (p[k], i);
+            }
+        }
+    }
+    let size = hi_p - lo_p;
+    if size.length().is_finite() {
+        return Ok(());
+    }
+    let k = (0..3)
+        .max_by(|&a, &b| size[a].total_cmp(&size[b]))
+        .unwrap_or(0);
+    Err(Error::input(
+        path,
+        format!(
+            "coordinates too large: {} at {:?} and {} at {:?} span a bounding box whose \
+             diagonal overflows f64 (scale the model down)",
+            raw.describe_vertex(lo[k]),
+            raw.positions[lo[k]].to_array(),
+            raw.describe_vertex(hi[k]),
+            raw.positions[hi[k]].to_array()
+        ),
+    ))
+}
+
 /// Welds, repairs and validates a parsed file; see the [`io`](super) module docs for the
 /// rules. Errors name `path`.
 pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlMesh, ReadReport)> {
@@ -166,11 +216,13 @@ pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlM
         return Err(Error::input(
             path,
             format!(
-                "vertex {i} has a non-finite coordinate {:?}",
+                "{} has a non-finite coordinate {:?}",
+                raw.describe_vertex(i),
                 raw.positions[i]
             ),
         ));
     }
+    check_extent(&raw, path)?;
     let nv = raw.positions.len() as u32;
     for f in 0..raw.face_count() {
         if let Some(&v) = raw.face(f).iter().find(|&&v| v >= nv) {
@@ -489,6 +541,42 @@ mod tests {
         raw.push_face(&[0, 2, 3], 0);
         raw.input_faces = 2;
         raw
+    }
+
+    /// Finite coordinates whose box has no finite diagonal are refused at read time with
+    /// the file, the vertices and their lines named; large boxes that still have one are
+    /// read.
+    #[test]
+    fn coordinates_whose_box_overflows_are_refused() {
+        let obj = "v 0 0 0\nv 1.7e308 0 0\nv -1.7e308 1 0\nf 1 2 3\n";
+        let e = crate::io::read_mesh_bytes(obj.as_bytes(), MeshFormat::Obj, Path::new("big.obj"))
+            .unwrap_err();
+        assert!(matches!(e, Error::Input { .. }), "{e}");
+        let msg = e.to_string();
+        assert!(msg.starts_with("big.obj: coordinates too large"), "{msg}");
+        assert!(
+            msg.contains("vertex 2 (line 3)") && msg.contains("vertex 1 (line 2)"),
+            "{msg}"
+        );
+        // The diagonal squares the sides: 1e155 overflows already, 1e150 does not.
+        for (side, ok) in [(1e155, false), (1e150, true)] {
+            let mut raw = square_raw();
+            raw.positions[2] = DVec3::new(side, side, 0.0);
+            assert_eq!(
+                finish(raw, MeshFormat::Stl, Path::new("t.stl")).is_ok(),
+                ok,
+                "{side}"
+            );
+        }
+        let mut raw = square_raw();
+        raw.positions[1].x = 1e300;
+        let msg = finish(raw, MeshFormat::Ply, Path::new("t.ply"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("vertex 0 at") && msg.contains("vertex 1 at"),
+            "{msg}"
+        );
     }
 
     #[test]

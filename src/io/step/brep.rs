@@ -19,8 +19,10 @@ use truck_stepio::r#in::{
 use truck_topology::compress::{CompressedEdge, CompressedEdgeIndex, CompressedFace};
 
 use super::analytic::Analytic;
+use super::check;
 use super::text::{self, Records};
-use super::{run_with_timeout, FaceSurface, SkippedFace};
+use super::watch::{Cancel, Workers};
+use super::{FaceSurface, SkippedFace};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
 use crate::mesh::{AnalyticSurface, Axis};
@@ -63,6 +65,9 @@ pub(super) struct Parsed {
     pub skipped: Vec<SkippedFace>,
     pub notes: Vec<String>,
     pub millimetres_per_unit: Option<f64>,
+    /// The read's watched jobs: every tessellation of the file counts its abandoned
+    /// threads with the parse's and the conversion's.
+    pub workers: Workers,
 }
 
 fn entity_ref<T>(p: &PlaceHolder<T>) -> Option<u64> {
@@ -74,7 +79,11 @@ fn entity_ref<T>(p: &PlaceHolder<T>) -> Option<u64> {
 
 /// Parses the text and converts every body's faces. Errors only when nothing can be read.
 pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result<Loaded> {
+    check::check(raw).map_err(|p| Error::input(path, p.to_string()))?;
     let (text, pcurve, empty) = text::prepass(raw);
+    // The pre-pass keeps every line where it was (the parabola rewrite below does not), so
+    // a syntax error found in this text is on the line the user sees.
+    let prepassed = text.clone();
     let mut records = text::scan(&text);
     let mut notes = Vec::new();
     let (text, parabolas) = text::parabolas_to_bsplines(&text, &records);
@@ -128,8 +137,20 @@ pub(super) fn parse(path: &Path, raw: &str, opts: &super::StepOptions) -> Result
     } else {
         None
     };
-    let exchange = truck_stepio::r#in::ruststep::parser::parse(&text)
-        .map_err(|e| Error::input(path, format!("STEP syntax error: {e}")))?;
+    let exchange = truck_stepio::r#in::ruststep::parser::parse(&text).map_err(|e| {
+        let detail = match check::locate_syntax_error(&prepassed) {
+            Some(p) => format!("STEP syntax error at {p}"),
+            // ruststep's own message, on one line.
+            None => format!(
+                "STEP syntax error: {}",
+                e.to_string()
+                    .split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            ),
+        };
+        Error::input(path, detail)
+    })?;
     let Some(data) = exchange.data.first() else {
         return Err(Error::input(path, "no DATA section"));
     };
@@ -233,8 +254,13 @@ pub(super) struct Loaded {
 }
 
 /// Converts every face of every body, each in a watchdog thread (`face_timeout`): a face
-/// whose conversion panics or hangs is skipped and named, the others are kept.
-pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
+/// whose conversion panics or hangs is skipped and named, the others are kept. An error
+/// when more conversions than a read tolerates are still running after their timeout.
+pub(super) fn convert(
+    loaded: Loaded,
+    opts: &super::StepOptions,
+    workers: Workers,
+) -> Result<Parsed> {
     let Loaded {
         table,
         records,
@@ -275,10 +301,14 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
                 let face_id = entity_ref(face).unwrap_or(0);
                 let (t, r, f, m) = (table.clone(), records.clone(), face.clone(), maps.clone());
                 let (nv, ne) = (body.vertices.len(), body.edges.len());
-                let watched =
-                    run_with_timeout("scode-step-convert", opts.face_timeout, move || {
-                        convert_face(&t, &r, &f, &m, nv, ne, radians_per_angle_unit)
-                    });
+                workers.check()?;
+                // truck_stepio's conversion cannot poll a token: a face that hangs in it is
+                // abandoned at the timeout and counted.
+                let watched = workers.run(
+                    "scode-step-convert",
+                    opts.face_timeout,
+                    move |_: &Cancel| convert_face(&t, &r, &f, &m, nv, ne, radians_per_angle_unit),
+                );
                 let result = watched
                     .or_why("converting the face (truck)", opts.face_timeout)
                     .map_err(|why| (face_and_surface(&records, face_id), why))
@@ -343,12 +373,13 @@ pub(super) fn convert(loaded: Loaded, opts: &super::StepOptions) -> Parsed {
              from their STEP records"
         ));
     }
-    Parsed {
+    Ok(Parsed {
         bodies,
         skipped,
         notes,
         millimetres_per_unit,
-    }
+        workers,
+    })
 }
 
 /// `ADVANCED_FACE #12 on B_SPLINE_SURFACE_WITH_KNOTS #40`: a face and its surface (the

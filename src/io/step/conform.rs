@@ -24,6 +24,7 @@ use truck_meshalgo::prelude::{
 use truck_stepio::r#in::alias::Surface;
 
 use super::analytic::Analytic;
+use super::watch::Guarded;
 
 /// A vertex of a conforming face mesh: a point of the shared pool (an edge polyline point),
 /// or a point this face adds (interior grid points, points on a cut seam or at a pole).
@@ -138,6 +139,38 @@ impl UvSurface for Analytic {
 
     fn division(&self, range: ((f64, f64), (f64, f64)), tol: f64) -> (Vec<f64>, Vec<f64>) {
         Analytic::division(self, range, tol)
+    }
+}
+
+/// A surface whose evaluations stop the tessellation when its job is cancelled (see
+/// `watch`): every loop of the tessellation evaluates or projects, so each polls.
+impl<S: UvSurface> UvSurface for Guarded<S> {
+    fn source(&self) -> &'static str {
+        self.inner.source()
+    }
+
+    fn point(&self, u: f64, v: f64) -> DVec3 {
+        self.get().point(u, v)
+    }
+
+    fn periods(&self) -> [Option<f64>; 2] {
+        self.inner.periods()
+    }
+
+    fn ranges(&self) -> [Option<(f64, f64)>; 2] {
+        self.inner.ranges()
+    }
+
+    fn project(&self, p: DVec3, hint: Option<[f64; 2]>) -> Option<[f64; 2]> {
+        self.get().project(p, hint)
+    }
+
+    fn project_globally(&self, p: DVec3) -> Option<([f64; 2], f64)> {
+        self.get().project_globally(p)
+    }
+
+    fn division(&self, range: ((f64, f64), (f64, f64)), tol: f64) -> (Vec<f64>, Vec<f64>) {
+        self.get().division(range, tol)
     }
 }
 

@@ -18,11 +18,17 @@
 //! * **Nothing dropped silently**: a face whose surface or edge curve truck cannot convert,
 //!   or whose tessellation fails, panics or hangs, becomes a [`SkippedFace`] naming the face
 //!   id and the entity; the rest of the model is still read.
+//! * **Hostile text** ([`check`]): nesting deeper than [`check::MAX_NESTING`], numbers that
+//!   are not finite f64 values (or do not fit ruststep's integers) and points whose box
+//!   has no finite diagonal are refused with their line and instance before ruststep parses
+//!   the file; a syntax error names the line of the damaged instance.
 //! * **Hangs and panics**: parsing runs in a watchdog thread ([`StepOptions::timeout`]), and
 //!   each face is tessellated in its own watchdog thread ([`StepOptions::face_timeout`]),
 //!   both under `catch_unwind`; all faces together get [`StepOptions::total_timeout`], so a
-//!   read always ends. A thread that does not finish cannot be stopped; it is abandoned (it
-//!   keeps a core busy until the process ends), which the result says.
+//!   read always ends. At a timeout the job's tessellation (ours and truck's) stops at its
+//!   next surface or curve evaluation (`watch`); a job that cannot be stopped (the parse,
+//!   truck's conversion of a face) is abandoned, and a read with more than one of those
+//!   still running fails rather than start more threads.
 //! * **Welding by construction**: each B-rep edge is polylined once (truck's curve
 //!   polylining, trimmed to the edge's vertices) into a shared vertex pool, where boundary
 //!   points at one position are one vertex. Each face is then triangulated by our own
@@ -56,9 +62,11 @@
 
 mod analytic;
 mod brep;
+pub mod check;
 mod conform;
 mod tessellate;
 pub mod text;
+mod watch;
 
 use std::path::Path;
 use std::time::Duration;
@@ -66,6 +74,7 @@ use std::time::Duration;
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
 use crate::mesh::{AnalyticSurface, Axis, ControlMesh, Tolerance};
+use watch::{Cancel, Watched, Workers};
 
 /// Options of [`read_step`].
 #[derive(Clone, Debug, PartialEq)]
@@ -298,7 +307,10 @@ fn parse_and_convert(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<br
     }
     let owned_path = path.to_path_buf();
     let owned_opts = opts.clone();
-    let parsed = run_with_timeout("scode-step-parse", opts.timeout, move || {
+    let workers = Workers::default();
+    // ruststep's parse cannot poll a token: the text checks before it keep it linear in
+    // the file's size, and past the timeout it is abandoned.
+    let parsed = workers.run("scode-step-parse", opts.timeout, move |_: &Cancel| {
         brep::parse(&owned_path, &text, &owned_opts)
     });
     let parsed = match parsed {
@@ -309,7 +321,7 @@ fn parse_and_convert(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<br
                 format!("the STEP reader (truck-stepio/ruststep) panicked: {msg}"),
             ))
         }
-        Watched::TimedOut => {
+        Watched::TimedOut { .. } => {
             return Err(Error::input(
                 path,
                 format!(
@@ -320,65 +332,5 @@ fn parse_and_convert(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<br
             ))
         }
     };
-    Ok(brep::convert(parsed, opts))
-}
-
-/// How a watched computation ended.
-pub(crate) enum Watched<T> {
-    Done(T),
-    Panicked(String),
-    TimedOut,
-}
-
-impl<T> Watched<T> {
-    /// The result, or why there is none: "`what` panicked: ..." or "`what` did not finish
-    /// within N s (abandoned)", for the message naming a skipped face.
-    pub(crate) fn or_why(self, what: &str, timeout: Duration) -> std::result::Result<T, String> {
-        match self {
-            Watched::Done(v) => Ok(v),
-            Watched::Panicked(msg) => Err(format!("{what} panicked: {msg}")),
-            Watched::TimedOut => Err(format!(
-                "{what} did not finish within {:.0} s (abandoned)",
-                timeout.as_secs_f64()
-            )),
-        }
-    }
-}
-
-/// Runs `f` in a new thread and waits at most `timeout`. A thread that does not finish is
-/// abandoned: Rust cannot stop it, so it runs on until it ends or the process exits.
-pub(crate) fn run_with_timeout<T: Send + 'static>(
-    name: &str,
-    timeout: Duration,
-    f: impl FnOnce() -> T + Send + 'static,
-) -> Watched<T> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    let spawned = std::thread::Builder::new()
-        .name(name.to_string())
-        .stack_size(64 << 20)
-        .spawn(move || {
-            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-            let _ = tx.send(r);
-        });
-    if let Err(e) = spawned {
-        return Watched::Panicked(format!("cannot start a thread: {e}"));
-    }
-    match rx.recv_timeout(timeout) {
-        Ok(Ok(v)) => Watched::Done(v),
-        Ok(Err(payload)) => Watched::Panicked(panic_message(payload.as_ref())),
-        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => Watched::TimedOut,
-        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-            Watched::Panicked("the worker thread ended without a result".into())
-        }
-    }
-}
-
-fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
-    if let Some(s) = payload.downcast_ref::<&str>() {
-        (*s).to_string()
-    } else if let Some(s) = payload.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "unknown panic".to_string()
-    }
+    brep::convert(parsed, opts, workers)
 }

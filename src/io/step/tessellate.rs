@@ -21,9 +21,8 @@ use truck_topology::compress::{
 
 use super::brep::{Parsed, ParsedBody, ParsedFace};
 use super::conform;
-use super::{
-    run_with_timeout, Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions, Watched,
-};
+use super::watch::{Cancel, Guarded, Watched, Workers};
+use super::{Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
 use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind, Tolerance};
@@ -31,6 +30,8 @@ use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind, Tole
 type MeshedShell = CompressedShell<Point3, PolylineCurve<Point3>, Option<PolygonMesh>>;
 /// One face as a shell of its own, for truck's tessellator.
 type FaceShell = CompressedShell<Point3, Curve3D, Surface>;
+/// A face shell whose curves and surface stop truck's tessellator at the job's timeout.
+type GuardedShell = CompressedShell<Point3, Guarded<Curve3D>, Guarded<Surface>>;
 
 fn dv(p: &Point3) -> DVec3 {
     DVec3::new(p.x, p.y, p.z)
@@ -125,6 +126,30 @@ fn single_face_shell(
     )
 }
 
+/// `shell` with its curves and surfaces evaluated through the job's token.
+fn guard_shell(shell: FaceShell, cancel: &Cancel) -> GuardedShell {
+    CompressedShell {
+        vertices: shell.vertices,
+        edges: shell
+            .edges
+            .into_iter()
+            .map(|e| CompressedEdge {
+                vertices: e.vertices,
+                curve: Guarded::new(e.curve, cancel),
+            })
+            .collect(),
+        faces: shell
+            .faces
+            .into_iter()
+            .map(|f| CompressedFace {
+                surface: Guarded::new(f.surface, cancel),
+                boundaries: f.boundaries,
+                orientation: f.orientation,
+            })
+            .collect(),
+    }
+}
+
 /// Pool of welded vertices. Boundary points (B-rep vertices and edge polyline points) are
 /// added with [`Pool::push_welded`], which returns an existing point of the same body within
 /// the weld distance: files that repeat a VERTEX_POINT at one position, or edges whose
@@ -186,8 +211,9 @@ pub(super) fn tessellate(path: &Path, parsed: Parsed, opts: &StepOptions) -> Res
         skipped,
         notes,
         millimetres_per_unit,
+        workers,
     } = parsed;
-    let mut model = WeldedModel::new(path, opts, tol, &bodies, skipped);
+    let mut model = WeldedModel::new(path, opts, tol, &bodies, skipped, workers);
     for (body_index, body) in bodies.iter().enumerate() {
         model.add_body(body_index, body)?;
     }
@@ -369,6 +395,8 @@ struct WeldedModel<'a> {
     started: Instant,
     total_faces: usize,
     faces_done: usize,
+    /// Runs each face's jobs and counts those that could not be stopped.
+    workers: Workers,
 }
 
 impl<'a> WeldedModel<'a> {
@@ -378,6 +406,7 @@ impl<'a> WeldedModel<'a> {
         tol: Tolerances,
         bodies: &[ParsedBody],
         skipped: Vec<SkippedFace>,
+        workers: Workers,
     ) -> Self {
         WeldedModel {
             path,
@@ -397,16 +426,19 @@ impl<'a> WeldedModel<'a> {
             started: Instant::now(),
             total_faces: bodies.iter().map(|b| b.faces.len()).sum(),
             faces_done: 0,
+            workers,
         }
     }
 
     /// Adds the body's faces, each as a group or as a skipped face, then the body. An
-    /// error only when the total timeout runs out.
+    /// error only when the total timeout runs out or more jobs than a read tolerates could
+    /// not be stopped.
     fn add_body(&mut self, body_index: usize, body: &ParsedBody) -> Result<()> {
         let first_group = self.mesh.groups.len() as u32;
         let analytic_only = analytic_only_edges(body);
         for (index, parsed) in body.faces.iter().enumerate() {
             self.check_total_time(body, parsed)?;
+            self.workers.check()?;
             self.faces_done += 1;
             let (shell, edges, _) = single_face_shell(body, &parsed.face);
             let face = FaceInBody {
@@ -506,14 +538,19 @@ impl<'a> WeldedModel<'a> {
         if need.is_empty() {
             return Ok(());
         }
-        let watched = run_with_timeout("scode-step-edges", self.opts.face_timeout, move || {
-            need.into_iter()
-                .map(|(ge, c, chord)| {
-                    let range = c.range_tuple();
-                    (ge, PolylineCurve::from_curve(&c, range, chord).0)
-                })
-                .collect::<Vec<(usize, Vec<Point3>)>>()
-        });
+        let watched = self.workers.run(
+            "scode-step-edges",
+            self.opts.face_timeout,
+            move |cancel: &Cancel| {
+                need.into_iter()
+                    .map(|(ge, c, chord)| {
+                        let range = c.range_tuple();
+                        let c = Guarded::new(c, cancel);
+                        (ge, PolylineCurve::from_curve(&c, range, chord).0)
+                    })
+                    .collect::<Vec<(usize, Vec<Point3>)>>()
+            },
+        );
         let polylines = watched.or_why("polylining its edges (truck)", self.opts.face_timeout)?;
         for (ge, pts) in polylines {
             self.add_edge_polyline(face.body_index, face.body, ge, pts);
@@ -712,9 +749,14 @@ impl<'a> WeldedModel<'a> {
             }
             Watched::Done(Err(msg)) => Err(msg),
             Watched::Panicked(msg) => Err(format!("panicked: {msg}")),
-            Watched::TimedOut => Err(format!(
-                "did not finish within {:.0} s",
-                self.opts.face_timeout.as_secs_f64()
+            Watched::TimedOut { stopped } => Err(format!(
+                "did not finish within {:.0} s{}",
+                self.opts.face_timeout.as_secs_f64(),
+                if stopped {
+                    " (stopped)"
+                } else {
+                    " (abandoned, still running)"
+                }
             )),
         }
     }
@@ -733,21 +775,27 @@ impl<'a> WeldedModel<'a> {
         let chord = self.tol.chord;
         let face_chord = chord * self.tol.analytic_factor;
         let stretch = self.opts.stretch_parameter_plane;
-        run_with_timeout(
+        self.workers.run(
             "scode-step-face",
             self.opts.face_timeout,
-            move || match exact {
-                Some(a) => conform::conforming_tessellation(&a, &loops, face_chord, stretch).map(
-                    |mut cm| {
-                        if !same_sense {
-                            for t in &mut cm.triangles {
-                                t.swap(1, 2);
+            move |cancel: &Cancel| match exact {
+                Some(a) => {
+                    let a = Guarded::new(a, cancel);
+                    conform::conforming_tessellation(&a, &loops, face_chord, stretch).map(
+                        |mut cm| {
+                            if !same_sense {
+                                for t in &mut cm.triangles {
+                                    t.swap(1, 2);
+                                }
                             }
-                        }
-                        cm
-                    },
-                ),
-                None => conform::conforming_tessellation(&surface, &loops, chord, stretch),
+                            cm
+                        },
+                    )
+                }
+                None => {
+                    let surface = Guarded::new(surface, cancel);
+                    conform::conforming_tessellation(&surface, &loops, chord, stretch)
+                }
             },
         )
     }
@@ -765,9 +813,11 @@ impl<'a> WeldedModel<'a> {
         let fell_back = format!("face #{} ({}): {why}", face.parsed.face_id, face.name);
         self.tally.fallback.push(fell_back);
         let chord = self.tol.chord;
-        let watched = run_with_timeout("scode-step-face", self.opts.face_timeout, move || {
-            shell.robust_triangulation(chord)
-        });
+        let watched = self.workers.run(
+            "scode-step-face",
+            self.opts.face_timeout,
+            move |cancel: &Cancel| guard_shell(shell, cancel).robust_triangulation(chord),
+        );
         let meshed: MeshedShell =
             watched.or_why("the tessellator (truck)", self.opts.face_timeout)?;
         let Some(poly) = meshed.faces.first().and_then(|f| f.surface.as_ref()) else {
@@ -1476,6 +1526,48 @@ fn no_face_error(path: &Path, skipped: &[SkippedFace]) -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A square face on a plane whose origin is infinite (what `1.0E400` in a placement
+    /// would become without the text checks): truck's tessellator divides its boundary for
+    /// ever (the NaN distances never meet the tolerance) and allocates without end. Given
+    /// through `guard_shell`, it stops at the face timeout and leaves no thread.
+    #[test]
+    fn a_runaway_truck_tessellation_stops_at_the_face_timeout() {
+        use std::time::Duration;
+        use truck_stepio::r#in::alias::{ElementarySurface, Line, Plane};
+        let corners = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)]
+            .map(|(x, y)| Point3::new(x, y, 0.0));
+        let o = Point3::new(f64::INFINITY, 0.0, 0.0);
+        let plane = Plane::new(o, o + truck_stepio::r#in::alias::Vector3::unit_x(), o);
+        let shell: FaceShell = CompressedShell {
+            vertices: corners.to_vec(),
+            edges: (0..4)
+                .map(|i| CompressedEdge {
+                    vertices: (i, (i + 1) % 4),
+                    curve: Curve3D::Line(Line(corners[i], corners[(i + 1) % 4])),
+                })
+                .collect(),
+            faces: vec![CompressedFace {
+                surface: Surface::ElementarySurface(Box::new(ElementarySurface::Plane(plane))),
+                boundaries: vec![(0..4)
+                    .map(|index| CompressedEdgeIndex {
+                        index,
+                        orientation: true,
+                    })
+                    .collect()],
+                orientation: true,
+            }],
+        };
+        let workers = Workers::default();
+        let timeout = Duration::from_millis(300);
+        let t0 = Instant::now();
+        let w = workers.run("test-runaway", timeout, move |cancel: &Cancel| {
+            guard_shell(shell, cancel).robust_triangulation(0.01)
+        });
+        assert!(matches!(w, Watched::TimedOut { stopped: true }));
+        assert!(t0.elapsed() < timeout + super::super::watch::GRACE);
+        assert_eq!(workers.still_running(), 0);
+    }
 
     /// Two faces closing the same ear on their shared edge `a - tip - b`: face 0's
     /// triangles are split at the midpoint of `a - b`, face 1's are left alone, and every
