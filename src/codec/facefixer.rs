@@ -7,6 +7,7 @@
 //! labels and maps the result back, so encoder and decoder cannot disagree about face order,
 //! vertex order or which label owns which edge.
 
+use super::Budget;
 use crate::error::{Error, Result};
 use crate::mesh::topology::{HalfEdgeMesh, NONE};
 
@@ -244,13 +245,22 @@ impl Rebuilt {
     }
 }
 
+/// The element `n` links away from `from`.
+fn walk(links: &[u32], mut from: u32, n: u64) -> u32 {
+    for _ in 0..n {
+        from = links[from as usize];
+    }
+    from
+}
+
 fn bad(field: &'static str, detail: impl Into<String>) -> Error {
     Error::format("connectivity", field, detail)
 }
 
 /// Undoes the labels (face-fixer.md §4). Every precondition is checked, so arbitrary label
-/// sequences give an error, never a panic.
-pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
+/// sequences give an error, never a panic. The walks of merge labels, whose length the labels
+/// decide, are charged to `budget`'s work bound.
+pub(crate) fn rebuild(labels: &[Label], budget: &mut Budget) -> Result<Rebuilt> {
     // Forward pass: split into components by counting open boundaries, and number faces.
     let mut comps = Vec::new();
     let mut open = 0u64;
@@ -286,11 +296,13 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
         return Err(bad("labels", "the last component does not end with E"));
     }
 
-    let mut next: Vec<u32> = Vec::new();
-    let mut twin: Vec<u32> = Vec::new();
-    let mut face: Vec<u32> = Vec::new();
-    let mut a_next: Vec<u32> = Vec::new();
-    let mut a_prev: Vec<u32> = Vec::new();
+    // Every label but the components' first makes one pair of half-edges.
+    let nh = 2 * (labels.len() - comps.len());
+    let mut next: Vec<u32> = Vec::with_capacity(nh);
+    let mut twin: Vec<u32> = Vec::with_capacity(nh);
+    let mut face: Vec<u32> = Vec::with_capacity(nh);
+    let mut a_next: Vec<u32> = Vec::with_capacity(nh);
+    let mut a_prev: Vec<u32> = Vec::with_capacity(nh);
     let mut faces = vec![
         RebuiltFace {
             first: NONE,
@@ -403,14 +415,24 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
                             format!("label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {len}, stack depth {})", stack.len()),
                         ));
                     }
+                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the
+                    // gate. The walks to Bpart's end and to B's gate go the shorter way round
+                    // and are charged first (their length is the file's to choose), and so is
+                    // inserting B i entries deep.
+                    let (l64, b_gate_at) = (u64::from(l), u64::from((l - k) % l));
+                    let (b_end_ahead, b_end_back) = (l64 - 1, len - l64 + 1);
+                    let b_gate_back = l64 - b_gate_at;
+                    budget.work(
+                        b_end_ahead.min(b_end_back) + b_gate_at.min(b_gate_back) + u64::from(i),
+                    )?;
                     let (g, t) =
                         new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the gate.
+                    let blast = if b_end_ahead <= b_end_back {
+                        walk(&a_next, gate, b_end_ahead)
+                    } else {
+                        walk(&a_prev, gate, b_end_back)
+                    };
                     let b1 = a_next[gate as usize];
-                    let mut blast = gate;
-                    for _ in 0..l - 1 {
-                        blast = a_next[blast as usize];
-                    }
                     let a_first = a_next[blast as usize];
                     // B = [t, b1 .. blast]
                     a_next[t as usize] = b1;
@@ -422,10 +444,11 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
                     a_prev[a_first as usize] = g;
                     a_next[gate as usize] = g;
                     a_prev[g as usize] = gate;
-                    let mut bgate = t;
-                    for _ in 0..(l - k) % l {
-                        bgate = a_next[bgate as usize];
-                    }
+                    let bgate = if b_gate_at <= b_gate_back {
+                        walk(&a_next, t, b_gate_at)
+                    } else {
+                        walk(&a_prev, t, b_gate_back)
+                    };
                     let at = stack.len() - i as usize;
                     stack.insert(at, (bgate, u64::from(l)));
                     gate = g;
@@ -601,7 +624,7 @@ mod tests {
         let m = mesh_from(nv, faces);
         let he = HalfEdgeMesh::build(&m).unwrap();
         let tr = encode_traversal(&he);
-        let rb = rebuild(&tr.labels).unwrap();
+        let rb = rebuild(&tr.labels, &mut Budget::unlimited()).unwrap();
         assert_eq!(rb.faces.len(), tr.faces.len());
         let mut map = vec![NONE; rb.vertex_count];
         let mut out = Vec::new();
@@ -840,7 +863,7 @@ mod tests {
             vec![F(3), H(3), R, R, E],
         ];
         for c in cases {
-            assert!(rebuild(&c).is_err(), "{c:?}");
+            assert!(rebuild(&c, &mut Budget::unlimited()).is_err(), "{c:?}");
         }
     }
 
@@ -863,7 +886,7 @@ mod tests {
         /// half-edge structure.
         #[test]
         fn random_labels_never_panic(labels in proptest::collection::vec(label_strategy(), 0..60)) {
-            if let Ok(rb) = rebuild(&labels) {
+            if let Ok(rb) = rebuild(&labels, &mut Budget::unlimited()) {
                 for h in 0..rb.next.len() {
                     assert_eq!(rb.twin[rb.twin[h] as usize] as usize, h);
                     assert_eq!(rb.prev[rb.next[h] as usize] as usize, h);
