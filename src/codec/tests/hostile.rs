@@ -2,8 +2,7 @@
 //! generator with the codec's own writers and coders, so CRCs and entropy coding are right and
 //! it is the decoder's logic that must reject the file; each test asserts the rejection and
 //! the decoder's own accounting (never wall time): at most 100 MB charged, the work within its
-//! bound. `write_hostile_files` (ignored) writes the full-size files for timing the CLI, and
-//! `spec/vectors/limits/` holds small ones, one per rule of spec §10.
+//! bound. `spec/vectors/limits/` holds small ones, one per rule of spec §10.
 
 use super::super::bytes::{TAG_DEFLATED, TAG_SKIPPABLE};
 use super::*;
@@ -562,55 +561,6 @@ fn faces_of_high_degree_decode_in_linear_work() {
     assert_eq!(usage.work, 0);
 }
 
-/// Writes the full-size hostile files into `$SCODE_HOSTILE_DIR` (for timing the command-line
-/// tool on them): `cargo test --release --lib write_hostile_files -- --ignored`.
-#[test]
-#[ignore]
-fn write_hostile_files() {
-    let dir =
-        std::path::PathBuf::from(std::env::var("SCODE_HOSTILE_DIR").expect("SCODE_HOSTILE_DIR"));
-    std::fs::create_dir_all(&dir).unwrap();
-    let write = |name: &str, bytes: &[u8]| {
-        std::fs::write(dir.join(name), bytes).unwrap();
-        println!("{name}: {} bytes", bytes.len());
-    };
-    let c = Counts {
-        v: 3,
-        f: 1,
-        k: 180_000_000,
-        g: 1,
-        ..Counts::default()
-    };
-    write("label_run.scode", &label_run(c, 1 << 27, Label::R));
-    write("merge_walk.scode", &merge_walk(1 << 22, 1200).1);
-    write("deep_inserts.scode", &deep_inserts(1 << 22, 20_000).1);
-    write("fan_vertex_groups.scode", &fan_vertex_groups(200_000).1);
-    // Real zlib streams of zeros: the connectivity, creases and geometry sections and four
-    // skippable ones, 1 GiB each.
-    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
-    let chunk = vec![0u8; 1 << 20];
-    for _ in 0..1024 {
-        std::io::Write::write_all(&mut z, &chunk).unwrap();
-    }
-    let stream = z.finish().unwrap();
-    let cube = encode(&samples::cube(), &EncodeOptions::default()).unwrap();
-    let mut r = Reader::new(&cube, "file");
-    r.bytes(6, "start").unwrap();
-    read_section(&mut r, Some(0), true).unwrap();
-    let mut bombs = cube[..r.pos()].to_vec();
-    for id in [SEC_CONNECTIVITY, SEC_CREASES, SEC_GEOMETRY] {
-        deflated_section(&mut bombs, id, 1 << 30, &stream);
-    }
-    for id in 7..11 {
-        deflated_section(&mut bombs, id | TAG_SKIPPABLE, 1 << 30, &stream);
-    }
-    write("inflate.scode", &bombs);
-    write("level12.scode", &triangle_at_level(12));
-    write("isolated.scode", &isolated_vertices(50_000_000, true).1);
-    write("names.scode", &repeated_names(100_000, 100_000).1);
-    write("big_face.scode", &pillow(200_000));
-}
-
 /// The vectors of `spec/vectors/limits/` (spec §11): file name, bytes, and the error a decoder
 /// with the default limits gives (`LimitsExceeded` and the quantity, or `Format` and the
 /// section and field).
@@ -660,34 +610,36 @@ fn limit_vector_dir() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/limits")
 }
 
-#[test]
-fn limit_vectors_match_their_generators() {
-    for (name, bytes, _) in limit_vectors() {
-        let stored = std::fs::read(limit_vector_dir().join(name)).unwrap();
-        assert!(
-            stored == bytes,
-            "{name} differs from its generator: `cargo test --release --lib write_limit_vectors \
-             -- --ignored` writes it"
-        );
-        assert!(bytes.len() < 100_000, "{name}: {} bytes", bytes.len());
-    }
-}
-
-/// Writes `spec/vectors/limits/` and its `EXPECTED.txt` (only when a rule or the coders change
-/// deliberately).
-#[test]
-#[ignore]
+/// Writes `spec/vectors/limits/` and its `EXPECTED.txt`.
 fn write_limit_vectors() {
     let dir = limit_vector_dir();
     std::fs::create_dir_all(&dir).unwrap();
     let mut expected = String::from(
         "# file  bytes  error with the default limits: LimitsExceeded + quantity, or Format + \
-         section.field\n# Regenerate with `cargo test --release --lib write_limit_vectors -- \
-         --ignored`; checked by tests/spec_vectors.rs.\n",
+         section.field\n# Regenerate with `SCODE_WRITE_VECTORS=1 cargo test --release --lib \
+         limit_vectors`; checked by tests/spec_vectors.rs.\n",
     );
     for (name, bytes, error) in limit_vectors() {
         std::fs::write(dir.join(name), &bytes).unwrap();
         expected += &format!("{name} {} {error}\n", bytes.len());
     }
     std::fs::write(dir.join("EXPECTED.txt"), expected).unwrap();
+}
+
+/// The stored vectors are what the generators make (with `SCODE_WRITE_VECTORS` set, when a
+/// rule or the coders change deliberately, they are written first).
+#[test]
+fn limit_vectors_match_their_generators() {
+    if std::env::var_os("SCODE_WRITE_VECTORS").is_some() {
+        write_limit_vectors();
+    }
+    for (name, bytes, _) in limit_vectors() {
+        let stored = std::fs::read(limit_vector_dir().join(name)).unwrap();
+        assert!(
+            stored == bytes,
+            "{name} differs from its generator: `SCODE_WRITE_VECTORS=1 cargo test --release \
+             --lib limit_vectors` writes it"
+        );
+        assert!(bytes.len() < 100_000, "{name}: {} bytes", bytes.len());
+    }
 }
