@@ -1,7 +1,7 @@
 //! Byte-level helpers: LEB128 varints, a bounds-checked reader, and section framing
 //! (tag, length, optional zlib, CRC-32). See `spec/format.md` §2-§3.
 
-use std::io::{Read, Write};
+use std::io::Write;
 
 use crate::error::{Error, Result};
 
@@ -234,17 +234,29 @@ impl<'a> RawSection<'a> {
         let Some(n) = self.raw_len else {
             return Ok(self.stored.into());
         };
-        let mut out = Vec::new();
-        let mut z = flate2::read::ZlibDecoder::new(self.stored).take(n + 1);
-        if z.read_to_end(&mut out).is_err() || out.len() as u64 != n {
-            return Err(Error::format(
+        // Inflated by miniz_oxide's core into a buffer of exactly `n` bytes (one allocation,
+        // the size charged; no std::io machinery in a decoder-only build). A stream that is
+        // corrupt, fails its Adler-32, ends early or has more than `n` bytes is refused.
+        use miniz_oxide::inflate::core::{decompress, inflate_flags, DecompressorOxide};
+        use miniz_oxide::inflate::TINFLStatus;
+        let corrupt = || {
+            Error::format(
                 "file",
                 "payload",
                 format!(
                     "section {}: zlib data corrupt or not of its raw length {n}",
                     self.id
                 ),
-            ));
+            )
+        };
+        let mut out = vec![0u8; usize::try_from(n).map_err(|_| corrupt())?];
+        let flags = inflate_flags::TINFL_FLAG_PARSE_ZLIB_HEADER
+            | inflate_flags::TINFL_FLAG_COMPUTE_ADLER32
+            | inflate_flags::TINFL_FLAG_USING_NON_WRAPPING_OUTPUT_BUF;
+        let mut state = Box::<DecompressorOxide>::default();
+        let (status, _, written) = decompress(&mut state, self.stored, &mut out, 0, flags);
+        if status != TINFLStatus::Done || written != out.len() {
+            return Err(corrupt());
         }
         Ok(out.into())
     }
