@@ -276,6 +276,9 @@ struct PlaneState {
     area: i64,
 }
 
+// The decoder charges 112 bytes per group for its plane state (`codec::GROUP_BYTES`).
+const _: () = assert!(std::mem::size_of::<PlaneState>() <= 112);
+
 fn sub(a: [i64; 3], b: [i64; 3]) -> [i64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }

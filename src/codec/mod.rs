@@ -98,9 +98,13 @@ pub struct Limits {
     /// Triangles after subdivision: a control mesh's fan-triangulated faces times 4^level, at
     /// the header's default level and at any level a caller decodes to (default 200 million).
     pub max_subdivided_faces: u64,
-    /// Memory budget of one decode in bytes (default 1 GiB): the input, inflated sections
-    /// and every array whose size the file decides (subdivision output included, when the
-    /// caller subdivides) are charged against it before they are allocated.
+    /// Memory budget of one decode in bytes: the input, inflated sections and every array
+    /// whose size the file decides (subdivision output included, when the caller subdivides)
+    /// are charged against it before they are allocated and released when they are freed;
+    /// what is live at once must fit. Default 1 GiB: a raw triangle mesh peaks at about 150
+    /// bytes per triangle (7 million triangles fit). A subdivided surface adds 200 bytes per
+    /// triangle of the finest level, so a caller that subdivides large CAD models to their
+    /// default level needs more (840 faces at level 5: 2.2 GB).
     pub max_memory: u64,
     /// Work bound: steps of the decoder's walks whose length the file decides (merge labels'
     /// boundary walks, candidate searches), at most this many per vertex, face and face
@@ -129,15 +133,21 @@ impl Default for Limits {
 /// What one decode charged against its [`Limits`] (see [`decode_with_usage`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Usage {
-    /// Bytes charged against `max_memory`.
+    /// Peak of the bytes charged against `max_memory` and not yet released: what the decode
+    /// held at most at one time.
     pub memory: u64,
+    /// Bytes still charged when the decode ended: the input and the decoded mesh, which the
+    /// caller holds (what a caller that subdivides adds to).
+    pub held: u64,
     /// Walk steps charged against the work bound.
     pub work: u64,
 }
 
-/// The running account of a decode: allocation sites charge their bytes before allocating,
-/// walks whose length the file decides charge their steps. Either total beyond its limit is
-/// `Error::LimitsExceeded`. The encoder runs the shared code with an unlimited budget.
+/// The running account of a decode: allocation sites charge their bytes before allocating
+/// and release them when the arrays are freed, so the live total is checked against the
+/// budget (its peak is what a decode needs); walks whose length the file decides charge
+/// their steps. Either beyond its limit is `Error::LimitsExceeded`. The encoder runs the
+/// shared code with an unlimited budget.
 pub(crate) struct Budget {
     max_memory: u64,
     max_work: u64,
@@ -157,12 +167,18 @@ impl Budget {
         Self::new(u64::MAX)
     }
 
-    /// Charges `bytes` of memory for `what` (named in the error).
+    /// Charges `bytes` of memory for `what` (named in the error) on top of what is live.
     pub fn charge(&mut self, what: &'static str, bytes: u64) -> Result<()> {
-        let total = self.usage.memory.saturating_add(bytes);
-        limit(what, total, self.max_memory)?;
-        self.usage.memory = total;
+        let live = self.usage.held.saturating_add(bytes);
+        limit(what, live, self.max_memory)?;
+        self.usage.held = live;
+        self.usage.memory = self.usage.memory.max(live);
         Ok(())
+    }
+
+    /// Releases `bytes` charged earlier, when their arrays are freed.
+    pub fn release(&mut self, bytes: u64) {
+        self.usage.held = self.usage.held.saturating_sub(bytes);
     }
 
     pub fn work(&mut self, steps: u64) -> Result<()> {
@@ -1371,49 +1387,76 @@ fn parse_header(
 }
 
 // Bytes the decoder allocates per element, charged against `Limits::max_memory` before the
-// arrays exist (`spec/format.md` §10).
-/// Per label: the label itself, charged once the label count is read.
-const LABEL_BYTES: u64 = std::mem::size_of::<Label>() as u64;
-/// Per label besides: its face and edge in the rebuild, its edge and sharp flag.
-const LABEL_ARRAY_BYTES: u64 = 4 + 4 + 4 + 1;
-/// Per half-edge: the rebuild's nine u32 arrays (next, twin, face, prev, tail vertex, the
-/// active boundary's two links, the vertex union-find and its numbering) and a crease flag.
-const HALF_EDGE_BYTES: u64 = 9 * 4 + 1;
-/// Per rebuilt face (holes included): its record, component bounds, group, plane group,
-/// axis and recency flag; per mesh face its output offset and group.
-const FACE_BYTES: u64 = 16 + 16 + 4 * 4;
-const MESH_FACE_BYTES: u64 = 8;
-/// Per coded vertex: first half-edge, corner and crease counts, grid point, the geometry
-/// walk's state (known, level, up to 6 bucket entries), merge flag and final numbering.
-const CODED_VERTEX_BYTES: u64 = 4 + 3 + 12 + 2 + 24 + 1 + 8;
-/// Per output vertex: its position and the validation's stamp.
-const VERTEX_BYTES: u64 = 24 + 4;
-/// Per group: patch kind and axis as decoded and reordered, the group records, name slots,
-/// group order and rank flags.
-const GROUP_BYTES: u64 = 2 * std::mem::size_of::<PatchKind>() as u64
-    + std::mem::size_of::<Option<geometry::GridAxis>>() as u64
-    + 2 * std::mem::size_of::<Group>() as u64
-    + 2 * std::mem::size_of::<String>() as u64
-    + 16;
-/// Entries of the sharp-edge and corner sets (B-tree nodes, amortised).
+// arrays exist and released when they are freed (`spec/format.md` §10.3); the rebuild charges
+// its own arrays (`facefixer::rebuild`). Fixed numbers (the sizes on 64-bit targets, checked
+// when compiling) rather than `size_of`, so whether a file fits a budget does not depend on
+// the platform.
+/// Per label: the label itself, from the label count until the rebuild is done.
+const LABEL_BYTES: u64 = 16;
+/// Held from the rebuild to the assembled mesh, per label: its edge and sharp flag.
+const LABEL_ARRAY_BYTES: u64 = 4 + 1;
+/// Per rebuilt face (holes included): its group and recency flag.
+const FACE_BYTES: u64 = 4 + 4;
+/// Per coded vertex: corner flag and two crease counts, grid point, merge flag, merge record
+/// and the two numberings of the fixups.
+const CODED_VERTEX_BYTES: u64 = 3 + 12 + 1 + 8 + 8;
+/// Per output vertex: the validation's stamp.
+const VERTEX_STAMP_BYTES: u64 = 4;
+/// Per group: patch kind decoded and reordered (2 x 56), grid axis (56) and axis list entry
+/// (48), plane state (112), the group record and its name (80 + 24), another name slot (24),
+/// and six u32 arrays (plane stamp, axis index, recency, name order, its rank flags, input
+/// order).
+const GROUP_BYTES: u64 = 2 * 56 + 56 + 48 + 112 + 80 + 24 + 24 + 6 * 4;
+/// The crease flags and the geometry walk, per half-edge (crease flag), per rebuilt face
+/// (plane group and axis) and per coded vertex (known flag, level, and the level buckets:
+/// each vertex enters each of 6 buckets at most once, and a bucket's capacity is at most
+/// twice its entries).
+const GEOMETRY_HALF_EDGE_BYTES: u64 = 1;
+const GEOMETRY_FACE_BYTES: u64 = 4 + 4;
+const GEOMETRY_VERTEX_BYTES: u64 = 1 + 1 + 6 * 4 * 2;
+/// The output mesh: per vertex its position, per face its offset and group, per corner its
+/// vertex; the entries of the sets of sharp edges and corners (B-tree nodes, amortised).
+const MESH_VERTEX_BYTES: u64 = 24;
+const MESH_FACE_BYTES: u64 = 8 + 4;
+const MESH_CORNER_BYTES: u64 = 4;
 const SHARP_EDGE_BYTES: u64 = 16;
 const CORNER_BYTES: u64 = 8;
 
-/// Bytes charged for the arrays sized by `labels` labels, `half_edges` half-edges and `faces`
-/// rebuilt faces, and for the output mesh the header describes (sets of sharp edges and
-/// corners apart).
-fn array_bytes(h: &Header, labels: u64, half_edges: u64, faces: u64) -> u64 {
-    // Labels, half-edges, faces and corners are below 2^32 (§5 bounds K); vertex and group
-    // counts only by the caller's limits.
+// No charge is below the size of what it stands for (on any target).
+const _: () = {
+    use std::mem::size_of;
+    assert!(size_of::<Label>() as u64 <= LABEL_BYTES);
+    assert!(size_of::<PatchKind>() <= 56);
+    assert!(size_of::<Option<geometry::GridAxis>>() <= 56);
+    assert!(size_of::<geometry::GridAxis>() <= 48);
+    assert!(size_of::<Group>() <= 80 && size_of::<String>() <= 24);
+    assert!(size_of::<usize>() as u64 + 4 <= MESH_FACE_BYTES);
+    assert!(size_of::<DVec3>() as u64 <= MESH_VERTEX_BYTES);
+};
+
+/// Bytes held from the rebuild to the assembled mesh for `labels` labels and `faces` rebuilt
+/// faces of a file with header `h`. Labels and faces are below 2^32 (§5 bounds K); vertex and
+/// group counts only by the caller's limits.
+fn decode_array_bytes(h: &Header, labels: u64, faces: u64) -> u64 {
     let coded = h.vertex_count.saturating_add(h.merged_vertex_count);
-    (labels * LABEL_ARRAY_BYTES
-        + half_edges * HALF_EDGE_BYTES
-        + faces * FACE_BYTES
-        + (h.face_count + 1) * MESH_FACE_BYTES
-        + h.face_corner_count * 4)
+    (labels * LABEL_ARRAY_BYTES + faces * FACE_BYTES)
         .saturating_add(coded.saturating_mul(CODED_VERTEX_BYTES))
-        .saturating_add(h.vertex_count.saturating_mul(VERTEX_BYTES))
+        .saturating_add(h.vertex_count.saturating_mul(VERTEX_STAMP_BYTES))
         .saturating_add(h.group_count.saturating_mul(GROUP_BYTES))
+}
+
+/// Bytes of the crease flags and the geometry walk (from the creases to the end of the
+/// geometry).
+fn geometry_bytes(h: &Header, half_edges: u64, faces: u64) -> u64 {
+    let coded = h.vertex_count.saturating_add(h.merged_vertex_count);
+    (half_edges * GEOMETRY_HALF_EDGE_BYTES + faces * GEOMETRY_FACE_BYTES)
+        .saturating_add(coded.saturating_mul(GEOMETRY_VERTEX_BYTES))
+}
+
+/// Bytes of the output mesh the header describes (sets of sharp edges and corners apart).
+fn mesh_bytes(h: &Header) -> u64 {
+    ((h.face_count + 1) * MESH_FACE_BYTES + h.face_corner_count * MESH_CORNER_BYTES)
+        .saturating_add(h.vertex_count.saturating_mul(MESH_VERTEX_BYTES))
 }
 
 /// A known section's payload, inflated after its raw length is checked and charged.
@@ -1427,6 +1470,14 @@ fn section_payload<'a>(
         budget.charge("decode memory for inflated sections (bytes)", n)?;
     }
     s.payload()
+}
+
+/// Drops a payload and releases its charge (a stored payload borrows the input: nothing to
+/// release).
+fn drop_payload(p: std::borrow::Cow<[u8]>, budget: &mut Budget) {
+    if let std::borrow::Cow::Owned(v) = p {
+        budget.release(v.len() as u64);
+    }
 }
 
 /// The sections of a file after its header, framed and CRC-checked but not inflated, by id;
@@ -1464,17 +1515,13 @@ fn decode_connectivity<const MEASURE: bool>(
         label_count * LABEL_BYTES,
     )?;
     let mut labels: Vec<Label> = Vec::with_capacity(label_count as usize);
-    let (mut faces, mut corners, mut holes) = (0u64, 0u64, 0u64);
+    let (mut faces, mut corners) = (0u64, 0u64);
     let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
     for _ in 0..label_count {
         let l = models.decode_label(&mut dec, max_degree.max(3))?;
-        match l {
-            Label::F(d) => {
-                faces += 1;
-                corners += u64::from(d);
-            }
-            Label::H(_) => holes += 1,
-            _ => {}
+        if let Label::F(d) = l {
+            faces += 1;
+            corners += u64::from(d);
         }
         labels.push(l);
     }
@@ -1490,12 +1537,9 @@ fn decode_connectivity<const MEASURE: bool>(
             ),
         ));
     }
-    // Every label makes at most one pair of half-edges.
-    budget.charge(
-        "decode memory for connectivity and geometry arrays (bytes)",
-        array_bytes(header, label_count, 2 * label_count, faces + holes),
-    )?;
     let rb = rebuild(&labels, budget)?;
+    drop(labels);
+    budget.release(label_count * LABEL_BYTES);
     let traversal_vertices =
         header.vertex_count + header.merged_vertex_count - header.isolated_vertex_count;
     if rb.vertex_count as u64 != traversal_vertices {
@@ -1508,6 +1552,10 @@ fn decode_connectivity<const MEASURE: bool>(
             ),
         ));
     }
+    budget.charge(
+        "decode memory for connectivity and geometry arrays (bytes)",
+        decode_array_bytes(header, label_count, rb.faces.len() as u64),
+    )?;
     let face_group = decode_groups::<MEASURE>(
         &mut dec,
         &mut models,
@@ -1517,7 +1565,7 @@ fn decode_connectivity<const MEASURE: bool>(
         budget,
     )?;
     dec.finish()?;
-    Ok((labels.len(), rb, face_group, models.group_bits))
+    Ok((label_count as usize, rb, face_group, models.group_bits))
 }
 
 /// Resolves the group of every mesh face in encoding order (spec §6.5).
@@ -1687,16 +1735,20 @@ fn read_file<'a, const MEASURE: bool>(
             raw_bytes: hs.payload_len() as usize,
         });
     }
-    let (header, quant) =
-        parse_header(&section_payload(&hs, limits, budget)?, major, minor, limits)?;
-    // What any file with these counts costs at least (a label per two corners, a half-edge
-    // per corner), before any work.
-    let k = header.face_corner_count;
+    let header_payload = section_payload(&hs, limits, budget)?;
+    let (header, quant) = parse_header(&header_payload, major, minor, limits)?;
+    drop_payload(header_payload, budget);
+    // What any file with these counts holds at least while its geometry is decoded (a label
+    // per two corners, a half-edge per corner, no hole), before any work.
+    let (k, f) = (header.face_corner_count, header.face_count);
     limit(
         "decode memory the header's counts need (bytes)",
-        budget.usage.memory.saturating_add(
-            (k / 2) * LABEL_BYTES + array_bytes(&header, k / 2, k, header.face_count),
-        ),
+        budget
+            .usage
+            .held
+            .saturating_add(facefixer::rebuilt_bytes(k / 2, k, f, 0))
+            .saturating_add(decode_array_bytes(&header, k / 2, f))
+            .saturating_add(geometry_bytes(&header, k, f)),
         limits.max_memory,
     )?;
     budget.max_work = limits.max_work_per_element.saturating_mul(
@@ -1807,21 +1859,30 @@ fn decode_full<const MEASURE: bool>(
     let conn = payload(SEC_CONNECTIVITY, budget)?.unwrap_or_default();
     let (label_count, rb, mut face_group, group_bits) =
         decode_connectivity::<MEASURE>(&conn, &header, features.groups_v3, budget)?;
-    drop(conn);
+    drop_payload(conn, budget);
+    // Released when the mesh is assembled.
+    let arrays = rb.bytes + decode_array_bytes(&header, label_count as u64, rb.faces.len() as u64);
 
     // Patches.
     let (patch_kinds, grid_axes) = match payload(SEC_PATCHES, budget)? {
-        Some(p) if LEGACY && !features.coded_patches => {
-            patches::decode_v1(&p, group_count, &quant)?
+        Some(p) => {
+            let decoded = if LEGACY && !features.coded_patches {
+                patches::decode_v1(&p, group_count, &quant)?
+            } else {
+                patches::decode(&p, group_count, &quant)?
+            };
+            drop_payload(p, budget);
+            decoded
         }
-        Some(p) => patches::decode(&p, group_count, &quant)?,
         None => (
             vec![PatchKind::Closed; group_count],
             vec![None; group_count],
         ),
     };
 
-    // Creases.
+    // Creases, and the geometry walk's arrays (released after the geometry).
+    let walk_bytes = geometry_bytes(&header, rb.next.len() as u64, rb.faces.len() as u64);
+    budget.charge("decode memory for the geometry walk (bytes)", walk_bytes)?;
     let edges = label_edges(&rb.label_edge);
     let mut sharp = vec![false; edges.len()];
     let mut corner = vec![false; coded_count];
@@ -1830,6 +1891,7 @@ fn decode_full<const MEASURE: bool>(
         let mut d = RangeDecoder::new(&creases, "creases")?;
         let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
         d.finish()?;
+        drop_payload(creases, budget);
         crease
     };
 
@@ -1856,11 +1918,17 @@ fn decode_full<const MEASURE: bool>(
             &mut gd,
         )?;
         d.finish()?;
+        drop_payload(geometry, budget);
     }
+    drop(crease_he);
+    budget.release(walk_bytes);
 
     // Fixups.
     let fixups = payload(SEC_FIXUPS, budget)?;
     let merges = decode_fixups(fixups.as_deref(), header.merged_vertex_count, coded_count)?;
+    if let Some(p) = fixups {
+        drop_payload(p, budget);
+    }
     let final_of_coded = final_numbering(coded_count, &merges);
 
     // Names, and (version 2) the input's group order: coded group `c` becomes group
@@ -1875,6 +1943,7 @@ fn decode_full<const MEASURE: bool>(
             names = n;
             input_of_coded = Some(order);
         }
+        drop_payload(p, budget);
     }
     let mut patch_kinds = patch_kinds;
     if let Some(order) = &input_of_coded {
@@ -1894,8 +1963,8 @@ fn decode_full<const MEASURE: bool>(
     let sharp_count = sharp.iter().filter(|&&s| s).count() as u64;
     let corner_count = corner.iter().filter(|&&c| c).count() as u64;
     budget.charge(
-        "decode memory for sharp edges and corners (bytes)",
-        sharp_count * SHARP_EDGE_BYTES + corner_count * CORNER_BYTES,
+        "decode memory for the decoded mesh (bytes)",
+        mesh_bytes(&header) + sharp_count * SHARP_EDGE_BYTES + corner_count * CORNER_BYTES,
     )?;
     let mut mesh = ControlMesh::new();
     let final_count = header.vertex_count as usize;
@@ -1937,6 +2006,8 @@ fn decode_full<const MEASURE: bool>(
     }
     mesh.validate()
         .map_err(|e| Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}")))?;
+    // The input and the mesh stay charged: the caller holds them.
+    budget.release(arrays);
 
     let summary = Summary {
         sections: sections_info,

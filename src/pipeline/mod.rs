@@ -301,12 +301,12 @@ pub fn decode_surface(
         (decoded.mesh, None)
     } else {
         // Before subdividing: the finest level's triangles (fan-triangulated faces times
-        // 4^level) against the limits, and the memory they take against what the decode
-        // left of the budget.
+        // 4^level) against the limits, and the memory they take on top of what the decode
+        // still holds (the input and the control mesh) against the budget.
         let triangles = (decoded.mesh.face_vertices.len() - 2 * decoded.mesh.face_count()) as u64;
         let finest = triangles.saturating_mul(1u64.checked_shl(2 * level).unwrap_or(u64::MAX));
         let memory = usage
-            .memory
+            .held
             .saturating_add(finest.saturating_mul(crate::subdiv::MEMORY_PER_TRIANGLE));
         for (what, value, limit) in [
             ("subdivided faces", finest, limits.max_subdivided_faces),

@@ -538,6 +538,27 @@ fn repeated_group_names_are_charged() {
     assert!(mesh.groups.iter().all(|g| g.name == "xxxx"));
 }
 
+#[test]
+fn a_decode_releases_what_it_frees() {
+    // Every array but the mesh is freed by the end of a decode: what stays charged is the
+    // input and the mesh, and the peak lies above it. (No names: their charge is the stems'.)
+    let mut part = samples::cad_part();
+    for g in &mut part.groups {
+        g.name.clear();
+    }
+    let bytes = encode(&part, &EncodeOptions::default()).unwrap();
+    let (d, usage) = decode_with_usage(&bytes, &Limits::default());
+    let mesh = d.unwrap().mesh;
+    assert!(!mesh.sharp_edges.is_empty() && !mesh.corners.is_empty());
+    let header = inspect(&bytes, &Limits::default()).unwrap().header;
+    let held = bytes.len() as u64
+        + mesh_bytes(&header)
+        + mesh.sharp_edges.len() as u64 * SHARP_EDGE_BYTES
+        + mesh.corners.len() as u64 * CORNER_BYTES;
+    assert_eq!(usage.held, held, "{usage:?}");
+    assert!(usage.memory > 2 * held, "{usage:?}");
+}
+
 /// Two faces of `n` corners each, glued along all their edges (a pillow).
 fn pillow(n: u32) -> Vec<u8> {
     let mut mesh = ControlMesh::new();
