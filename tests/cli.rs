@@ -243,10 +243,11 @@ fn triangle_at_level(level: u8) -> PathBuf {
 
 #[test]
 fn decoding_is_refused_beyond_the_memory_budget() {
-    // Level 12 of one triangle is 16.7 M triangles: more than the default 1 GiB budget, refused
-    // before subdividing; a level asked for on the command line is checked the same way.
-    let file = triangle_at_level(12);
-    let out = tmp("level12.obj");
+    // Level 13 of one triangle is 67 M triangles: more than the command line's 4 GiB budget,
+    // refused before subdividing; a level asked for on the command line is checked the same
+    // way.
+    let file = triangle_at_level(13);
+    let out = tmp("level13.obj");
     let (ok, text) = scode(&["decode", file.to_str().unwrap(), out.to_str().unwrap()]);
     assert!(!ok, "{text}");
     assert!(

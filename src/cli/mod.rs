@@ -245,6 +245,11 @@ pub struct DecodeArgs {
     pub limits: DecodeLimits,
 }
 
+/// Memory budget of `scode decode` and `scode info`: four times the library's default,
+/// because they subdivide to a file's default level, which for CAD models of hundreds of faces
+/// takes one to two GB (the library's decode alone stays within its 1 GiB default).
+const DEFAULT_MAX_MEMORY: u64 = 4 << 30;
+
 /// What decoding a `.scode` file may cost (a file that needs more is refused before the
 /// memory is allocated).
 #[derive(Args, Debug)]
@@ -253,8 +258,10 @@ pub struct DecodeLimits {
     #[arg(long, value_name = "BYTES", default_value_t = Limits::default().max_input_bytes)]
     pub max_bytes: u64,
     /// Memory budget of the decode in bytes: the input, every array sized by the file's
-    /// counts and the subdivided surface are charged against it before they are allocated.
-    #[arg(long, value_name = "BYTES", default_value_t = Limits::default().max_memory)]
+    /// counts and the subdivided surface are charged against it before they are allocated
+    /// (and released when freed), and what is live at once must fit. The default (4 GiB)
+    /// fits large CAD models at their default level (840 faces at level 5: 2.2 GB).
+    #[arg(long, value_name = "BYTES", default_value_t = DEFAULT_MAX_MEMORY)]
     pub max_memory: u64,
     /// Work bound of the decode: steps of the walks whose length the file decides, per
     /// vertex, face and face corner. Meshes with tens of thousands of handles (lattices) may

@@ -104,7 +104,8 @@ pub struct Limits {
     /// what is live at once must fit. Default 1 GiB: a raw triangle mesh peaks at about 150
     /// bytes per triangle (7 million triangles fit). A subdivided surface adds 200 bytes per
     /// triangle of the finest level, so a caller that subdivides large CAD models to their
-    /// default level needs more (840 faces at level 5: 2.2 GB).
+    /// default level needs more (840 faces at level 5: 2.2 GB); the command-line tool uses
+    /// 4 GiB.
     pub max_memory: u64,
     /// Work bound: steps of the decoder's walks whose length the file decides (merge labels'
     /// boundary walks, candidate searches), at most this many per vertex, face and face
