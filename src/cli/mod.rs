@@ -264,8 +264,8 @@ pub struct DecodeLimits {
     #[arg(long, value_name = "BYTES", default_value_t = DEFAULT_MAX_MEMORY)]
     pub max_memory: u64,
     /// Work bound of the decode: steps of the walks whose length the file decides, per
-    /// vertex, face and face corner. Meshes with tens of thousands of handles (lattices) may
-    /// need more than the default.
+    /// vertex, face and face corner. Lattices of more than about 30,000 tunnels may need more
+    /// than the default.
     #[arg(long, value_name = "N", default_value_t = Limits::default().max_work_per_element)]
     pub max_work_per_element: u64,
 }

@@ -447,7 +447,7 @@ fn vertex_candidates_around_a_hub_are_charged_to_the_work_bound() {
     let (c, bytes) = fan_vertex_groups(40);
     let (r, usage) = decode_with_usage(&bytes, &Limits::default());
     assert!(
-        usage.work > 0 && usage.work <= 64 * c.elements(),
+        usage.work > 0 && usage.work <= Limits::default().max_work_per_element * c.elements(),
         "{usage:?}"
     );
     if let Err(e) = r {
