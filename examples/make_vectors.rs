@@ -6,6 +6,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use scode::codec::bytes::{put_varint, TAG_DEFLATED, TAG_SKIPPABLE};
 use scode::codec::samples::{self, canonical_hash};
 use scode::codec::{decode, encode, Content, EncodeOptions, Limits};
 use scode::mesh::ControlMesh;
@@ -55,5 +56,28 @@ fn main() {
         .unwrap();
         println!("{file}: {} bytes", bytes.len());
     }
+    // Spec §10: an unknown section with the skippable bit is skipped without inflating it. This
+    // one says it is deflated but holds no zlib stream, so a decoder that inflated it would
+    // fail; the file decodes to the cube.
+    let mut bytes = encode(&samples::cube(), &EncodeOptions::default()).expect("encode cube");
+    let start = bytes.len();
+    let garbage = [0xA5u8; 16];
+    bytes.push(7 | TAG_SKIPPABLE | TAG_DEFLATED);
+    put_varint(&mut bytes, garbage.len() as u64);
+    put_varint(&mut bytes, 1040 * garbage.len() as u64 + 64);
+    bytes.extend_from_slice(&garbage);
+    let crc = crc32fast::hash(&bytes[start..]);
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    let decoded = decode(&bytes, &Limits::default()).expect("decode skippable_section");
+    std::fs::write(dir.join("skippable_section.scode"), &bytes).expect("write vector");
+    writeln!(
+        expected,
+        "skippable_section.scode {:016x} {} {} {}",
+        canonical_hash(&decoded.mesh),
+        decoded.mesh.vertex_count(),
+        decoded.mesh.face_count(),
+        bytes.len()
+    )
+    .unwrap();
     std::fs::write(dir.join("EXPECTED.txt"), expected).expect("write EXPECTED.txt");
 }

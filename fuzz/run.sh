@@ -8,5 +8,5 @@ cd "$(dirname "$0")"
 sh ./seed.sh
 for t in decode roundtrip; do
     mkdir -p "corpus/$t"
-    cargo ${FUZZ_TOOLCHAIN-+nightly} fuzz run "$t" "corpus/$t" -- -max_total_time="$SECONDS_PER_TARGET" -rss_limit_mb=2048 -max_len=4096 -len_control=10
+    cargo ${FUZZ_TOOLCHAIN-+nightly} fuzz run "$t" "corpus/$t" -- -max_total_time="$SECONDS_PER_TARGET" -rss_limit_mb=2048 -max_len=65536 -len_control=10
 done

@@ -488,3 +488,95 @@ fn gltf_buffers_outside_the_folder_are_refused() {
         }
     }
 }
+
+/// One triangle as a control mesh whose header asks for subdivision level `level`.
+fn triangle_at_level(level: u8) -> PathBuf {
+    let mut mesh = scode::ControlMesh::new();
+    for p in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        mesh.push_vertex(p.into());
+    }
+    let g = mesh.push_group("", scode::mesh::PatchKind::Closed);
+    mesh.push_face(&[0, 1, 2], g);
+    let opts = scode::codec::EncodeOptions {
+        content: scode::codec::Content::ControlMesh {
+            default_level: level,
+        },
+        ..Default::default()
+    };
+    let path = tmp(&format!("triangle_level{level}.scode"));
+    std::fs::write(&path, scode::codec::encode(&mesh, &opts).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn decoding_is_refused_beyond_the_memory_budget() {
+    // Level 13 of one triangle is 67 M triangles: more than the command line's 4 GiB budget,
+    // refused before subdividing; a level asked for on the command line is checked the same
+    // way.
+    let file = triangle_at_level(13);
+    let out = tmp("level13.obj");
+    let (ok, text) = scode(&["decode", file.to_str().unwrap(), out.to_str().unwrap()]);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("limit exceeded: decode memory with subdivision"),
+        "{text}"
+    );
+    assert!(!out.exists());
+    let (ok, text) = scode(&[
+        "decode",
+        "--level",
+        "3",
+        file.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("64 faces"), "{text}");
+    // --max-memory sets the budget.
+    let (ok, text) = scode(&[
+        "decode",
+        "--max-memory",
+        "1000",
+        file.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("limit exceeded: decode memory"), "{text}");
+    let (ok, text) = scode(&["info", "--max-memory", "1000", file.to_str().unwrap()]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("limit exceeded: decode memory"), "{text}");
+}
+
+#[test]
+fn a_file_over_max_bytes_is_refused_before_it_is_read() {
+    // A sparse 2 GiB file: refused from its size, never read (reading it would take 2 GiB).
+    let file = tmp("huge.scode");
+    std::fs::File::create(&file)
+        .unwrap()
+        .set_len(2 << 30)
+        .unwrap();
+    let out = tmp("huge.obj");
+    for args in [vec!["--max-bytes", "1000"], vec![]] {
+        let mut all = vec!["decode"];
+        all.extend(args);
+        all.extend([file.to_str().unwrap(), out.to_str().unwrap()]);
+        let (ok, text) = scode(&all);
+        assert!(!ok, "{text}");
+        assert!(
+            text.contains("limit exceeded: input bytes = 2147483648"),
+            "{text}"
+        );
+    }
+    std::fs::remove_file(&file).unwrap();
+}
+
+#[test]
+fn max_work_per_element_sets_the_work_bound() {
+    // The CAD part's group candidates take a few walk steps: none are allowed here.
+    let part = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/cad_part.scode");
+    let part = part.to_str().unwrap();
+    let (ok, text) = scode(&["info", "--max-work-per-element", "0", part]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("limit exceeded: decode work"), "{text}");
+    let (ok, text) = scode(&["info", part]);
+    assert!(ok, "{text}");
+}

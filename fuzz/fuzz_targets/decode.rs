@@ -1,24 +1,37 @@
 //! Arbitrary bytes into the decoder with checksums off (so the fuzzer gets past the CRCs) and
-//! modest limits (so forged counts cannot make one input take seconds). Must never panic.
+//! the command-line tool's default limits scaled down together by `SCALE` (counts, input size
+//! and memory budget; the work bound is per element already), so an input costs what it would
+//! cost a default decode at a sixteenth of the scale. Must never panic, and a decode that
+//! fails must fail within its budget.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use scode::codec::{decode, inspect, Limits};
+use scode::codec::{decode_with_usage, inspect, Limits};
+
+const SCALE: u64 = 16;
 
 fuzz_target!(|data: &[u8]| {
+    let d = Limits::default();
     let limits = Limits {
-        max_vertices: 200_000,
-        max_faces: 400_000,
-        max_face_corners: 1_200_000,
-        max_groups: 10_000,
+        max_input_bytes: d.max_input_bytes / SCALE,
+        max_vertices: d.max_vertices / SCALE,
+        max_faces: d.max_faces / SCALE,
+        max_face_corners: d.max_face_corners / SCALE,
+        max_groups: d.max_groups / SCALE,
+        max_subdivided_faces: d.max_subdivided_faces / SCALE,
+        max_memory: d.max_memory / SCALE,
         verify_checksums: false,
-        ..Limits::default()
+        ..d
     };
-    if let Ok(d) = decode(data, &limits) {
+    let (decoded, usage) = decode_with_usage(data, &limits);
+    assert!(usage.memory <= limits.max_memory, "{usage:?}");
+    if let Ok(d) = decoded {
         // Whatever decodes must be a valid mesh that matches its header.
         d.mesh.validate().expect("decoded mesh must be valid");
         assert_eq!(d.mesh.vertex_count() as u64, d.header.vertex_count);
         assert_eq!(d.mesh.face_count() as u64, d.header.face_count);
+        let elements = d.header.vertex_count + d.header.face_count + d.header.face_corner_count;
+        assert!(usage.work <= limits.max_work_per_element * (elements + 1));
         let info = inspect(data, &limits).expect("inspect agrees with decode");
         assert_eq!(info.total_bytes, data.len());
     }

@@ -18,8 +18,34 @@ use scode::pipeline::{
     decode_surface, encode_fitted, encode_step, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
 };
 
-fn read_file(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| scode::Error::io(path, e).into())
+/// Reads a `.scode` file for decoding with `limits`: its size (from the file's metadata) is
+/// checked against `max_input_bytes` before anything is read, and at most one byte more is
+/// read, so a file that grows meanwhile is refused too.
+fn read_scode(path: &Path, limits: &Limits) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let max = limits.max_input_bytes;
+    let too_big = |value| scode::Error::LimitsExceeded {
+        what: "input bytes",
+        value,
+        limit: max,
+    };
+    let file = std::fs::File::open(path).map_err(|e| scode::Error::io(path, e))?;
+    let size = file
+        .metadata()
+        .map_err(|e| scode::Error::io(path, e))?
+        .len();
+    if size > max {
+        return Err(too_big(size)).with_context(|| format!("cannot read {}", path.display()));
+    }
+    let mut bytes = Vec::with_capacity(size as usize);
+    file.take(max.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| scode::Error::io(path, e))?;
+    if bytes.len() as u64 > max {
+        return Err(too_big(bytes.len() as u64))
+            .with_context(|| format!("cannot read {}", path.display()));
+    }
+    Ok(bytes)
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -54,8 +80,9 @@ fn print_read_report(path: &Path, report: &ReadReport) {
 /// Reads a mesh file or decodes a .scode file into a control mesh.
 fn load_control_mesh(path: &Path) -> Result<(ControlMesh, Option<Content>)> {
     if is_scode(path) {
-        let bytes = read_file(path)?;
-        let decoded = codec::decode(&bytes, &Limits::default())
+        let limits = Limits::default();
+        let bytes = read_scode(path, &limits)?;
+        let decoded = codec::decode(&bytes, &limits)
             .with_context(|| format!("cannot decode {}", path.display()))?;
         Ok((decoded.mesh, Some(decoded.header.content)))
     } else {
@@ -319,11 +346,8 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
 
 pub fn decode(args: &DecodeArgs) -> Result<()> {
     let output = args.output.checked(&args.input, Writes::Mesh)?;
-    let bytes = read_file(&args.input)?;
-    let mut limits = Limits::default();
-    if let Some(max) = args.max_bytes {
-        limits.max_input_bytes = max;
-    }
+    let limits = args.limits.limits();
+    let bytes = read_scode(&args.input, &limits)?;
     let opts = SurfaceOptions {
         level: args.level,
         limit: if args.limit {
@@ -463,8 +487,9 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         print_mesh_summary(&mesh, args.groups);
         return Ok(());
     }
-    let bytes = read_file(&args.file)?;
-    let info = codec::inspect(&bytes, &Limits::default())
+    let limits = args.limits.limits();
+    let bytes = read_scode(&args.file, &limits)?;
+    let info = codec::inspect(&bytes, &limits)
         .with_context(|| format!("cannot read {}", args.file.display()))?;
     let h = &info.header;
     println!(
@@ -526,7 +551,7 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         info.total_bytes as f64 * 8.0 / nv
     );
     if args.groups {
-        let decoded = codec::decode(&bytes, &Limits::default())?;
+        let decoded = codec::decode(&bytes, &limits)?;
         let mesh = &decoded.mesh;
         let mut faces_of = vec![0usize; mesh.groups.len()];
         for &g in &mesh.face_groups {
@@ -555,7 +580,7 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         }
     }
     if let Some(reference) = &args.against {
-        let surface = decode_surface(&bytes, &Limits::default(), &SurfaceOptions::default())?;
+        let surface = decode_surface(&bytes, &limits, &SurfaceOptions::default())?;
         let level = surface.level;
         let (input, _) = io::read_mesh(reference)?;
         let r = scode::metrics::measure_against_input(&surface.mesh, &input)?;

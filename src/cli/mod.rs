@@ -32,6 +32,7 @@ use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 
 use exit::CliError;
+use scode::codec::Limits;
 use scode::io::MeshFormat;
 use scode::pipeline::Effort;
 use scode::Tolerance;
@@ -327,9 +328,44 @@ pub struct DecodeArgs {
     /// S-CODE's sparse triangulation.
     #[arg(long)]
     pub dense_boundary: bool,
-    /// Refuse files larger than this many bytes (a decoder safety limit).
-    #[arg(long, value_name = "BYTES")]
-    pub max_bytes: Option<u64>,
+    #[command(flatten)]
+    pub limits: DecodeLimits,
+}
+
+/// Memory budget of `scode decode` and `scode info`: four times the library's default,
+/// because they subdivide to a file's default level, which for CAD models of hundreds of faces
+/// takes one to two GB (the library's decode alone stays within its 1 GiB default).
+const DEFAULT_MAX_MEMORY: u64 = 4 << 30;
+
+/// What decoding a `.scode` file may cost (a file that needs more is refused before the
+/// memory is allocated).
+#[derive(Args, Debug)]
+pub struct DecodeLimits {
+    /// Refuse files larger than this many bytes (checked before the file is read).
+    #[arg(long, value_name = "BYTES", default_value_t = Limits::default().max_input_bytes)]
+    pub max_bytes: u64,
+    /// Memory budget of the decode in bytes: the input, every array sized by the file's
+    /// counts and the subdivided surface are charged against it before they are allocated
+    /// (and released when freed), and what is live at once must fit. The default (4 GiB)
+    /// fits large CAD models at their default level (840 faces at level 5: 2.2 GB).
+    #[arg(long, value_name = "BYTES", default_value_t = DEFAULT_MAX_MEMORY)]
+    pub max_memory: u64,
+    /// Work bound of the decode: steps of the walks whose length the file decides, per
+    /// vertex, face and face corner. Lattices of more than about 30,000 tunnels may need more
+    /// than the default.
+    #[arg(long, value_name = "N", default_value_t = Limits::default().max_work_per_element)]
+    pub max_work_per_element: u64,
+}
+
+impl DecodeLimits {
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_input_bytes: self.max_bytes,
+            max_memory: self.max_memory,
+            max_work_per_element: self.max_work_per_element,
+            ..Limits::default()
+        }
+    }
 }
 
 #[derive(Args, Debug)]
@@ -343,6 +379,8 @@ pub struct InfoArgs {
     /// decoded surface (default level) and the mesh.
     #[arg(long, value_name = "MESH")]
     pub against: Option<PathBuf>,
+    #[command(flatten)]
+    pub limits: DecodeLimits,
 }
 
 #[derive(Args, Debug)]

@@ -194,8 +194,11 @@ pub fn open_browser(url: &str) {
 
 /// Checks the file is a `.scode` file before serving it, so a wrong argument fails early.
 pub fn check_scode(file: &Path) -> Result<()> {
-    let bytes = std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?;
-    if bytes.len() < 4 || bytes[..4] != scode::codec::MAGIC {
+    let mut magic = Vec::new();
+    std::fs::File::open(file)
+        .and_then(|f| f.take(4).read_to_end(&mut magic))
+        .with_context(|| format!("cannot read {}", file.display()))?;
+    if magic != scode::codec::MAGIC {
         bail!(
             "{} is not a .scode file (encode a mesh first: scode encode in.obj out.scode)",
             file.display()

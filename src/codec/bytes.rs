@@ -1,7 +1,7 @@
 //! Byte-level helpers: LEB128 varints, a bounds-checked reader, and section framing
 //! (tag, length, optional zlib, CRC-32). See `spec/format.md` §2-§3.
 
-use std::io::{Read, Write};
+use std::io::Write;
 
 use crate::error::{Error, Result};
 
@@ -209,25 +209,67 @@ fn zlib_static_blocks(payload: &[u8]) -> Option<Vec<u8>> {
     })
 }
 
-/// One framed section as read from the file.
-pub struct RawSection {
+/// One framed section as read from the file, not yet inflated: a decoder that skips the
+/// section (an unknown skippable one) never pays for its inflation.
+pub struct RawSection<'a> {
     pub id: u8,
     pub skippable: bool,
-    /// Payload after inflation.
-    pub payload: Vec<u8>,
+    /// The payload as stored (a zlib stream when `raw_len` is set).
+    stored: &'a [u8],
+    /// Length of a deflated payload once inflated.
+    pub raw_len: Option<u64>,
     /// Bytes the section occupies in the file (framing included).
     pub stored_bytes: usize,
 }
 
-/// Reads the next section at `r` (a reader over the whole file). The CRC covers the file bytes
-/// from `crc_start` (default: the tag byte) to the end of the payload; `max_raw` caps the
-/// inflated size (zip-bomb guard).
-pub fn read_section(
-    r: &mut Reader,
+impl<'a> RawSection<'a> {
+    /// Payload bytes after inflation.
+    pub fn payload_len(&self) -> u64 {
+        self.raw_len.unwrap_or(self.stored.len() as u64)
+    }
+
+    /// The payload: borrowed when stored, inflated (exactly `raw_len` bytes, which the
+    /// caller has checked against its limits) when deflated.
+    pub fn payload(&self) -> Result<std::borrow::Cow<'a, [u8]>> {
+        let Some(n) = self.raw_len else {
+            return Ok(self.stored.into());
+        };
+        // Inflated by miniz_oxide's core into a buffer of exactly `n` bytes (one allocation,
+        // the size charged; no std::io machinery in a decoder-only build). A stream that is
+        // corrupt, fails its Adler-32, ends early or has more than `n` bytes is refused.
+        use miniz_oxide::inflate::core::{decompress, inflate_flags, DecompressorOxide};
+        use miniz_oxide::inflate::TINFLStatus;
+        let corrupt = || {
+            Error::format(
+                "file",
+                "payload",
+                format!(
+                    "section {}: zlib data corrupt or not of its raw length {n}",
+                    self.id
+                ),
+            )
+        };
+        let mut out = vec![0u8; usize::try_from(n).map_err(|_| corrupt())?];
+        let flags = inflate_flags::TINFL_FLAG_PARSE_ZLIB_HEADER
+            | inflate_flags::TINFL_FLAG_COMPUTE_ADLER32
+            | inflate_flags::TINFL_FLAG_USING_NON_WRAPPING_OUTPUT_BUF;
+        let mut state = Box::<DecompressorOxide>::default();
+        let (status, _, written) = decompress(&mut state, self.stored, &mut out, 0, flags);
+        if status != TINFLStatus::Done || written != out.len() {
+            return Err(corrupt());
+        }
+        Ok(out.into())
+    }
+}
+
+/// Reads the framing of the next section at `r` (a reader over the whole file) and checks its
+/// CRC, which covers the file bytes from `crc_start` (default: the tag byte) to the end of the
+/// payload. A deflated section's raw length is checked against what zlib can expand to.
+pub fn read_section<'a>(
+    r: &mut Reader<'a>,
     crc_start: Option<usize>,
     verify: bool,
-    max_raw: u64,
-) -> Result<RawSection> {
+) -> Result<RawSection<'a>> {
     let start = r.pos();
     let crc_from = crc_start.unwrap_or(start);
     let tag = r.u8("tag")?;
@@ -245,7 +287,7 @@ pub fn read_section(
     }
     let raw_len = if deflated {
         // zlib cannot expand more than ~1032:1, so a larger claim is a zip bomb or corruption.
-        let cap = max_raw.min(stored_len.saturating_mul(1040).saturating_add(64));
+        let cap = stored_len.saturating_mul(1040).saturating_add(64);
         Some(r.varint_max("raw_length", cap)?)
     } else {
         None
@@ -260,26 +302,11 @@ pub fn read_section(
             format!("checksum mismatch in section {id} (data corrupted)"),
         ));
     }
-    let payload = match raw_len {
-        None => stored.to_vec(),
-        Some(n) => {
-            let mut out = Vec::new();
-            let mut z = flate2::read::ZlibDecoder::new(stored).take(n + 1);
-            z.read_to_end(&mut out)
-                .map_err(|e| r.err("payload", format!("zlib data is corrupt: {e}")))?;
-            if out.len() as u64 != n {
-                return Err(r.err(
-                    "raw_length",
-                    format!("inflated to {} bytes, header says {n}", out.len()),
-                ));
-            }
-            out
-        }
-    };
     Ok(RawSection {
         id,
         skippable: tag & TAG_SKIPPABLE != 0,
-        payload,
+        stored,
+        raw_len,
         stored_bytes: r.pos() - start,
     })
 }
@@ -311,16 +338,24 @@ mod tests {
         put_section(&mut out, 5, &big, true, false);
         assert!(out.len() < 100, "zlib should win on repetitive data");
         let mut r = Reader::new(&out, "file");
-        let a = read_section(&mut r, None, true, 1 << 20).unwrap();
-        assert_eq!((a.id, a.payload.as_slice()), (3, small.as_slice()));
-        let b = read_section(&mut r, None, true, 1 << 20).unwrap();
-        assert_eq!(b.id, 5);
-        assert_eq!(b.payload, big);
+        let a = read_section(&mut r, None, true).unwrap();
+        assert_eq!((a.id, &*a.payload().unwrap()), (3, small.as_slice()));
+        let b = read_section(&mut r, None, true).unwrap();
+        assert_eq!((b.id, b.payload_len()), (5, 1000));
+        assert_eq!(&*b.payload().unwrap(), big.as_slice());
         r.expect_end().unwrap();
-        // Zip-bomb cap: a raw length over the limit is refused before inflating.
-        let mut r = Reader::new(&out, "file");
-        read_section(&mut r, None, true, 1 << 20).unwrap();
-        assert!(read_section(&mut r, None, true, 10).is_err());
+        // Zip-bomb cap: a raw length beyond what zlib can expand to is refused when the
+        // framing is read, before anything is inflated.
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        z.write_all(&big).unwrap();
+        let stream = z.finish().unwrap();
+        let mut bomb = Vec::new();
+        bomb.push(5 | TAG_DEFLATED);
+        put_varint(&mut bomb, stream.len() as u64);
+        put_varint(&mut bomb, stream.len() as u64 * 1040 + 65);
+        bomb.extend_from_slice(&stream);
+        bomb.extend_from_slice(&[0; 4]);
+        assert!(read_section(&mut Reader::new(&bomb, "file"), None, false).is_err());
     }
 
     #[test]
@@ -344,8 +379,8 @@ mod tests {
         // tag, two one-byte lengths, the fixed-code stream, CRC.
         assert_eq!(out.len(), 3 + fixed.len() + 4);
         let mut r = Reader::new(&out, "file");
-        let s = read_section(&mut r, None, true, 1 << 20).unwrap();
-        assert_eq!(s.payload, payload);
+        let s = read_section(&mut r, None, true).unwrap();
+        assert_eq!(&*s.payload().unwrap(), payload.as_slice());
         // Data that fixed codes cannot shrink stays stored.
         let noise: Vec<u8> = (0..200u32)
             .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)

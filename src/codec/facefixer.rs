@@ -7,6 +7,7 @@
 //! labels and maps the result back, so encoder and decoder cannot disagree about face order,
 //! vertex order or which label owns which edge.
 
+use super::Budget;
 use crate::error::{Error, Result};
 use crate::mesh::topology::{HalfEdgeMesh, NONE};
 
@@ -225,6 +226,8 @@ pub struct Rebuilt {
     pub vertex_count: usize,
     /// One outgoing half-edge per vertex.
     pub vertex_out: Vec<u32>,
+    /// Bytes charged to the budget for these arrays; whoever drops them releases them.
+    pub bytes: u64,
 }
 
 impl Rebuilt {
@@ -244,19 +247,57 @@ impl Rebuilt {
     }
 }
 
+/// The element `n` links away from `from`.
+fn walk(links: &[u32], mut from: u32, n: u64) -> u32 {
+    for _ in 0..n {
+        from = links[from as usize];
+    }
+    from
+}
+
 fn bad(field: &'static str, detail: impl Into<String>) -> Error {
     Error::format("connectivity", field, detail)
 }
 
+/// Bytes of a [`RebuiltFace`] and of an entry of the stack of suspended boundaries, as the
+/// budget charges them.
+const FACE_RECORD_BYTES: u64 = 12;
+const STACK_ENTRY_BYTES: u64 = 16;
+const REBUILD_MEMORY: &str = "decode memory for the connectivity rebuild (bytes)";
+const _: () = assert!(
+    std::mem::size_of::<RebuiltFace>() as u64 <= FACE_RECORD_BYTES
+        && std::mem::size_of::<(u32, u64)>() as u64 <= STACK_ENTRY_BYTES
+);
+
+/// Bytes a [`Rebuilt`] of `labels` labels, `half_edges` half-edges, `faces` faces and `roots`
+/// vertex classes holds: label edges; next, prev, twin, face and vertex per half-edge; face
+/// records; one outgoing half-edge per vertex.
+pub(crate) fn rebuilt_bytes(labels: u64, half_edges: u64, faces: u64, roots: u64) -> u64 {
+    4 * labels + 20 * half_edges + FACE_RECORD_BYTES * faces + 4 * roots
+}
+
 /// Undoes the labels (face-fixer.md §4). Every precondition is checked, so arbitrary label
-/// sequences give an error, never a panic.
-pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
-    // Forward pass: split into components by counting open boundaries, and number faces.
-    let mut comps = Vec::new();
-    let mut open = 0u64;
-    let mut start = 0usize;
+/// sequences give an error, never a panic. Every array is charged to `budget` before it is
+/// allocated and the scratch arrays are released when they are freed (the result's arrays
+/// stay charged: [`Rebuilt::bytes`]); the walks of merge labels, whose length the labels
+/// decide, are charged to its work bound.
+pub(crate) fn rebuild(labels: &[Label], budget: &mut Budget) -> Result<Rebuilt> {
+    // Every label but a component's first makes a pair of half-edges, numbered in u32 with
+    // NONE reserved.
+    if labels.len() >= (NONE / 2) as usize {
+        return Err(bad("labels", "too many half-edges"));
+    }
+    let nl = labels.len() as u64;
+    budget.charge(REBUILD_MEMORY, 8 * nl)?;
     let mut face_of_label = vec![NONE; labels.len()];
-    let mut nfaces = 0u32;
+    // The edge each label owns; until the boundaries are undone, at a component's first
+    // label, the end of its component.
+    let mut label_edge = vec![NONE; labels.len()];
+    // Forward pass: split into components by counting open boundaries, number faces, and
+    // bound the stack of suspended boundaries (an E or M label of a component adds at most
+    // one entry).
+    let (mut open, mut start, mut nfaces, mut ncomps) = (0u64, 0usize, 0u32, 0usize);
+    let (mut depth, mut max_depth) = (0u64, 0u64);
     for (j, lab) in labels.iter().enumerate() {
         if open == 0 {
             if !matches!(lab, Label::F(_)) {
@@ -267,30 +308,49 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
             }
             start = j;
             open = 1;
+            depth = 0;
         } else {
             match lab {
                 Label::S => open += 1,
-                Label::M { .. } | Label::E => open -= 1,
+                Label::M { .. } | Label::E => {
+                    open -= 1;
+                    depth += 1;
+                }
                 _ => {}
             }
         }
+        max_depth = max_depth.max(depth);
         if matches!(lab, Label::F(_) | Label::H(_)) {
             face_of_label[j] = nfaces;
             nfaces += 1;
         }
         if open == 0 {
-            comps.push((start, j + 1));
+            label_edge[start] = j as u32 + 1;
+            ncomps += 1;
         }
     }
     if open != 0 {
         return Err(bad("labels", "the last component does not end with E"));
     }
 
-    let mut next: Vec<u32> = Vec::new();
-    let mut twin: Vec<u32> = Vec::new();
-    let mut face: Vec<u32> = Vec::new();
-    let mut a_next: Vec<u32> = Vec::new();
-    let mut a_prev: Vec<u32> = Vec::new();
+    let nh = 2 * (labels.len() - ncomps);
+    let nh64 = nh as u64;
+    // next, twin and face (kept), the active boundary's two links and the stack (scratch),
+    // the faces (kept).
+    let scratch = 4 * nl + 8 * nh64 + STACK_ENTRY_BYTES * max_depth;
+    budget.charge(
+        REBUILD_MEMORY,
+        12 * nh64
+            + 8 * nh64
+            + STACK_ENTRY_BYTES * max_depth
+            + FACE_RECORD_BYTES * u64::from(nfaces),
+    )?;
+    let mut next: Vec<u32> = Vec::with_capacity(nh);
+    let mut twin: Vec<u32> = Vec::with_capacity(nh);
+    let mut face: Vec<u32> = Vec::with_capacity(nh);
+    let mut a_next: Vec<u32> = Vec::with_capacity(nh);
+    let mut a_prev: Vec<u32> = Vec::with_capacity(nh);
+    let mut stack: Vec<(u32, u64)> = Vec::with_capacity(max_depth as usize);
     let mut faces = vec![
         RebuiltFace {
             first: NONE,
@@ -300,7 +360,6 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
         };
         nfaces as usize
     ];
-    let mut label_edge = vec![NONE; labels.len()];
     let new_pair = |next: &mut Vec<u32>,
                     twin: &mut Vec<u32>,
                     face: &mut Vec<u32>,
@@ -322,10 +381,13 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
         Ok((g as u32, g as u32 + 1))
     };
 
-    for &(s, e) in &comps {
+    let mut s = 0;
+    while s < labels.len() {
+        let e = label_edge[s] as usize;
+        label_edge[s] = NONE;
         let mut gate = NONE;
         let mut len = 0u64;
-        let mut stack: Vec<(u32, u64)> = Vec::new();
+        stack.clear();
         for j in (s + 1..e).rev() {
             let lab = labels[j];
             match lab {
@@ -403,14 +465,24 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
                             format!("label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {len}, stack depth {})", stack.len()),
                         ));
                     }
+                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the
+                    // gate. The walks to Bpart's end and to B's gate go the shorter way round
+                    // and are charged first (their length is the file's to choose), and so is
+                    // inserting B i entries deep.
+                    let (l64, b_gate_at) = (u64::from(l), u64::from((l - k) % l));
+                    let (b_end_ahead, b_end_back) = (l64 - 1, len - l64 + 1);
+                    let b_gate_back = l64 - b_gate_at;
+                    budget.work(
+                        b_end_ahead.min(b_end_back) + b_gate_at.min(b_gate_back) + u64::from(i),
+                    )?;
                     let (g, t) =
                         new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the gate.
+                    let blast = if b_end_ahead <= b_end_back {
+                        walk(&a_next, gate, b_end_ahead)
+                    } else {
+                        walk(&a_prev, gate, b_end_back)
+                    };
                     let b1 = a_next[gate as usize];
-                    let mut blast = gate;
-                    for _ in 0..l - 1 {
-                        blast = a_next[blast as usize];
-                    }
                     let a_first = a_next[blast as usize];
                     // B = [t, b1 .. blast]
                     a_next[t as usize] = b1;
@@ -422,10 +494,11 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
                     a_prev[a_first as usize] = g;
                     a_next[gate as usize] = g;
                     a_prev[g as usize] = gate;
-                    let mut bgate = t;
-                    for _ in 0..(l - k) % l {
-                        bgate = a_next[bgate as usize];
-                    }
+                    let bgate = if b_gate_at <= b_gate_back {
+                        walk(&a_next, t, b_gate_at)
+                    } else {
+                        walk(&a_prev, t, b_gate_back)
+                    };
                     let at = stack.len() - i as usize;
                     stack.insert(at, (bgate, u64::from(l)));
                     gate = g;
@@ -498,11 +571,16 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
             hole: false,
             start: true,
         };
+        s = e;
     }
-    let nh = next.len();
+    drop((face_of_label, a_next, a_prev, stack));
+    budget.release(scratch);
     if let Some(h) = next.iter().position(|&n| n == NONE) {
         return Err(bad("labels", format!("half-edge {h} ends up in no face")));
     }
+    // prev and the vertex of every half-edge (kept), the union-find and its numbering
+    // (scratch).
+    budget.charge(REBUILD_MEMORY, 16 * nh64)?;
     let mut prev = vec![NONE; nh];
     for h in 0..nh {
         prev[next[h] as usize] = h as u32;
@@ -525,7 +603,10 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
     let mut id_of_root = vec![NONE; nh];
     let mut vertex = vec![NONE; nh];
     let mut vertex_count = 0u32;
-    let mut vertex_out = Vec::new();
+    // At most one vertex per union-find root.
+    let roots = (0..nh).filter(|&h| parent[h] == h as u32).count();
+    budget.charge(REBUILD_MEMORY, 4 * roots as u64)?;
+    let mut vertex_out = Vec::with_capacity(roots);
     for rf in faces.iter().filter(|f| !f.hole) {
         let mut h = rf.first;
         for _ in 0..rf.degree {
@@ -545,6 +626,8 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
         }
         *vh = id_of_root[r];
     }
+    drop((parent, id_of_root));
+    budget.release(8 * nh64);
     Ok(Rebuilt {
         next,
         prev,
@@ -555,6 +638,7 @@ pub fn rebuild(labels: &[Label]) -> Result<Rebuilt> {
         label_edge,
         vertex_count: vertex_count as usize,
         vertex_out,
+        bytes: rebuilt_bytes(nl, nh64, u64::from(nfaces), roots as u64),
     })
 }
 
@@ -601,7 +685,7 @@ mod tests {
         let m = mesh_from(nv, faces);
         let he = HalfEdgeMesh::build(&m).unwrap();
         let tr = encode_traversal(&he);
-        let rb = rebuild(&tr.labels).unwrap();
+        let rb = rebuild(&tr.labels, &mut Budget::unlimited()).unwrap();
         assert_eq!(rb.faces.len(), tr.faces.len());
         let mut map = vec![NONE; rb.vertex_count];
         let mut out = Vec::new();
@@ -840,7 +924,7 @@ mod tests {
             vec![F(3), H(3), R, R, E],
         ];
         for c in cases {
-            assert!(rebuild(&c).is_err(), "{c:?}");
+            assert!(rebuild(&c, &mut Budget::unlimited()).is_err(), "{c:?}");
         }
     }
 
@@ -863,7 +947,7 @@ mod tests {
         /// half-edge structure.
         #[test]
         fn random_labels_never_panic(labels in proptest::collection::vec(label_strategy(), 0..60)) {
-            if let Ok(rb) = rebuild(&labels) {
+            if let Ok(rb) = rebuild(&labels, &mut Budget::unlimited()) {
                 for h in 0..rb.next.len() {
                     assert_eq!(rb.twin[rb.twin[h] as usize] as usize, h);
                     assert_eq!(rb.prev[rb.next[h] as usize] as usize, h);

@@ -8,6 +8,7 @@ use glam::DVec3;
 
 use super::facefixer::Rebuilt;
 use super::rangecoder::{unzigzag, zigzag, BitModel, IntModel, RangeDecoder, RangeEncoder};
+use super::Budget;
 use crate::error::{Error, Result};
 use crate::mesh::topology::NONE;
 
@@ -158,6 +159,10 @@ pub trait ResidualCoder {
     fn flag(&mut self, ctx: usize, slot: &mut bool) -> Result<()>;
     /// True for the encoder (which knows the values and makes the choices).
     fn encoding(&self) -> bool;
+    /// Charges walk steps whose number the file decides (the decoder's work bound).
+    fn work(&mut self, _steps: u64) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// Contexts of the parallelogram-selection flags: (number of candidates 2, 3, 4+) x
@@ -211,20 +216,22 @@ impl ResidualCoder for GeomEncoder<'_> {
     }
 }
 
-pub struct GeomDecoder<'a, 'b> {
+pub(crate) struct GeomDecoder<'a, 'b> {
     pub dec: &'a mut RangeDecoder<'b>,
     models: Vec<IntModel>,
     flags: Vec<BitModel>,
     max_q: i32,
+    budget: &'a mut Budget,
 }
 
 impl<'a, 'b> GeomDecoder<'a, 'b> {
-    pub fn new(dec: &'a mut RangeDecoder<'b>, max_q: i32) -> Self {
+    pub fn new(dec: &'a mut RangeDecoder<'b>, max_q: i32, budget: &'a mut Budget) -> Self {
         GeomDecoder {
             dec,
             models: vec![IntModel::default(); CONTEXTS],
             flags: vec![BitModel::default(); FLAG_CONTEXTS],
             max_q,
+            budget,
         }
     }
 }
@@ -253,6 +260,10 @@ impl ResidualCoder for GeomDecoder<'_, '_> {
     fn encoding(&self) -> bool {
         false
     }
+
+    fn work(&mut self, steps: u64) -> Result<()> {
+        self.budget.work(steps)
+    }
 }
 
 /// Integer plane through three grid points, kept per planar group (`spec/format.md` §8.3).
@@ -264,6 +275,9 @@ struct PlaneState {
     normal: [i64; 3],
     area: i64,
 }
+
+// The decoder charges 112 bytes per group for its plane state (`codec::GROUP_BYTES`).
+const _: () = assert!(std::mem::size_of::<PlaneState>() <= 112);
 
 fn sub(a: [i64; 3], b: [i64; 3]) -> [i64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -473,7 +487,8 @@ fn edge_axes(rb: &Rebuilt, arcs: &ArcAxes, hs: &[u32], out: &mut Vec<u32>) {
 /// as twice their value, at most `MAX_CANDIDATES` in all. Version 3 (`arcs`): where the two
 /// points a prediction is made from lie on one circle around the axis of a cylinder or cone
 /// face next to the chain, the point on that circle replaces the straight-line one. Returns
-/// whether any candidate is such an arc.
+/// whether any candidate is such an arc, and adds to `steps` the length of the neighbours'
+/// rotations it walked.
 #[allow(clippy::too_many_arguments)]
 fn crease_candidates(
     rb: &Rebuilt,
@@ -486,6 +501,7 @@ fn crease_candidates(
     scratch: &mut Vec<u32>,
     axes_near: &mut Vec<u32>,
     cands: &mut Vec<[i64; 3]>,
+    steps: &mut u64,
 ) -> bool {
     let head = |h: u32| rb.vertex[rb.next[h as usize] as usize];
     let p = |w: u32| q[w as usize].map(i64::from);
@@ -527,6 +543,7 @@ fn crease_candidates(
             break;
         }
         rotation(rb, w, scratch);
+        *steps += scratch.len() as u64;
         let mut other = None;
         let mut n_other = 0usize;
         for &h in scratch.iter() {
@@ -577,6 +594,7 @@ pub fn walk(
     let mut level = vec![0u8; nt];
     let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); MAX_LEVEL + 1];
     let mut planes = vec![PlaneState::default(); plane_groups];
+    let mut plane_stamp = vec![NONE; plane_groups];
     let mut prev_vertex: Option<u32> = None;
     let mut last_class = 0u32;
     let mut incident: Vec<u32> = Vec::new();
@@ -617,6 +635,7 @@ pub fn walk(
         cands.clear();
         let mut arc = false;
         if let Some(cr) = crease {
+            let mut steps = 0;
             arc = crease_candidates(
                 rb,
                 cr,
@@ -628,7 +647,9 @@ pub fn walk(
                 &mut scratch,
                 &mut axes_near,
                 &mut cands,
+                &mut steps,
             );
+            coder.work(steps)?;
         }
         let n_crease = cands.len();
         let mut add2 = |pr2: [i64; 3]| {
@@ -642,16 +663,25 @@ pub fn walk(
             if rf.hole {
                 continue;
             }
-            let vert = |k: u32| {
+            // The face's vertices k steps forward and back from v's corner: each walk is at
+            // most 3 steps, so a face of high degree costs no more per corner.
+            let ahead = |k: u32| {
                 let mut x = h;
                 for _ in 0..k {
                     x = rb.next[x as usize];
                 }
                 rb.vertex[x as usize]
             };
+            let back = |k: u32| {
+                let mut x = h;
+                for _ in 0..k {
+                    x = rb.prev[x as usize];
+                }
+                rb.vertex[x as usize]
+            };
             let d = rf.degree;
             if d == 3 {
-                let (a, b) = (vert(1), vert(2));
+                let (a, b) = (ahead(1), ahead(2));
                 if !(kn(a) && kn(b)) {
                     continue;
                 }
@@ -668,13 +698,13 @@ pub fn walk(
                 let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
                 add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
             } else {
-                let (a, b, c3) = (vert(1), vert(2), vert(3));
+                let (a, b, c3) = (ahead(1), ahead(2), ahead(3));
                 if kn(a) && kn(b) && kn(c3) {
                     let (pa, pb, pc) = (p(a), p(b), p(c3));
                     add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
                 }
                 if d >= 5 {
-                    let (a, b, c3) = (vert(d - 1), vert(d - 2), vert(d - 3));
+                    let (a, b, c3) = (back(1), back(2), back(3));
                     if kn(a) && kn(b) && kn(c3) {
                         let (pa, pb, pc) = (p(a), p(b), p(c3));
                         add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
@@ -718,19 +748,20 @@ pub fn walk(
                 (pr.to_vec(), KIND_START)
             }
         };
-        // Plane groups around v (each once, ascending ids) -> the plane with the largest
-        // defining triangle.
+        // Plane groups around v (each once: a group is taken when its stamp is not yet v, so
+        // a vertex of high valence costs no more per edge) -> the plane with the largest
+        // defining triangle. (No sort needed: ties on the area are broken by the group id.)
         incident.clear();
         for &h in &out_edges {
             let pg = face_plane_group
                 .get(rb.face[h as usize] as usize)
                 .copied()
                 .unwrap_or(NONE);
-            if pg != NONE && !incident.contains(&pg) {
+            if pg != NONE && plane_stamp[pg as usize] != v {
+                plane_stamp[pg as usize] = v;
                 incident.push(pg);
             }
         }
-        // (No sort needed: ties on the area are broken by the group id.)
         let best = incident
             .iter()
             .filter(|&&g| planes[g as usize].n == 3)

@@ -27,7 +27,7 @@ use std::collections::BTreeSet;
 
 use glam::DVec3;
 
-use self::bytes::{put_section, put_varint, read_section, Reader};
+use self::bytes::{put_section, put_varint, read_section, RawSection, Reader};
 use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
 use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, Quantizer};
 use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
@@ -81,7 +81,8 @@ impl Default for EncodeOptions {
 }
 
 /// Decoder resource limits. Every count read from a file is checked against these before
-/// anything is allocated for it.
+/// anything is allocated for it, and the memory and work a file can cost are bounded
+/// (`spec/format.md` §10).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Limits {
     /// Largest accepted file, and largest inflated section (default 1 GiB).
@@ -94,8 +95,27 @@ pub struct Limits {
     pub max_face_corners: u64,
     /// Default 1 million.
     pub max_groups: u64,
-    /// Faces after subdivision (used by the subdivision code; default 200 million).
+    /// Triangles after subdivision: a control mesh's fan-triangulated faces times 4^level, at
+    /// the header's default level and at any level a caller decodes to (default 200 million).
     pub max_subdivided_faces: u64,
+    /// Memory budget of one decode in bytes: the input, inflated sections and every array
+    /// whose size the file decides (subdivision output included, when the caller subdivides)
+    /// are charged against it before they are allocated and released when they are freed;
+    /// what is live at once must fit. Default 1 GiB: a raw triangle mesh peaks at about 150
+    /// bytes per triangle (7 million triangles fit). A subdivided surface adds 200 bytes per
+    /// triangle of the finest level, so a caller that subdivides large CAD models to their
+    /// default level needs more (840 faces at level 5: 2.2 GB); the command-line tool uses
+    /// 4 GiB.
+    pub max_memory: u64,
+    /// Work bound: steps of the decoder's walks whose length the file decides (merge labels'
+    /// boundary walks, candidate searches), at most this many per vertex, face and face
+    /// corner of the header: a decode takes at most `max_work_per_element x (V + F + K + 1)`
+    /// steps. The memory budget bounds the counts a header may claim (at least 25 bytes are
+    /// charged per element, so 42 million elements per GiB): with the defaults a file costs at
+    /// most about 256 x 42 million = 1.1e10 steps, and 4.4e10 with the command-line tool's
+    /// 4 GiB. Default 256: genuine meshes of few handles count far below 1 per element, a
+    /// voxel lattice of 45^3 cells (30,000 tunnels) 127; lattices of more tunnels need more.
+    pub max_work_per_element: u64,
     /// Verify section CRCs (default true; the fuzz target turns it off).
     pub verify_checksums: bool,
 }
@@ -109,8 +129,69 @@ impl Default for Limits {
             max_face_corners: 400_000_000,
             max_groups: 1_000_000,
             max_subdivided_faces: 200_000_000,
+            max_memory: 1 << 30,
+            max_work_per_element: 256,
             verify_checksums: true,
         }
+    }
+}
+
+/// What one decode charged against its [`Limits`] (see [`decode_with_usage`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Usage {
+    /// Peak of the bytes charged against `max_memory` and not yet released: what the decode
+    /// held at most at one time.
+    pub memory: u64,
+    /// Bytes still charged when the decode ended: the input and the decoded mesh, which the
+    /// caller holds (what a caller that subdivides adds to).
+    pub held: u64,
+    /// Walk steps charged against the work bound.
+    pub work: u64,
+}
+
+/// The running account of a decode: allocation sites charge their bytes before allocating
+/// and release them when the arrays are freed, so the live total is checked against the
+/// budget (its peak is what a decode needs); walks whose length the file decides charge
+/// their steps. Either beyond its limit is `Error::LimitsExceeded`. The encoder runs the
+/// shared code with an unlimited budget.
+pub(crate) struct Budget {
+    max_memory: u64,
+    max_work: u64,
+    pub usage: Usage,
+}
+
+impl Budget {
+    pub fn new(max_memory: u64) -> Self {
+        Budget {
+            max_memory,
+            max_work: u64::MAX,
+            usage: Usage::default(),
+        }
+    }
+
+    pub fn unlimited() -> Self {
+        Self::new(u64::MAX)
+    }
+
+    /// Charges `bytes` of memory for `what` (named in the error) on top of what is live.
+    pub fn charge(&mut self, what: &'static str, bytes: u64) -> Result<()> {
+        let live = self.usage.held.saturating_add(bytes);
+        limit(what, live, self.max_memory)?;
+        self.usage.held = live;
+        self.usage.memory = self.usage.memory.max(live);
+        Ok(())
+    }
+
+    /// Releases `bytes` charged earlier, when their arrays are freed.
+    pub fn release(&mut self, bytes: u64) {
+        self.usage.held = self.usage.held.saturating_sub(bytes);
+    }
+
+    pub fn work(&mut self, steps: u64) -> Result<()> {
+        let total = self.usage.work.saturating_add(steps);
+        limit("decode work (walk steps)", total, self.max_work)?;
+        self.usage.work = total;
+        Ok(())
     }
 }
 
@@ -476,16 +557,22 @@ impl ConnModels {
         }
     }
 
-    /// Decodes a group symbol; `class` as in [`Self::group_ctx`].
-    fn decode_group(
+    /// Decodes a group symbol; `class` as in [`Self::group_ctx`]. With `MEASURE` (`inspect`)
+    /// the bits the group symbols take are added up; a plain decode leaves that code out.
+    fn decode_group<const MEASURE: bool>(
         &mut self,
         dec: &mut RangeDecoder,
         seen: u32,
         class: usize,
     ) -> Result<GroupSym> {
         let c = self.group_ctx(class);
-        let (s, cost) = self.groups[c].decode_with_cost(dec)?;
-        self.group_bits += cost;
+        let s = if MEASURE {
+            let (s, cost) = self.groups[c].decode_with_cost(dec)?;
+            self.group_bits += cost;
+            s
+        } else {
+            self.groups[c].decode(dec)?
+        };
         self.prev_group = s;
         let no_groups = || {
             Error::format(
@@ -500,9 +587,9 @@ impl ConnModels {
             i if i > GROUP_CANDIDATES + 1 => GroupSym::Vertex((i - GROUP_SYMBOLS) as u8),
             _ if self.groups_v3 => {
                 let max = seen.checked_sub(1).ok_or_else(no_groups)?;
-                let before = self.recent.clone();
+                let before = MEASURE.then(|| self.recent.clone());
                 let r = self.recent.decode(dec, max, "group_rank")?;
-                self.group_bits += before.cost(r);
+                self.group_bits += before.map_or(0.0, |b| b.cost(r));
                 GroupSym::Recent(r)
             }
             _ if LEGACY => {
@@ -553,14 +640,15 @@ fn decode_below(dec: &mut RangeDecoder, bound: u32) -> Result<u32> {
 
 /// Candidate groups of mesh face `f` (spec §6.4): the distinct groups of the mesh faces
 /// across its edges that precede it in encoding order, in the order of its half-edges from
-/// the entry half-edge; when there are none, the group of the previous mesh face.
+/// the entry half-edge; when there are none, the group of the previous mesh face. Returns
+/// the work done (comparisons, at most degree x candidates), which the decoder charges.
 fn group_candidates(
     rb: &Rebuilt,
     f: usize,
     face_group: &[u32],
     prev_real: Option<usize>,
     out: &mut Vec<u32>,
-) {
+) -> u64 {
     out.clear();
     let rf = rb.faces[f];
     let mut h = rf.first;
@@ -576,6 +664,7 @@ fn group_candidates(
             out.push(face_group[p]);
         }
     }
+    u64::from(rf.degree) * (out.len() as u64 + 1)
 }
 
 /// Version-3 context class of a face with candidate list `cands` (spec §6.5): 0 for at most
@@ -610,28 +699,31 @@ fn group_class(rb: &Rebuilt, f: usize, face_group: &[u32], cands: &[u32]) -> usi
 /// cycle order from the entry half-edge, the faces around each vertex in rotation order
 /// (from its first outgoing half-edge, `next = twin(prev(h))`); the groups of those that are
 /// earlier mesh faces, each once, not among the edge candidates `cands`; at most
-/// `GROUP_CANDIDATES`.
+/// `GROUP_CANDIDATES`. Returns the work done (rotation steps times the comparisons of each),
+/// which the decoder charges: around a vertex of high valence the walk is long.
 fn vertex_candidates(
     rb: &Rebuilt,
     f: usize,
     face_group: &[u32],
     cands: &[u32],
     out: &mut Vec<u32>,
-) {
+) -> u64 {
     out.clear();
     let rf = rb.faces[f];
     let mut h = rf.first;
-    for _ in 0..rf.degree {
+    let mut steps = 0u64;
+    'vertices: for _ in 0..rf.degree {
         let start = rb.vertex_out[rb.vertex[h as usize] as usize];
         let mut e = start;
         for _ in 0..rb.next.len() {
+            steps += 1;
             let k = rb.face[e as usize] as usize;
             if k < f && !rb.faces[k].hole {
                 let g = face_group[k];
                 if !cands.contains(&g) && !out.contains(&g) {
                     out.push(g);
                     if out.len() == GROUP_CANDIDATES {
-                        return;
+                        break 'vertices;
                     }
                 }
             }
@@ -642,6 +734,7 @@ fn vertex_candidates(
         }
         h = rb.next[h as usize];
     }
+    steps * (cands.len() as u64 + 1)
 }
 
 /// Recency order of the groups used so far (version 3, §6.5): each used group's last face,
@@ -819,7 +912,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     let work = cut.as_ref().unwrap_or(mesh);
     let tr = encode_traversal(&he);
     let internal = |what: &str| Error::Mesh(format!("internal encoder error: {what}"));
-    let rb = rebuild(&tr.labels).map_err(|e| internal(&e.to_string()))?;
+    let rb = rebuild(&tr.labels, &mut Budget::unlimited()).map_err(|e| internal(&e.to_string()))?;
     if rb.faces.len() != tr.faces.len() {
         return Err(internal("face count mismatch"));
     }
@@ -991,7 +1084,8 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         .iter()
         .map(|&w| quant.quantize(work.positions[w as usize]))
         .collect();
-    let face_plane_group = plane_groups_of_faces(&face_group_new, &groups_new_order);
+    let kinds: Vec<PatchKind> = groups_new_order.iter().map(|g| g.patch).collect();
+    let face_plane_group = plane_groups_of_faces(&face_group_new, &kinds);
     let (face_axis, axes) = patches::face_axes(&face_group_new, &group_axes);
     let mut geom_enc = RangeEncoder::new();
     {
@@ -1139,10 +1233,10 @@ fn final_numbering(coded_count: usize, merges: &[(u32, u32)]) -> Vec<u32> {
     fin
 }
 
-fn plane_groups_of_faces(face_group: &[u32], groups: &[Group]) -> Vec<u32> {
+fn plane_groups_of_faces(face_group: &[u32], kinds: &[PatchKind]) -> Vec<u32> {
     face_group
         .iter()
-        .map(|&g| match groups.get(g as usize).map(|g| g.patch) {
+        .map(|&g| match kinds.get(g as usize) {
             Some(PatchKind::Boundary(BoundarySurface::Plane)) => g,
             _ => NONE,
         })
@@ -1154,12 +1248,33 @@ fn plane_groups_of_faces(face_group: &[u32], groups: &[Group]) -> Vec<u32> {
 
 /// Decodes a file. Every malformed input gives `Error::Format` or `Error::LimitsExceeded`.
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<Decoded> {
-    decode_full(bytes, limits).map(|(d, _)| d)
+    decode_full::<false>(bytes, limits, &mut Budget::new(limits.max_memory)).map(|(d, _)| d)
+}
+
+/// Decodes a file and reports what the decode charged against `limits` (also when it
+/// fails): the bytes charged against `max_memory` and the walk steps against the work bound.
+pub fn decode_with_usage(bytes: &[u8], limits: &Limits) -> (Result<Decoded>, Usage) {
+    let mut budget = Budget::new(limits.max_memory);
+    let decoded = decode_full::<false>(bytes, limits, &mut budget).map(|(d, _)| d);
+    (decoded, budget.usage)
 }
 
 /// Header, section sizes and summary counts of a file (decodes it fully).
 pub fn inspect(bytes: &[u8], limits: &Limits) -> Result<FileInfo> {
-    decode_full(bytes, limits).map(|(_, i)| i)
+    let (Decoded { header, mesh }, summary) =
+        decode_full::<true>(bytes, limits, &mut Budget::new(limits.max_memory))?;
+    Ok(FileInfo {
+        header,
+        sections: summary.sections,
+        total_bytes: bytes.len(),
+        sharp_edge_count: mesh.sharp_edges.len(),
+        corner_count: mesh.corners.len(),
+        patch_kinds: mesh.groups.iter().map(|g| g.patch).collect(),
+        group_names: mesh.groups.into_iter().map(|g| g.name).collect(),
+        component_count: summary.component_count,
+        label_count: summary.label_count,
+        group_bits: summary.group_bits,
+    })
 }
 
 fn limit(what: &'static str, value: u64, max: u64) -> Result<()> {
@@ -1241,6 +1356,18 @@ fn parse_header(
         ));
     }
     r.expect_end()?;
+    if let Content::ControlMesh { default_level } = content {
+        // The triangles a decode at the default level makes: the fan-triangulated faces
+        // (K - 2F) times 4^level.
+        let scale = 1u64
+            .checked_shl(2 * u32::from(default_level))
+            .unwrap_or(u64::MAX);
+        limit(
+            "subdivided faces at the default level",
+            (corners - 2 * face_count).saturating_mul(scale),
+            limits.max_subdivided_faces,
+        )?;
+    }
     let header = Header {
         version_major: major,
         version_minor: minor,
@@ -1265,107 +1392,113 @@ fn parse_header(
     Ok((header, quant))
 }
 
-fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
-    limit("input bytes", bytes.len() as u64, limits.max_input_bytes)?;
-    let mut r = Reader::new(bytes, "file");
-    let magic = r.bytes(4, "magic")?;
-    if magic != MAGIC {
-        return Err(Error::format(
-            "file",
-            "magic",
-            "not an .scode file (bad magic bytes)",
-        ));
-    }
-    let major = r.u8("version_major")?;
-    let minor = r.u8("version_minor")?;
-    let features = features_for(major, minor)?;
-    let max_raw = limits.max_input_bytes;
-    let verify = limits.verify_checksums;
+// Bytes the decoder allocates per element, charged against `Limits::max_memory` before the
+// arrays exist and released when they are freed (`spec/format.md` §10.3); the rebuild charges
+// its own arrays (`facefixer::rebuild`). Fixed numbers (the sizes on 64-bit targets, checked
+// when compiling) rather than `size_of`, so whether a file fits a budget does not depend on
+// the platform.
+/// Per label: the label itself, from the label count until the rebuild is done.
+const LABEL_BYTES: u64 = 16;
+/// Held from the rebuild to the assembled mesh, per label: its edge and sharp flag.
+const LABEL_ARRAY_BYTES: u64 = 4 + 1;
+/// Per rebuilt face (holes included): its group and recency flag.
+const FACE_BYTES: u64 = 4 + 4;
+/// Per coded vertex: corner flag and two crease counts, grid point, merge flag, merge record
+/// and the two numberings of the fixups.
+const CODED_VERTEX_BYTES: u64 = 3 + 12 + 1 + 8 + 8;
+/// Per output vertex: the validation's stamp.
+const VERTEX_STAMP_BYTES: u64 = 4;
+/// Per group: patch kind decoded and reordered (2 x 56), grid axis (56) and axis list entry
+/// (48), plane state (112), the group record and its name (80 + 24), another name slot (24),
+/// and six u32 arrays (plane stamp, axis index, recency, name order, its rank flags, input
+/// order).
+const GROUP_BYTES: u64 = 2 * 56 + 56 + 48 + 112 + 80 + 24 + 24 + 6 * 4;
+/// The crease flags and the geometry walk, per half-edge (crease flag), per rebuilt face
+/// (plane group and axis) and per coded vertex (known flag, level, and the level buckets:
+/// each vertex enters each of 6 buckets at most once, and a bucket's capacity is at most
+/// twice its entries).
+const GEOMETRY_HALF_EDGE_BYTES: u64 = 1;
+const GEOMETRY_FACE_BYTES: u64 = 4 + 4;
+const GEOMETRY_VERTEX_BYTES: u64 = 1 + 1 + 6 * 4 * 2;
+/// The output mesh: per vertex its position, per face its offset and group, per corner its
+/// vertex; the entries of the sets of sharp edges and corners (B-tree nodes, amortised).
+const MESH_VERTEX_BYTES: u64 = 24;
+const MESH_FACE_BYTES: u64 = 8 + 4;
+const MESH_CORNER_BYTES: u64 = 4;
+const SHARP_EDGE_BYTES: u64 = 16;
+const CORNER_BYTES: u64 = 8;
 
-    let mut sections_info = Vec::new();
-    let hs = read_section(&mut r, Some(0), verify, max_raw)?;
-    if hs.id != SEC_HEADER {
-        return Err(Error::format(
-            "file",
-            "section",
-            "the first section must be the header",
-        ));
-    }
-    sections_info.push(SectionInfo {
-        name: "header",
-        stored_bytes: hs.stored_bytes + 6,
-        raw_bytes: hs.payload.len(),
-    });
-    let (header, quant) = parse_header(&hs.payload, major, minor, limits)?;
+// No charge is below the size of what it stands for (on any target).
+const _: () = {
+    use std::mem::size_of;
+    assert!(size_of::<Label>() as u64 <= LABEL_BYTES);
+    assert!(size_of::<PatchKind>() <= 56);
+    assert!(size_of::<Option<geometry::GridAxis>>() <= 56);
+    assert!(size_of::<geometry::GridAxis>() <= 48);
+    assert!(size_of::<Group>() <= 80 && size_of::<String>() <= 24);
+    assert!(size_of::<usize>() as u64 + 4 <= MESH_FACE_BYTES);
+    assert!(size_of::<DVec3>() as u64 <= MESH_VERTEX_BYTES);
+};
 
-    // Remaining sections, in increasing id order; unknown skippable ones are ignored.
-    let mut payloads: [Option<Vec<u8>>; 7] = Default::default();
-    let mut last_id = SEC_HEADER;
-    while !r.is_empty() {
-        let s = read_section(&mut r, None, verify, max_raw)?;
-        if s.id <= last_id {
-            return Err(Error::format(
-                "file",
-                "section",
-                format!("section {} out of order or repeated", s.id),
-            ));
-        }
-        last_id = s.id;
-        if s.id as usize >= payloads.len() {
-            if s.skippable {
-                continue;
-            }
-            return Err(Error::format(
-                "file",
-                "section",
-                format!("unknown section id {}", s.id),
-            ));
-        }
-        sections_info.push(SectionInfo {
-            name: section_name(s.id),
-            stored_bytes: s.stored_bytes,
-            raw_bytes: s.payload.len(),
-        });
-        payloads[s.id as usize] = Some(s.payload);
-    }
-    for (id, flag) in [
-        (SEC_PATCHES, FLAG_PATCHES),
-        (SEC_FIXUPS, FLAG_MERGES),
-        (SEC_NAMES, FLAG_NAMES),
-    ] {
-        if payloads[id as usize].is_some() != (header.flags & flag != 0) {
-            return Err(Error::format(
-                section_name(id),
-                "section",
-                "section presence does not match the header flags",
-            ));
-        }
-    }
-    let required = |id: u8| -> Result<&Vec<u8>> {
-        payloads[id as usize].as_ref().ok_or_else(|| {
-            Error::format(section_name(id), "section", "required section is missing")
-        })
-    };
+/// Bytes held from the rebuild to the assembled mesh for `labels` labels and `faces` rebuilt
+/// faces of a file with header `h`. Labels and faces are below 2^32 (§5 bounds K); vertex and
+/// group counts only by the caller's limits.
+fn decode_array_bytes(h: &Header, labels: u64, faces: u64) -> u64 {
+    let coded = h.vertex_count.saturating_add(h.merged_vertex_count);
+    (labels * LABEL_ARRAY_BYTES + faces * FACE_BYTES)
+        .saturating_add(coded.saturating_mul(CODED_VERTEX_BYTES))
+        .saturating_add(h.vertex_count.saturating_mul(VERTEX_STAMP_BYTES))
+        .saturating_add(h.group_count.saturating_mul(GROUP_BYTES))
+}
 
-    let nf = header.face_count as usize;
-    let coded_count = header
-        .vertex_count
-        .checked_add(header.merged_vertex_count)
-        .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
-        as usize;
-    let traversal_vertices = coded_count
-        .checked_sub(header.isolated_vertex_count as usize)
-        .ok_or_else(|| {
-            Error::format(
-                "header",
-                "isolated_vertex_count",
-                "exceeds the vertex count",
-            )
-        })?;
-    let group_count = header.group_count as usize;
+/// Bytes of the crease flags and the geometry walk (from the creases to the end of the
+/// geometry).
+fn geometry_bytes(h: &Header, half_edges: u64, faces: u64) -> u64 {
+    let coded = h.vertex_count.saturating_add(h.merged_vertex_count);
+    (half_edges * GEOMETRY_HALF_EDGE_BYTES + faces * GEOMETRY_FACE_BYTES)
+        .saturating_add(coded.saturating_mul(GEOMETRY_VERTEX_BYTES))
+}
 
-    // Connectivity.
-    let conn = required(SEC_CONNECTIVITY)?;
+/// Bytes of the output mesh the header describes (sets of sharp edges and corners apart).
+fn mesh_bytes(h: &Header) -> u64 {
+    ((h.face_count + 1) * MESH_FACE_BYTES + h.face_corner_count * MESH_CORNER_BYTES)
+        .saturating_add(h.vertex_count.saturating_mul(MESH_VERTEX_BYTES))
+}
+
+/// A known section's payload, inflated after its raw length is checked and charged.
+fn section_payload<'a>(
+    s: &RawSection<'a>,
+    limits: &Limits,
+    budget: &mut Budget,
+) -> Result<std::borrow::Cow<'a, [u8]>> {
+    if let Some(n) = s.raw_len {
+        limit("inflated section bytes", n, limits.max_input_bytes)?;
+        budget.charge("decode memory for inflated sections (bytes)", n)?;
+    }
+    s.payload()
+}
+
+/// Drops a payload and releases its charge (a stored payload borrows the input: nothing to
+/// release).
+fn drop_payload(p: std::borrow::Cow<[u8]>, budget: &mut Budget) {
+    if let std::borrow::Cow::Owned(v) = p {
+        budget.release(v.len() as u64);
+    }
+}
+
+/// The sections of a file after its header, framed and CRC-checked but not inflated, by id;
+/// unknown skippable sections are skipped (never inflated).
+type Sections<'a> = [Option<RawSection<'a>>; 7];
+
+/// The connectivity section (spec §6): the labels, the rebuilt connectivity and every mesh
+/// face's group. Returns the label count, the rebuilt connectivity, the face groups and the
+/// bits the group symbols took (with `MEASURE`).
+fn decode_connectivity<const MEASURE: bool>(
+    conn: &[u8],
+    header: &Header,
+    groups_v3: bool,
+    budget: &mut Budget,
+) -> Result<(usize, Rebuilt, Vec<u32>, f64)> {
     let mut cr = Reader::new(conn, "connectivity");
     let label_count = cr.varint_max("label_count", header.face_corner_count + header.face_count)?;
     // Each label is one frequency-model symbol: at least log2(8216 / 8207) bits (9 other
@@ -1382,31 +1515,40 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         ));
     }
     let mut dec = RangeDecoder::new(coded, "connectivity")?;
-    let mut models = ConnModels::new(features.groups_v3);
-    let mut labels = Vec::new();
+    let mut models = ConnModels::new(groups_v3);
+    budget.charge(
+        "decode memory for connectivity labels (bytes)",
+        label_count * LABEL_BYTES,
+    )?;
+    let mut labels: Vec<Label> = Vec::with_capacity(label_count as usize);
+    let (mut faces, mut corners) = (0u64, 0u64);
     let max_degree = header.face_corner_count.min(u64::from(u32::MAX / 2)) as u32;
     for _ in 0..label_count {
-        labels.push(models.decode_label(&mut dec, max_degree.max(3))?);
+        let l = models.decode_label(&mut dec, max_degree.max(3))?;
+        if let Label::F(d) = l {
+            faces += 1;
+            corners += u64::from(d);
+        }
+        labels.push(l);
     }
-    let rb = rebuild(&labels)?;
-    let real_faces = rb.faces.iter().filter(|f| !f.hole).count();
-    let real_corners: u64 = rb
-        .faces
-        .iter()
-        .filter(|f| !f.hole)
-        .map(|f| u64::from(f.degree))
-        .sum();
-    if real_faces != nf || real_corners != header.face_corner_count {
+    // The mesh faces and their corners must be the header's before the rebuild is charged
+    // and run.
+    if faces != header.face_count || corners != header.face_corner_count {
         return Err(Error::format(
             "connectivity",
             "labels",
             format!(
-                "labels give {real_faces} faces / {real_corners} corners, header says {nf} / {}",
-                header.face_corner_count
+                "labels give {faces} faces / {corners} corners, header says {} / {}",
+                header.face_count, header.face_corner_count
             ),
         ));
     }
-    if rb.vertex_count != traversal_vertices {
+    let rb = rebuild(&labels, budget)?;
+    drop(labels);
+    budget.release(label_count * LABEL_BYTES);
+    let traversal_vertices =
+        header.vertex_count + header.merged_vertex_count - header.isolated_vertex_count;
+    if rb.vertex_count as u64 != traversal_vertices {
         return Err(Error::format(
             "connectivity",
             "labels",
@@ -1416,13 +1558,37 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             ),
         ));
     }
-    // Resolve groups in encoding order.
+    budget.charge(
+        "decode memory for connectivity and geometry arrays (bytes)",
+        decode_array_bytes(header, label_count, rb.faces.len() as u64),
+    )?;
+    let face_group = decode_groups::<MEASURE>(
+        &mut dec,
+        &mut models,
+        &rb,
+        header.group_count as usize,
+        groups_v3,
+        budget,
+    )?;
+    dec.finish()?;
+    Ok((label_count as usize, rb, face_group, models.group_bits))
+}
+
+/// Resolves the group of every mesh face in encoding order (spec §6.5).
+fn decode_groups<const MEASURE: bool>(
+    dec: &mut RangeDecoder,
+    models: &mut ConnModels,
+    rb: &Rebuilt,
+    group_count: usize,
+    groups_v3: bool,
+    budget: &mut Budget,
+) -> Result<Vec<u32>> {
     let mut face_group = vec![NONE; rb.faces.len()];
     let mut next_group = 0u32;
     let mut prev_real = None;
     let (mut cands, mut vcands) = (Vec::new(), Vec::new());
     let mut recency =
-        (features.groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
+        (groups_v3 && group_count > 1).then(|| Recency::new(group_count, rb.faces.len()));
     for i in 0..rb.faces.len() {
         if rb.faces[i].hole {
             continue;
@@ -1430,9 +1596,9 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         let g = if group_count <= 1 {
             0
         } else {
-            group_candidates(&rb, i, &face_group, prev_real, &mut cands);
-            let class = if features.groups_v3 {
-                group_class(&rb, i, &face_group, &cands)
+            budget.work(group_candidates(rb, i, &face_group, prev_real, &mut cands))?;
+            let class = if groups_v3 {
+                group_class(rb, i, &face_group, &cands)
             } else {
                 cands.len().clamp(1, 3) - 1
             };
@@ -1443,7 +1609,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
                     format!("face {i} refers to {what} candidate group {c} of {n}"),
                 )
             };
-            match models.decode_group(&mut dec, next_group, class)? {
+            match models.decode_group::<MEASURE>(dec, next_group, class)? {
                 GroupSym::New => {
                     next_group += 1;
                     next_group - 1
@@ -1453,7 +1619,7 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
                     .get(usize::from(c))
                     .ok_or_else(|| missing("edge", c, cands.len()))?,
                 GroupSym::Vertex(c) => {
-                    vertex_candidates(&rb, i, &face_group, &cands, &mut vcands);
+                    budget.work(vertex_candidates(rb, i, &face_group, &cands, &mut vcands))?;
                     *vcands
                         .get(usize::from(c))
                         .ok_or_else(|| missing("vertex", c, vcands.len()))?
@@ -1483,77 +1649,17 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
         }
         prev_real = Some(i);
     }
-    dec.finish()?;
+    Ok(face_group)
+}
 
-    // Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
-    // their number by its size before allocating per-vertex arrays.
-    let geometry_len = required(SEC_GEOMETRY)?.len();
-    if header.isolated_vertex_count.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
-        return Err(Error::format(
-            "geometry",
-            "isolated_vertex_count",
-            format!(
-                "{} isolated vertices cannot fit in {geometry_len} coded bytes",
-                header.isolated_vertex_count
-            ),
-        ));
-    }
-
-    // Patches.
-    let (patch_kinds, grid_axes) = match &payloads[SEC_PATCHES as usize] {
-        Some(p) if LEGACY && !features.coded_patches => patches::decode_v1(p, group_count, &quant)?,
-        Some(p) => patches::decode(p, group_count, &quant)?,
-        None => (
-            vec![PatchKind::Closed; group_count],
-            vec![None; group_count],
-        ),
-    };
-
-    // Creases.
-    let edges = label_edges(&rb.label_edge);
-    let mut sharp = vec![false; edges.len()];
-    let mut corner = vec![false; coded_count];
-    let crease_he = {
-        let mut d = RangeDecoder::new(required(SEC_CREASES)?, "creases")?;
-        let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
-        d.finish()?;
-        crease
-    };
-
-    // Geometry.
-    let mut q = vec![[0i32; 3]; coded_count];
-    {
-        let groups_tmp: Vec<Group> = patch_kinds
-            .iter()
-            .map(|&patch| Group {
-                name: String::new(),
-                patch,
-            })
-            .collect();
-        let face_plane_group = plane_groups_of_faces(&face_group, &groups_tmp);
-        let (face_axis, axes) = patches::face_axes(&face_group, &grid_axes);
-        let arcs = ArcAxes {
-            face_axis: &face_axis,
-            axes: &axes,
-        };
-        let mut d = RangeDecoder::new(required(SEC_GEOMETRY)?, "geometry")?;
-        let mut gd = GeomDecoder::new(&mut d, quant.max_q());
-        geometry::walk(
-            &rb,
-            &face_plane_group,
-            group_count,
-            quant.bits,
-            features.crease_prediction.then_some(crease_he.as_slice()),
-            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
-            &mut q,
-            &mut gd,
-        )?;
-        d.finish()?;
-    }
-
-    // Fixups.
+/// The `(copy, representative)` merges of the `fixups` section (spec §9).
+fn decode_fixups(
+    payload: Option<&[u8]>,
+    merged: u64,
+    coded_count: usize,
+) -> Result<Vec<(u32, u32)>> {
     let mut merges = Vec::new();
-    match (&payloads[SEC_FIXUPS as usize], header.merged_vertex_count) {
+    match (payload, merged) {
         (None, 0) => {}
         (Some(p), m) if m > 0 => {
             let mut fr = Reader::new(p, "fixups");
@@ -1591,20 +1697,259 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
             ))
         }
     }
+    Ok(merges)
+}
+
+/// The start of a decode: magic and version, the header (its counts checked against the
+/// limits, and the memory any file with them needs against the budget, before any work),
+/// and the framing of the other sections.
+fn read_file<'a, const MEASURE: bool>(
+    bytes: &'a [u8],
+    limits: &Limits,
+    budget: &mut Budget,
+    sections_info: &mut Vec<SectionInfo>,
+) -> Result<(Features, Header, Quantizer, Sections<'a>)> {
+    limit("input bytes", bytes.len() as u64, limits.max_input_bytes)?;
+    // The caller holds the input for the whole decode.
+    budget.charge("decode memory for the input (bytes)", bytes.len() as u64)?;
+    let mut r = Reader::new(bytes, "file");
+    let magic = r.bytes(4, "magic")?;
+    if magic != MAGIC {
+        return Err(Error::format(
+            "file",
+            "magic",
+            "not an .scode file (bad magic bytes)",
+        ));
+    }
+    let major = r.u8("version_major")?;
+    let minor = r.u8("version_minor")?;
+    let features = features_for(major, minor)?;
+    let verify = limits.verify_checksums;
+
+    let hs = read_section(&mut r, Some(0), verify)?;
+    if hs.id != SEC_HEADER {
+        return Err(Error::format(
+            "file",
+            "section",
+            "the first section must be the header",
+        ));
+    }
+    if MEASURE {
+        sections_info.push(SectionInfo {
+            name: "header",
+            stored_bytes: hs.stored_bytes + 6,
+            raw_bytes: hs.payload_len() as usize,
+        });
+    }
+    let header_payload = section_payload(&hs, limits, budget)?;
+    let (header, quant) = parse_header(&header_payload, major, minor, limits)?;
+    drop_payload(header_payload, budget);
+    // What any file with these counts holds at least while its geometry is decoded (a label
+    // per two corners, a half-edge per corner, no hole), before any work.
+    let (k, f) = (header.face_corner_count, header.face_count);
+    limit(
+        "decode memory the header's counts need (bytes)",
+        budget
+            .usage
+            .held
+            .saturating_add(facefixer::rebuilt_bytes(k / 2, k, f, 0))
+            .saturating_add(decode_array_bytes(&header, k / 2, f))
+            .saturating_add(geometry_bytes(&header, k, f)),
+        limits.max_memory,
+    )?;
+    budget.max_work = limits.max_work_per_element.saturating_mul(
+        header
+            .vertex_count
+            .saturating_add(header.face_count + k + 1),
+    );
+    // The other sections, in increasing id order, framed and CRC-checked but not inflated;
+    // unknown skippable ones are skipped (never inflated).
+    let mut sections: Sections<'a> = Default::default();
+    let mut last_id = SEC_HEADER;
+    while !r.is_empty() {
+        let s = read_section(&mut r, None, verify)?;
+        if s.id <= last_id {
+            return Err(Error::format(
+                "file",
+                "section",
+                format!("section {} out of order or repeated", s.id),
+            ));
+        }
+        last_id = s.id;
+        if s.id as usize >= sections.len() {
+            if s.skippable {
+                continue;
+            }
+            return Err(Error::format(
+                "file",
+                "section",
+                format!("unknown section id {}", s.id),
+            ));
+        }
+        if MEASURE {
+            sections_info.push(SectionInfo {
+                name: section_name(s.id),
+                stored_bytes: s.stored_bytes,
+                raw_bytes: s.payload_len() as usize,
+            });
+        }
+        let id = s.id as usize;
+        sections[id] = Some(s);
+    }
+    // Optional sections are present exactly when their flag is set, required ones always.
+    for (id, flag) in [
+        (SEC_CONNECTIVITY, 0),
+        (SEC_PATCHES, FLAG_PATCHES),
+        (SEC_CREASES, 0),
+        (SEC_GEOMETRY, 0),
+        (SEC_FIXUPS, FLAG_MERGES),
+        (SEC_NAMES, FLAG_NAMES),
+    ] {
+        if sections[id as usize].is_some() != (flag == 0 || header.flags & flag != 0) {
+            return Err(Error::format(
+                section_name(id),
+                "section",
+                "section missing or present against the header",
+            ));
+        }
+    }
+    Ok((features, header, quant, sections))
+}
+
+/// What [`inspect`] reports besides the decoded mesh.
+struct Summary {
+    sections: Vec<SectionInfo>,
+    component_count: usize,
+    label_count: usize,
+    group_bits: f64,
+}
+
+fn decode_full<const MEASURE: bool>(
+    bytes: &[u8],
+    limits: &Limits,
+    budget: &mut Budget,
+) -> Result<(Decoded, Summary)> {
+    let mut sections_info = Vec::new();
+    let (features, header, quant, sections) =
+        read_file::<MEASURE>(bytes, limits, budget, &mut sections_info)?;
+    let payload = |id: u8, budget: &mut Budget| match &sections[id as usize] {
+        Some(s) => section_payload(s, limits, budget).map(Some),
+        None => Ok(None),
+    };
+
+    let nf = header.face_count as usize;
+    let coded_count = header
+        .vertex_count
+        .checked_add(header.merged_vertex_count)
+        .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
+        as usize;
+    let group_count = header.group_count as usize;
+
+    // Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
+    // their number by its size before allocating per-vertex arrays.
+    let geometry_len = sections[SEC_GEOMETRY as usize]
+        .as_ref()
+        .map_or(0, |s| s.payload_len()) as usize;
+    if header.isolated_vertex_count.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
+        return Err(Error::format(
+            "geometry",
+            "isolated_vertex_count",
+            format!(
+                "{} isolated vertices cannot fit in {geometry_len} coded bytes",
+                header.isolated_vertex_count
+            ),
+        ));
+    }
+
+    // Connectivity.
+    let conn = payload(SEC_CONNECTIVITY, budget)?.unwrap_or_default();
+    let (label_count, rb, mut face_group, group_bits) =
+        decode_connectivity::<MEASURE>(&conn, &header, features.groups_v3, budget)?;
+    drop_payload(conn, budget);
+    // Released when the mesh is assembled.
+    let arrays = rb.bytes + decode_array_bytes(&header, label_count as u64, rb.faces.len() as u64);
+
+    // Patches.
+    let (patch_kinds, grid_axes) = match payload(SEC_PATCHES, budget)? {
+        Some(p) => {
+            let decoded = if LEGACY && !features.coded_patches {
+                patches::decode_v1(&p, group_count, &quant)?
+            } else {
+                patches::decode(&p, group_count, &quant)?
+            };
+            drop_payload(p, budget);
+            decoded
+        }
+        None => (
+            vec![PatchKind::Closed; group_count],
+            vec![None; group_count],
+        ),
+    };
+
+    // Creases, and the geometry walk's arrays (released after the geometry).
+    let walk_bytes = geometry_bytes(&header, rb.next.len() as u64, rb.faces.len() as u64);
+    budget.charge("decode memory for the geometry walk (bytes)", walk_bytes)?;
+    let edges = label_edges(&rb.label_edge);
+    let mut sharp = vec![false; edges.len()];
+    let mut corner = vec![false; coded_count];
+    let crease_he = {
+        let creases = payload(SEC_CREASES, budget)?.unwrap_or_default();
+        let mut d = RangeDecoder::new(&creases, "creases")?;
+        let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
+        d.finish()?;
+        drop_payload(creases, budget);
+        crease
+    };
+
+    // Geometry.
+    let mut q = vec![[0i32; 3]; coded_count];
+    {
+        let face_plane_group = plane_groups_of_faces(&face_group, &patch_kinds);
+        let (face_axis, axes) = patches::face_axes(&face_group, &grid_axes);
+        let arcs = ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
+        };
+        let geometry = payload(SEC_GEOMETRY, budget)?.unwrap_or_default();
+        let mut d = RangeDecoder::new(&geometry, "geometry")?;
+        let mut gd = GeomDecoder::new(&mut d, quant.max_q(), budget);
+        geometry::walk(
+            &rb,
+            &face_plane_group,
+            group_count,
+            quant.bits,
+            features.crease_prediction.then_some(crease_he.as_slice()),
+            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
+            &mut q,
+            &mut gd,
+        )?;
+        d.finish()?;
+        drop_payload(geometry, budget);
+    }
+    drop(crease_he);
+    budget.release(walk_bytes);
+
+    // Fixups.
+    let fixups = payload(SEC_FIXUPS, budget)?;
+    let merges = decode_fixups(fixups.as_deref(), header.merged_vertex_count, coded_count)?;
+    if let Some(p) = fixups {
+        drop_payload(p, budget);
+    }
     let final_of_coded = final_numbering(coded_count, &merges);
 
     // Names, and (version 2) the input's group order: coded group `c` becomes group
     // `input_of_coded[c]`.
     let mut names = vec![String::new(); group_count];
     let mut input_of_coded: Option<Vec<u32>> = None;
-    if let Some(p) = &payloads[SEC_NAMES as usize] {
+    if let Some(p) = payload(SEC_NAMES, budget)? {
         if LEGACY && !features.names_in_input_order {
-            names = names::read_v1(p, group_count)?;
+            names = names::read_v1(&p, group_count)?;
         } else {
-            let (n, order) = names::read(p, group_count)?;
+            let (n, order) = names::read(&p, group_count, budget)?;
             names = n;
             input_of_coded = Some(order);
         }
+        drop_payload(p, budget);
     }
     let mut patch_kinds = patch_kinds;
     if let Some(order) = &input_of_coded {
@@ -1621,6 +1966,12 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
 
     // Assemble.
+    let sharp_count = sharp.iter().filter(|&&s| s).count() as u64;
+    let corner_count = corner.iter().filter(|&&c| c).count() as u64;
+    budget.charge(
+        "decode memory for the decoded mesh (bytes)",
+        mesh_bytes(&header) + sharp_count * SHARP_EDGE_BYTES + corner_count * CORNER_BYTES,
+    )?;
     let mut mesh = ControlMesh::new();
     let final_count = header.vertex_count as usize;
     mesh.positions = vec![DVec3::ZERO; final_count];
@@ -1629,6 +1980,8 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
     mesh.face_vertices
         .reserve(header.face_corner_count as usize);
+    mesh.face_offsets.reserve(nf);
+    mesh.face_groups.reserve(nf);
     let mut buf = Vec::new();
     for (i, rf) in rb.faces.iter().enumerate() {
         if rf.hole {
@@ -1659,20 +2012,20 @@ fn decode_full(bytes: &[u8], limits: &Limits) -> Result<(Decoded, FileInfo)> {
     }
     mesh.validate()
         .map_err(|e| Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}")))?;
+    // The input and the mesh stay charged: the caller holds them.
+    budget.release(arrays);
 
-    let info = FileInfo {
-        header: header.clone(),
+    let summary = Summary {
         sections: sections_info,
-        total_bytes: bytes.len(),
-        sharp_edge_count: mesh.sharp_edges.len(),
-        corner_count: mesh.corners.len(),
-        group_names: mesh.groups.iter().map(|g| g.name.clone()).collect(),
-        patch_kinds,
-        component_count: rb.faces.iter().filter(|f| f.start).count(),
-        label_count: labels.len(),
-        group_bits: models.group_bits,
+        component_count: if MEASURE {
+            rb.faces.iter().filter(|f| f.start).count()
+        } else {
+            0
+        },
+        label_count,
+        group_bits,
     };
-    Ok((Decoded { header, mesh }, info))
+    Ok((Decoded { header, mesh }, summary))
 }
 
 #[cfg(test)]

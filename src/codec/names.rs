@@ -10,7 +10,7 @@
 use super::bytes::{put_varint, Reader};
 use super::rangecoder::{BitModel, RangeDecoder, RangeEncoder};
 use super::ranks::Flags;
-use super::{decode_below, encode_below, unzigzag64, zigzag64};
+use super::{decode_below, encode_below, unzigzag64, zigzag64, Budget};
 use crate::error::Result;
 
 /// Largest number a name may end in to be split as stem + number (18 decimal digits).
@@ -93,8 +93,13 @@ pub fn write(names: &[&str], original_of_coded: &[u32]) -> Vec<u8> {
 }
 
 /// Reads a version-2 payload for `group_count` groups: the names in input order and, for
-/// every coded group, its input index.
-pub fn read(payload: &[u8], group_count: usize) -> Result<(Vec<String>, Vec<u32>)> {
+/// every coded group, its input index. A record of a byte or two can repeat a long stem, so
+/// each name is charged to `budget` before it is made.
+pub(crate) fn read(
+    payload: &[u8],
+    group_count: usize,
+    budget: &mut Budget,
+) -> Result<(Vec<String>, Vec<u32>)> {
     let mut r = Reader::new(payload, "names");
     let order_len = r.varint_max("order_length", r.remaining() as u64)? as usize;
     let order = r.bytes(order_len, "order")?;
@@ -147,6 +152,10 @@ pub fn read(payload: &[u8], group_count: usize) -> Result<(Vec<String>, Vec<u32>
         } else {
             return Err(r.err("name_head", format!("invalid record head {head}")));
         };
+        budget.charge(
+            "decode memory for group names (bytes)",
+            stem.len() as u64 + 20,
+        )?;
         names.push(match number {
             Some(n) => format!("{stem}{n}"),
             None => stem.clone(),
@@ -193,7 +202,7 @@ mod tests {
 
     fn round_trip(names: &[&str], order: &[u32]) -> usize {
         let payload = write(names, order);
-        let (back, back_order) = read(&payload, names.len()).unwrap();
+        let (back, back_order) = read(&payload, names.len(), &mut Budget::unlimited()).unwrap();
         assert_eq!(back, names);
         assert_eq!(back_order, order);
         payload.len()
@@ -221,14 +230,17 @@ mod tests {
     fn bad_payloads_are_errors() {
         let good = write(&["a1", "a2", "b"], &[2, 0, 1]);
         for n in 0..good.len() {
-            assert!(read(&good[..n], 3).is_err(), "prefix {n}");
+            assert!(
+                read(&good[..n], 3, &mut Budget::unlimited()).is_err(),
+                "prefix {n}"
+            );
         }
         let mut extra = good.clone();
         extra.push(0);
-        assert!(read(&extra, 3).is_err());
+        assert!(read(&extra, 3, &mut Budget::unlimited()).is_err());
         // A head with the low bits 10 other than 2 is invalid.
         let mut bad = write(&[], &[]);
         bad.push(6);
-        assert!(read(&bad, 1).is_err());
+        assert!(read(&bad, 1, &mut Budget::unlimited()).is_err());
     }
 }

@@ -348,12 +348,20 @@ impl FreqModel {
     }
 
     pub fn decode(&mut self, dec: &mut RangeDecoder) -> Result<usize> {
-        self.decode_with_cost(dec).map(|(s, _)| s)
+        self.decode_counted(dec).map(|(s, _)| s)
     }
 
     /// Decodes a symbol and also returns its information content in bits under the model
     /// as it was before the update (what the symbol cost in the stream).
     pub fn decode_with_cost(&mut self, dec: &mut RangeDecoder) -> Result<(usize, f64)> {
+        let total = self.total;
+        let (s, count) = self.decode_counted(dec)?;
+        Ok((s, -(f64::from(count) / f64::from(total)).log2()))
+    }
+
+    /// Decodes a symbol; returns it with its count before the update (a plain decode never
+    /// computes a cost, which keeps the logarithm out of decoders that do not measure).
+    fn decode_counted(&mut self, dec: &mut RangeDecoder) -> Result<(usize, u32)> {
         let (v, r) = dec.decode_freq(self.total);
         let mut cum = 0;
         let mut s = 0;
@@ -361,10 +369,10 @@ impl FreqModel {
             cum += self.counts[s];
             s += 1;
         }
-        dec.consume(r, cum, self.counts[s])?;
-        let cost = self.cost(s);
+        let count = self.counts[s];
+        dec.consume(r, cum, count)?;
         self.update(s);
-        Ok((s, cost))
+        Ok((s, count))
     }
 
     pub fn cost(&self, s: usize) -> f64 {

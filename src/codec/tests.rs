@@ -6,6 +6,8 @@ use proptest::prelude::*;
 
 use super::samples::*;
 
+mod hostile;
+
 fn cyclic_eq(a: &[u32], b: &[u32]) -> bool {
     a.len() == b.len() && (0..a.len()).any(|r| (0..a.len()).all(|i| a[(i + r) % a.len()] == b[i]))
 }

@@ -230,21 +230,24 @@ impl ControlMesh {
                 "vertex {i} has a non-finite coordinate"
             )));
         }
+        // The last face that used each vertex: a repeated vertex is found in one pass, also
+        // in a face of huge degree.
+        let mut last_face = vec![u32::MAX; nv];
         for f in 0..self.face_count() {
             let (s, e) = (self.face_offsets[f], self.face_offsets[f + 1]);
             if e < s || (e - s) < 3 {
                 return Err(Error::Mesh(format!("face {f} has fewer than 3 vertices")));
             }
-            let face = self.face(f);
-            for (i, &v) in face.iter().enumerate() {
-                if v as usize >= nv {
+            for &v in self.face(f) {
+                let Some(last) = last_face.get_mut(v as usize) else {
                     return Err(Error::Mesh(format!(
                         "face {f} references vertex {v}, but there are only {nv} vertices"
                     )));
-                }
-                if face[..i].contains(&v) {
+                };
+                if *last == f as u32 {
                     return Err(Error::Mesh(format!("face {f} repeats vertex {v}")));
                 }
+                *last = f as u32;
             }
             if self.face_groups[f] as usize >= self.groups.len() {
                 return Err(Error::Mesh(format!(

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::codec::{self, Content, EncodeOptions, Limits};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::fit::encoder::{fit_model, ExactSurface, FitOptions, FitReport, SurfaceHint};
 use crate::io::faces_json::{self, SurfaceType};
 #[cfg(feature = "step")]
@@ -198,7 +198,7 @@ pub(crate) fn encode_fitted_once(
     let mut reconstruct =
         |control: &ControlMesh, level: u8, coarser: u8| -> Result<(ControlMesh, usize)> {
             let (bytes, map) = codec::encode_with_map(control, &encode_opts(level, coarser))?;
-            let mut mesh = codec::decode(&bytes, &Limits::default())?.mesh;
+            let mut mesh = codec::decode(&bytes, &trusted_limits())?.mesh;
             let mut old_of_new = vec![0u32; mesh.groups.len()];
             for (old, &new) in map.group.iter().enumerate() {
                 old_of_new[new as usize] = old as u32;
@@ -244,6 +244,17 @@ pub(crate) fn rotate_faces(mesh: &ControlMesh, start: usize) -> ControlMesh {
     out
 }
 
+/// Limits for decoding the encoder's own output while fitting: only the format's count
+/// limits apply, not the budgets that guard a decode of untrusted files.
+fn trusted_limits() -> Limits {
+    Limits {
+        max_subdivided_faces: u64::MAX,
+        max_memory: u64::MAX,
+        max_work_per_element: u64::MAX,
+        ..Limits::default()
+    }
+}
+
 /// A `.scode` file decoded to the surface a viewer shows by default.
 #[derive(Clone, Debug)]
 pub struct DecodedSurface {
@@ -277,7 +288,8 @@ pub fn decode_surface(
     limits: &Limits,
     opts: &SurfaceOptions,
 ) -> Result<DecodedSurface> {
-    let decoded = codec::decode(bytes, limits)?;
+    let (decoded, usage) = codec::decode_with_usage(bytes, limits);
+    let decoded = decoded?;
     let content = decoded.header.content;
     let (default_level, default_limit) = match content {
         Content::RawMesh => (0, false),
@@ -288,9 +300,30 @@ pub fn decode_surface(
     let (mesh, normals) = if level == 0 && !limit {
         (decoded.mesh, None)
     } else {
+        // Before subdividing: the finest level's triangles (fan-triangulated faces times
+        // 4^level) against the limits, and the memory they take on top of what the decode
+        // still holds (the input and the control mesh) against the budget.
+        let triangles = (decoded.mesh.face_vertices.len() - 2 * decoded.mesh.face_count()) as u64;
+        let finest = triangles.saturating_mul(1u64.checked_shl(2 * level).unwrap_or(u64::MAX));
+        let memory = usage
+            .held
+            .saturating_add(finest.saturating_mul(crate::subdiv::MEMORY_PER_TRIANGLE));
+        for (what, value, limit) in [
+            ("subdivided faces", finest, limits.max_subdivided_faces),
+            (
+                "decode memory with subdivision (bytes)",
+                memory,
+                limits.max_memory,
+            ),
+        ] {
+            if value > limit {
+                return Err(Error::LimitsExceeded { what, value, limit });
+            }
+        }
         let sopts = crate::subdiv::SubdivOptions {
             limit,
             boundary_patches: opts.boundary_patches,
+            max_faces: limits.max_subdivided_faces,
             ..Default::default()
         };
         crate::subdiv::subdivide(&decoded.mesh, level, &sopts)?

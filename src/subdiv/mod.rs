@@ -58,6 +58,12 @@ use topology::{Base, Level};
 /// 64 Mi triangles need about 4 GB for topology and positions.
 pub const DEFAULT_MAX_FACES: u64 = 1 << 26;
 
+/// Memory a uniform subdivision takes per finest-level triangle, output included (the
+/// topology of every level, positions, limit positions and normals, the output mesh; dense
+/// boundary output, the larger one): what a decoder charges against its memory budget
+/// before subdividing.
+pub const MEMORY_PER_TRIANGLE: u64 = 200;
+
 /// Largest accepted refinement level.
 pub const MAX_LEVEL: u32 = 12;
 
