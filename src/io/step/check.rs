@@ -104,21 +104,7 @@ pub fn check(text: &str) -> Result<(), TextProblem> {
         };
         match c {
             b'\'' => {
-                i += 1;
-                while i < b.len() {
-                    if b[i] == b'\'' {
-                        if b.get(i + 1) == Some(&b'\'') {
-                            i += 2;
-                            continue;
-                        }
-                        break;
-                    }
-                    if b[i] == b'\n' {
-                        line += 1;
-                    }
-                    i += 1;
-                }
-                i += 1;
+                i = after_string(b, i, &mut line);
             }
             // A binary literal: hex digits, not a number.
             b'"' => {
@@ -329,21 +315,7 @@ pub fn locate_syntax_error(text: &str) -> Option<TextProblem> {
             }
             b'\'' => {
                 start.get_or_insert((i, line));
-                i += 1;
-                while i < b.len() {
-                    if b[i] == b'\'' {
-                        if b.get(i + 1) == Some(&b'\'') {
-                            i += 2;
-                            continue;
-                        }
-                        break;
-                    }
-                    if b[i] == b'\n' {
-                        line += 1;
-                    }
-                    i += 1;
-                }
-                i += 1;
+                i = after_string(b, i, &mut line);
             }
             b';' => {
                 let (from, at) = start.take().unwrap_or((i, line));
@@ -394,6 +366,26 @@ fn excerpt(stmt: &str) -> String {
         Some((k, _)) => format!("{}...", &one_line[..k]),
         None => one_line,
     }
+}
+
+/// The index after the string literal that opens at `b[open]` (a quote; `''` inside is a
+/// quote, not the end), counting the lines it spans into `line`.
+fn after_string(b: &[u8], open: usize, line: &mut usize) -> usize {
+    let mut i = open + 1;
+    while i < b.len() {
+        if b[i] == b'\'' {
+            if b.get(i + 1) == Some(&b'\'') {
+                i += 2;
+                continue;
+            }
+            break;
+        }
+        if b[i] == b'\n' {
+            *line += 1;
+        }
+        i += 1;
+    }
+    i + 1
 }
 
 #[cfg(test)]
