@@ -37,7 +37,9 @@ pub fn write_glb(
     opts: &WriteOptions,
 ) -> io::Result<()> {
     let (mut document, mut bin) = build_document(mesh, normals, opts)?;
-    document["buffers"] = json!([{ "byteLength": bin.len() }]);
+    if !bin.is_empty() {
+        document["buffers"] = json!([{ "byteLength": bin.len() }]);
+    }
     let mut json = serde_json::to_vec(&document).map_err(io::Error::other)?;
     while json.len() % 4 != 0 {
         json.push(b' ');
@@ -45,7 +47,9 @@ pub fn write_glb(
     while bin.len() % 4 != 0 {
         bin.push(0);
     }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
+    // A file without a buffer has no BIN chunk.
+    let bin_chunk = if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let total = 12 + 8 + json.len() + bin_chunk;
     let total =
         u32::try_from(total).map_err(|_| io::Error::other("mesh too large for a .glb file"))?;
     let mut w = io::BufWriter::new(out);
@@ -55,9 +59,11 @@ pub fn write_glb(
     w.write_all(&(json.len() as u32).to_le_bytes())?;
     w.write_all(b"JSON")?;
     w.write_all(&json)?;
-    w.write_all(&(bin.len() as u32).to_le_bytes())?;
-    w.write_all(b"BIN\0")?;
-    w.write_all(&bin)?;
+    if !bin.is_empty() {
+        w.write_all(&(bin.len() as u32).to_le_bytes())?;
+        w.write_all(b"BIN\0")?;
+        w.write_all(&bin)?;
+    }
     w.flush()
 }
 
@@ -70,10 +76,12 @@ pub fn write_gltf(
     opts: &WriteOptions,
 ) -> io::Result<()> {
     let (mut document, bin) = build_document(mesh, normals, opts)?;
-    document["buffers"] = json!([{
-        "byteLength": bin.len(),
-        "uri": format!("data:application/octet-stream;base64,{}", super::base64_encode(&bin)),
-    }]);
+    if !bin.is_empty() {
+        document["buffers"] = json!([{
+            "byteLength": bin.len(),
+            "uri": format!("data:application/octet-stream;base64,{}", super::base64_encode(&bin)),
+        }]);
+    }
     let mut w = io::BufWriter::new(out);
     serde_json::to_writer(&mut w, &document).map_err(io::Error::other)?;
     w.write_all(b"\n")?;
@@ -467,6 +475,12 @@ fn build_document(
             "group names too long for a glTF property table",
         ));
     }
+    let asset =
+        json!({ "version": "2.0", "generator": concat!("scode ", env!("CARGO_PKG_VERSION")) });
+    if mesh.face_count() == 0 {
+        // Nothing to draw: the asset alone (glTF allows no empty arrays).
+        return Ok((json!({ "asset": asset }), Vec::new()));
+    }
     let quant = opts.quantize.then(|| Quantizer::new(&mesh.positions));
     let mut bin = Bin {
         bytes: Vec::new(),
@@ -533,7 +547,7 @@ fn build_document(
         required.push("KHR_mesh_quantization");
     }
     let mut document = json!({
-        "asset": { "version": "2.0", "generator": concat!("scode ", env!("CARGO_PKG_VERSION")) },
+        "asset": asset,
         "extensionsUsed": used,
         "extensions": { "EXT_structural_metadata": metadata },
         "scene": 0,
@@ -835,6 +849,21 @@ pub(super) mod tests {
         let names: Vec<_> = back.groups.iter().map(|g| g.name.as_str()).collect();
         assert_eq!(names, ["lid", "base", "plate"]);
         assert_eq!(back.sharp_edges, mesh.sharp_edges);
+    }
+
+    /// A mesh without faces is a valid file without scenes, which the reader refuses
+    /// as it refuses any file without faces.
+    #[test]
+    fn a_mesh_without_faces_is_a_file_without_scenes() {
+        let mut mesh = ControlMesh::new();
+        mesh.push_vertex(DVec3::ONE);
+        for quantize in [false, true] {
+            let bytes = glb(&mesh, None, quantize);
+            let doc = gltf::Gltf::from_slice(&bytes).unwrap();
+            assert_eq!((doc.meshes().len(), doc.buffers().len()), (0, 0));
+            let e = read_mesh_bytes(&bytes, MeshFormat::Glb, Path::new("e.glb")).unwrap_err();
+            assert!(e.to_string().contains("no faces"), "{e}");
+        }
     }
 
     /// Past 65535 groups the feature ids are floats (exact integers to 2^24).
