@@ -60,6 +60,7 @@
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::{Component, Path};
+use std::rc::Rc;
 
 use glam::{DMat4, DVec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -278,8 +279,9 @@ struct Reader<'a> {
     raw: RawMesh,
     /// (POSITION accessor, transform bits) -> the vertex in `raw.positions` of each of its
     /// elements: primitives sharing both share vertices. Lookup only; vertex order follows
-    /// the file.
-    vertices: HashMap<(usize, [u64; 16]), Vec<u32>>,
+    /// the file. Shared, not copied: files with one primitive per face (hundreds) over one
+    /// accessor of a million vertices are common.
+    vertices: HashMap<(usize, [u64; 16]), Rc<[u32]>>,
     groups: Groups,
     /// Property tables, each read once when a primitive first names it.
     tables: HashMap<usize, Table>,
@@ -348,13 +350,13 @@ impl Reader<'_> {
         transform: &DMat4,
         merge: bool,
         what: &str,
-    ) -> Result<Vec<u32>> {
+    ) -> Result<Rc<[u32]>> {
         let key = (
             positions.index(),
             transform.to_cols_array().map(f64::to_bits),
         );
         if let Some(v) = self.vertices.get(&key) {
-            return Ok(v.clone());
+            return Ok(Rc::clone(v));
         }
         let points = read_vec3(positions, self.buffers, what, self.path)?;
         if *transform != DMat4::IDENTITY {
@@ -375,7 +377,7 @@ impl Reader<'_> {
         if base + world.len() > u32::MAX as usize {
             return Err(self.err("too many vertices".into()));
         }
-        let map: Vec<u32> = if merge {
+        let map: Rc<[u32]> = if merge {
             let welded = super::weld::weld(&world);
             self.raw.positions.extend_from_slice(&welded.positions);
             welded.remap.iter().map(|&i| base as u32 + i).collect()
@@ -383,7 +385,7 @@ impl Reader<'_> {
             self.raw.positions.extend_from_slice(&world);
             (base as u32..(base + world.len()) as u32).collect()
         };
-        self.vertices.insert(key, map.clone());
+        self.vertices.insert(key, Rc::clone(&map));
         Ok(map)
     }
 
@@ -507,11 +509,10 @@ impl Reader<'_> {
             positions.index(),
             transform.to_cols_array().map(f64::to_bits),
         );
-        let Some(vertices) = self.vertices.get(&key) else {
+        let Some(vertices) = self.vertices.get(&key).map(Rc::clone) else {
             self.skipped_primitives += 1;
             return Ok(());
         };
-        let vertices = vertices.clone();
         let indices = self.indices(prim, vertices.len(), what)?;
         let n = indices.len();
         let pairs: Vec<(usize, usize)> = match prim.mode() {
