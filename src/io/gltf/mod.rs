@@ -25,7 +25,8 @@
 //!   its mesh (`mesh_<i>` if unnamed), with `#<k>` appended when the mesh has several
 //!   primitives and `@node<n>` when the mesh is instanced more than once.
 //!
-//! Groups of one property table are ordered by id, the rest by first appearance. Primitives
+//! Groups come in order of first appearance of their property table or primitive, and by
+//! feature id within one (a file from this writer reads back in group order). Primitives
 //! that share a `POSITION` accessor under the same transform share their vertices;
 //! everything else is welded like any other input. Triangle lists, strips and fans are read.
 //! **Line primitives** (lists, strips, loops) that share their `POSITION` accessor with a
