@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Sets up what the tests need on a fresh machine and runs them: formatting, lints, the whole
 # test suite (unit, property, corpus round-trips and encodes of the small corpus models, spec
-# vectors), the decoder-only and WebAssembly-viewer checks, the viewer's end-to-end test in
-# headless Chromium, and a short fuzzing pass. The same corpus checks on the larger models
-# are scripts/sweep.sh.
+# vectors, the Khronos glTF validator on decoded glTF), the decoder-only and
+# WebAssembly-viewer checks, the viewer's end-to-end test in headless Chromium, and a short
+# fuzzing pass. The same corpus checks on the larger models are scripts/sweep.sh.
 # Usage: scripts/test.sh            (FUZZ_SECONDS=30 by default; FUZZ_SECONDS=0 skips fuzzing;
 #                                    E2E=0 skips the browser test)
 set -euo pipefail
@@ -35,6 +35,17 @@ cargo check --lib --no-default-features
 
 echo "== cargo clippy (with the sweep tests, which cargo test leaves out)"
 cargo clippy --all-targets --features sweep -- -D warnings
+
+echo "== npm packages of the tests: gltf-validator (tests/gltf_output.rs)"
+# Under CI the validator test fails without them; elsewhere it says it was skipped.
+if command -v npm >/dev/null 2>&1; then
+  (cd tests/gltf_validator && npm ci --no-audit --no-fund --loglevel=error)
+elif [ -n "${CI:-}" ]; then
+  echo "error: npm not found: the glTF validator test needs Node.js 20 with npm" >&2
+  exit 1
+else
+  echo "note: npm not found; the glTF validator test will report that it was skipped" >&2
+fi
 
 echo "== cargo test"
 PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test --all-targets

@@ -346,6 +346,14 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
 
 pub fn decode(args: &DecodeArgs) -> Result<()> {
     let output = args.output.checked(&args.input, Writes::Mesh)?;
+    let format = io::MeshFormat::from_path(output)?;
+    if args.quantize && !matches!(format, io::MeshFormat::Glb | io::MeshFormat::Gltf) {
+        return Err(CliError::Usage(format!(
+            "--quantize applies to glTF output (.glb, .gltf), not to .{format} ({})",
+            output.display()
+        ))
+        .into());
+    }
     let limits = args.limits.limits();
     let bytes = read_scode(&args.input, &limits)?;
     let opts = SurfaceOptions {
@@ -363,7 +371,10 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     let surface = decode_surface(&bytes, &limits, &opts)
         .with_context(|| format!("cannot decode {}", args.input.display()))?;
     let t_decode = t0.elapsed();
-    io::write_mesh(output, &surface.mesh, surface.normals.as_deref())?;
+    let write = io::WriteOptions {
+        quantize: args.quantize,
+    };
+    io::write_mesh_with(output, &surface.mesh, surface.normals.as_deref(), &write)?;
     println!(
         "wrote {}: {} vertices, {} faces (level {}; decode and subdivide {:.1} ms)",
         output.display(),

@@ -10,7 +10,7 @@
 //! | OBJ  | polygons, `o`/`g`, `l`, `p` | yes (f64 exact) | `g` | `l` / `p` elements ([`obj`]) |
 //! | PLY  | ascii, binary LE/BE | binary LE (f64 positions) | face `group` property (+ names in comments) | `sharp_edge` element / vertex `corner` ([`ply`]) |
 //! | STL  | ascii, binary | binary, fan-triangulated | one group | no |
-//! | glTF / glb | triangles, strips, fans | glb or self-contained gltf, fan-triangulated (f32 positions) | one primitive per group | no |
+//! | glTF / glb | triangles, strips, fans; 8/16-bit quantised | glb or self-contained gltf, fan-triangulated, one primitive per body (f32 or quantised positions) | feature ids (`EXT_mesh_features`, names in `EXT_structural_metadata`), else one per primitive ([`gltf`]) | line primitives / no |
 //! | OFF  | polygons | yes | one group | no |
 //!
 //! # What every reader does after parsing (see [`repair`])
@@ -297,24 +297,60 @@ pub fn read_mesh_bytes_with(
     repair::finish(raw, format, name_for_errors)
 }
 
-/// Writes a mesh file; the format comes from the extension. `normals`: optional per-vertex
-/// normals (written as `vn` in OBJ, normal attribute in PLY/glb, ignored for STL which has
-/// per-face normals computed from geometry, and for OFF).
+/// Options of the mesh writers ([`write_mesh_with`], [`write_mesh_to_with`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct WriteOptions {
+    /// glTF only (other formats refuse it): positions as normalized 16-bit integers under a
+    /// node transform and normals as normalized 8-bit integers (`KHR_mesh_quantization`,
+    /// then a required extension). Positions keep about 1.5e-5 of the half extent.
+    pub quantize: bool,
+}
+
+/// Writes a mesh file with the default [`WriteOptions`]; the format comes from the
+/// extension. `normals`: optional per-vertex normals (written as `vn` in OBJ, normal
+/// attribute in PLY/glb, ignored for STL which has per-face normals computed from geometry,
+/// and for OFF).
 pub fn write_mesh(path: &Path, mesh: &ControlMesh, normals: Option<&[DVec3]>) -> Result<()> {
+    write_mesh_with(path, mesh, normals, &WriteOptions::default())
+}
+
+/// [`write_mesh`] with `opts`.
+pub fn write_mesh_with(
+    path: &Path,
+    mesh: &ControlMesh,
+    normals: Option<&[DVec3]>,
+    opts: &WriteOptions,
+) -> Result<()> {
     let format = MeshFormat::from_path(path)?;
     let mut bytes = Vec::new();
-    write_mesh_to(&mut bytes, format, mesh, normals)?;
+    write_mesh_to_with(&mut bytes, format, mesh, normals, opts)?;
     std::fs::write(path, &bytes).map_err(|e| Error::io(path, e))
 }
 
-/// Writes a mesh in `format` to `writer`. The mesh must pass [`ControlMesh::validate`];
-/// `normals`, when given, must have one entry per vertex.
+/// Writes a mesh in `format` to `writer` with the default [`WriteOptions`]. The mesh must
+/// pass [`ControlMesh::validate`]; `normals`, when given, must have one entry per vertex.
 pub fn write_mesh_to(
     writer: &mut dyn std::io::Write,
     format: MeshFormat,
     mesh: &ControlMesh,
     normals: Option<&[DVec3]>,
 ) -> Result<()> {
+    write_mesh_to_with(writer, format, mesh, normals, &WriteOptions::default())
+}
+
+/// [`write_mesh_to`] with `opts`.
+pub fn write_mesh_to_with(
+    writer: &mut dyn std::io::Write,
+    format: MeshFormat,
+    mesh: &ControlMesh,
+    normals: Option<&[DVec3]>,
+    opts: &WriteOptions,
+) -> Result<()> {
+    if opts.quantize && !matches!(format, MeshFormat::Glb | MeshFormat::Gltf) {
+        return Err(Error::Parameter(format!(
+            "quantization is a glTF option; {format} output cannot be quantized"
+        )));
+    }
     mesh.validate()?;
     if let Some(n) = normals {
         if n.len() != mesh.vertex_count() {
@@ -330,8 +366,8 @@ pub fn write_mesh_to(
         MeshFormat::Off => off::write(writer, mesh),
         MeshFormat::Ply => ply::write(writer, mesh, normals),
         MeshFormat::Stl => stl::write(writer, mesh),
-        MeshFormat::Glb => gltf::write_glb(writer, mesh, normals),
-        MeshFormat::Gltf => gltf::write_gltf(writer, mesh, normals),
+        MeshFormat::Glb => gltf::write_glb(writer, mesh, normals, opts),
+        MeshFormat::Gltf => gltf::write_gltf(writer, mesh, normals, opts),
     };
     result.map_err(|e| Error::io(format!("<{format} output>"), e))
 }
