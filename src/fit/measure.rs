@@ -47,7 +47,7 @@ pub(crate) struct Measurement {
 
 /// One face's decoded triangles and what was measured on them. Everything in it is a
 /// function of the triangles' corners alone (and of the input, which never changes), so it
-/// is reused while the face decodes to bit-identical corners.
+/// is reused while the face decodes to the same triangles (see [`GroupDecoded::same_triangles`]).
 struct GroupDecoded {
     /// What identifies the face's decoded triangles: the [`block_fingerprint`] of each
     /// control face's, sorted (the order in which control faces come out is not kept).
