@@ -168,6 +168,7 @@ pub fn subdivide_to_tolerance(
         limit: &limit,
         fine: n + 1,
         plan: plan.as_ref(),
+        floor: tolerance * 1e-6,
     };
     // The flips of plane patches afterwards may move the surface by a small share of the
     // tolerance: the levels are chosen for the rest.
@@ -275,6 +276,10 @@ struct Measure<'a> {
     limit: &'a [DVec3],
     fine: u32,
     plan: Option<&'a SparsePlan>,
+    /// Distances below this are not told apart (a millionth of the tolerance): a flat
+    /// face's points lie on its triangles up to rounding, and measuring each of them to the
+    /// triangles around would cost a flat face as much as a curved one.
+    floor: f64,
 }
 
 impl Measure<'_> {
@@ -538,13 +543,16 @@ impl Measure<'_> {
 
     /// The largest distance from the limit samples inside base triangle `k` (but those on
     /// the base edges `skip`) to the nearest of the triangles around the level-`m` face
-    /// holding each (its own and those around its corners, as `tri` gives them); stops as
-    /// soon as it exceeds `stop_above`.
+    /// holding each (its own and those around its corners in the same CAD face, as `tri`
+    /// gives them); stops as soon as it exceeds `stop_above`. Distances below
+    /// `self.floor` are not told apart.
     ///
     /// Every sample's distance to its own triangle is an upper bound on its distance; only
     /// samples whose own distance exceeds the largest distance found so far can raise it,
-    /// and they are few once the sample with the largest own distance sets it, so only they
-    /// are measured to the triangles around.
+    /// and they are few once the sample with the largest own distance sets it, so a first
+    /// pass finds that sample and a second measures it first and then only those to the
+    /// triangles around. The samples are visited, not stored: a base triangle at a deep
+    /// level has millions.
     fn max_nearest(
         &self,
         k: usize,
@@ -555,27 +563,23 @@ impl Measure<'_> {
     ) -> f64 {
         let lm = self.r.full(m);
         let q = 1usize << (2 * m);
-        let (mut points, mut samples) = (Vec::new(), Vec::new());
+        let mut first = (0.0f64, DVec3::ZERO, u32::MAX);
         for f in k * q..(k + 1) * q {
-            points.clear();
-            self.samples_in(m, f, skip, &mut points);
             let t = tri(f);
-            samples.extend(
-                points
-                    .iter()
-                    .map(|&p| (point_triangle_distance_squared(p, &t), p, f as u32)),
-            );
+            self.for_samples(m, f, skip, &mut |p| {
+                let own = point_triangle_distance_squared(p, &t);
+                if own > first.0 {
+                    first = (own, p, f as u32);
+                }
+            });
         }
-        let Some(first) = (0..samples.len()).max_by(|&a, &b| samples[a].0.total_cmp(&samples[b].0))
-        else {
-            return 0.0;
-        };
-        let (mut err2, mut around, mut tris) = (0.0f64, Vec::new(), Vec::new());
+        let group = self.r.base.group[k];
+        let (mut around, mut tris) = (Vec::new(), Vec::new());
         let mut ring_of = u32::MAX;
-        for i in std::iter::once(first).chain(0..samples.len()) {
-            let (own, p, f) = samples[i];
-            if own <= err2 {
-                continue;
+        let mut err2 = self.floor * self.floor;
+        let mut measure = |p: DVec3, f: u32, own: f64, err2: &mut f64| {
+            if own <= *err2 {
+                return;
             }
             if ring_of != f {
                 faces_around(lm, f as usize, &mut around);
@@ -583,7 +587,6 @@ impl Measure<'_> {
                 tris.push(tri(f as usize));
                 // Only within the CAD face: across a crease the neighbour is another surface,
                 // and a sample near it is no nearer the output of its own.
-                let group = self.r.base.group[k];
                 tris.extend(
                     around
                         .iter()
@@ -592,26 +595,36 @@ impl Measure<'_> {
                 );
                 ring_of = f;
             }
-            err2 = err2.max(nearest(p, &tris, err2.sqrt()));
+            *err2 = err2.max(nearest(p, &tris, err2.sqrt()));
+        };
+        if first.2 != u32::MAX {
+            measure(first.1, first.2, first.0, &mut err2);
+        }
+        for f in k * q..(k + 1) * q {
             if err2 > stop_above * stop_above {
                 break;
             }
+            let t = tri(f);
+            self.for_samples(m, f, skip, &mut |p| {
+                let own = point_triangle_distance_squared(p, &t);
+                measure(p, f as u32, own, &mut err2);
+            });
         }
         err2.sqrt()
     }
 
-    /// Appends the limit samples of the vertices that levels m+1..=fine add inside face `f`
-    /// of level `m` and on its edges, but those on the base edges `skip`: each once (the
-    /// edges' shared with the neighbouring face too), by the nested numbering (the
+    /// Calls `visit` with the limit samples of the vertices that levels m+1..=fine add inside
+    /// face `f` of level `m` and on its edges, but those on the base edges `skip`: each once
+    /// (the edges' shared with the neighbouring face too), by the nested numbering (the
     /// descendants of a level-j edge e at level t are `[e 2^(t-j), (e+1) 2^(t-j))`, and face
     /// g of level i has the interior edges `2 ne_i + 3g + s` at level i+1).
-    fn samples_in(&self, m: u32, f: usize, skip: &[usize], out: &mut Vec<DVec3>) {
+    fn for_samples(&self, m: u32, f: usize, skip: &[usize], visit: &mut impl FnMut(DVec3)) {
         let lm = self.r.full(m);
         let on_base = self.l0().ne() << m;
         for &e in &lm.face_edges[3 * f..3 * f + 3] {
             let e = e as usize;
             if !(e < on_base && skip.contains(&(e >> m))) {
-                self.edge_samples(m, e, out);
+                self.edge_samples(m, e, visit);
             }
         }
         for i in m..self.fine.saturating_sub(1) {
@@ -619,23 +632,21 @@ impl Measure<'_> {
             let span = 1usize << (2 * (i - m));
             for g in f * span..(f + 1) * span {
                 for s in 0..3 {
-                    self.edge_samples(i + 1, 2 * li.ne() + 3 * g + s, out);
+                    self.edge_samples(i + 1, 2 * li.ne() + 3 * g + s, visit);
                 }
             }
         }
     }
 
-    /// Appends the limit samples of the vertices that levels j+1..=fine add on edge `e` of
-    /// level `j`.
-    fn edge_samples(&self, j: u32, e: usize, out: &mut Vec<DVec3>) {
+    /// Calls `visit` with the limit samples of the vertices that levels j+1..=fine add on
+    /// edge `e` of level `j`.
+    fn edge_samples(&self, j: u32, e: usize, visit: &mut impl FnMut(DVec3)) {
         for t in j..self.fine {
             let nv = self.r.full(t).nv;
             let d0 = e << (t - j);
-            out.extend(
-                self.limit[nv + d0..nv + d0 + (1 << (t - j))]
-                    .iter()
-                    .copied(),
-            );
+            for &p in &self.limit[nv + d0..nv + d0 + (1 << (t - j))] {
+                visit(p);
+            }
         }
     }
 
@@ -775,7 +786,7 @@ impl Measure<'_> {
         let q = 1usize << (2 * m);
         let depth = (self.fine - m).min(2);
         let (mut points, mut around, mut near) = (Vec::new(), Vec::new(), Vec::new());
-        let mut err2 = 0.0f64;
+        let mut err2 = self.floor * self.floor;
         for f in k * q..(k + 1) * q {
             let t = tri(f);
             points.clear();
