@@ -104,12 +104,13 @@ pub struct AccurateSurface {
 }
 
 /// Memory [`subdivide_to_tolerance`] takes per triangle of level `max_level`, the finest it
-/// can show: the refinement to `max_level + 1` (connectivity of levels 0 to `max_level`,
-/// about 90 bytes), the positions of level `max_level + 1` and their limit positions (two
-/// vertices, 96 bytes), the positions of level `max_level` and the gap-filled copy the
-/// extraction makes (24 bytes). The output is a fraction of a uniform level's. A decoder
-/// charges this, as it charges [`super::MEMORY_PER_TRIANGLE`] for a uniform level, before
-/// refining.
+/// can show: the connectivity of levels 0 to `max_level` (about 68 bytes per triangle of a
+/// level, so 90 for all of them), the positions of level `max_level + 1` and their limit
+/// positions (two vertices per triangle of `max_level`, 24 bytes each: 96), and the
+/// positions of level `max_level`, their limit normals and the gap-filled copy the extraction
+/// makes (half a vertex per triangle each: 36). The output is a fraction of a uniform
+/// level's. A decoder charges this before refining, as it charges
+/// [`super::MEMORY_PER_TRIANGLE`] for a uniform level.
 pub const MEMORY_PER_TRIANGLE: u64 = 220;
 
 /// Subdivides `mesh` so that every base triangle is shown at the coarsest level (at most
