@@ -500,10 +500,9 @@ impl Measure<'_> {
         // Moving vertices along the edge slides the triangles next to it along the surface,
         // so a sample is measured to the nearest of the triangles shown around its own (the
         // coarser neighbour's across the edge).
-        let own_faces = |f: usize| shown(f);
         self.max_nearest(k, m, &skip, &shown, f64::INFINITY)
             .max(chords)
-            .max(self.output_error(k, m, &own_faces, f64::INFINITY))
+            .max(self.output_error(k, m, &shown, f64::INFINITY))
     }
 
     /// The largest distance from the vertices gap filling moves onto the coarser side's
@@ -559,7 +558,7 @@ impl Measure<'_> {
         k: usize,
         m: u32,
         skip: &[usize],
-        tri: impl Fn(usize) -> [DVec3; 3],
+        tri: &impl Fn(usize) -> [DVec3; 3],
         stop_above: f64,
     ) -> f64 {
         let lm = self.r.full(m);
@@ -952,7 +951,7 @@ impl FaceErrors {
 fn tail_beyond_samples(e: &[f64]) -> f64 {
     let n = e.len() - 1;
     let last = e[n];
-    let rho = if n == 0 || !(e[n - 1] > 0.0) {
+    let rho = if n == 0 || e[n - 1].is_nan() || e[n - 1] <= 0.0 {
         0.25
     } else {
         (last / e[n - 1]).clamp(0.25, 0.5)
