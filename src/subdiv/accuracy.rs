@@ -12,9 +12,10 @@
 //!   triangle around its corners in the same CAD face (corners at their limit positions):
 //!   a sample may lie beyond its own triangle along the surface, which is no distance, but
 //!   not across a crease, where the neighbour is another surface. From the output to the
-//!   surface: the largest distance from the points of the level-`m` triangles over the
-//!   level-(m+1) and level-(m+2) vertices to the level-`N` triangles around those vertices
-//!   (a triangle whose samples all lie nearer its neighbours can stand off the surface);
+//!   surface: the largest distance from the points of the level-`m` triangles over their
+//!   edges' midpoints and the level-(m+2) vertices inside them to the level-`N` triangles
+//!   around those vertices (a triangle whose samples all lie nearer its neighbours can
+//!   stand off the surface);
 //! * output sparsely (plane patches, belts of cylinders and cones, `sparse`): the output
 //!   uses only points on the split edges, and between them the patch is planar (a plane) or
 //!   ruled along straight rulings (a belt), so the error is that of the split edges'
@@ -408,7 +409,7 @@ impl Measure<'_> {
         let mut values = vec![0.0f64; missing.len()];
         par::for_each_heavy(&mut values, |i, v| {
             let k = missing[i];
-            *v = self.dense_error(k, u32::from(levels[k]), f64::INFINITY);
+            *v = self.dense_error(k, u32::from(levels[k]));
         });
         for (&k, v) in missing.iter().zip(values) {
             errors[k].error[levels[k] as usize] = v;
@@ -550,8 +551,8 @@ impl Measure<'_> {
     /// Every sample's distance to its own triangle is an upper bound on its distance; only
     /// samples whose own distance exceeds the largest distance found so far can raise it,
     /// and they are few once the sample with the largest own distance sets it, so a first
-    /// pass finds that sample and a second measures it first and then only those to the
-    /// triangles around. The samples are visited, not stored: a base triangle at a deep
+    /// pass over a coarser grid of samples finds such a sample and a second measures it
+    /// first and then only those to the triangles around. The samples are visited, not stored: a base triangle at a deep
     /// level has millions.
     fn max_nearest(
         &self,
@@ -563,10 +564,13 @@ impl Measure<'_> {
     ) -> f64 {
         let lm = self.r.full(m);
         let q = 1usize << (2 * m);
+        // The largest distance to its own triangle among the samples two levels down: the
+        // error varies smoothly, so that sample sets a threshold near the final one.
         let mut first = (0.0f64, DVec3::ZERO, u32::MAX);
+        let upto = (m + 2).min(self.fine);
         for f in k * q..(k + 1) * q {
             let t = tri(f);
-            self.for_samples(m, f, skip, &mut |p| {
+            self.for_samples(m, f, skip, upto, &mut |p| {
                 let own = point_triangle_distance_squared(p, &t);
                 if own > first.0 {
                     first = (own, p, f as u32);
@@ -605,7 +609,7 @@ impl Measure<'_> {
                 break;
             }
             let t = tri(f);
-            self.for_samples(m, f, skip, &mut |p| {
+            self.for_samples(m, f, skip, self.fine, &mut |p| {
                 let own = point_triangle_distance_squared(p, &t);
                 measure(p, f as u32, own, &mut err2);
             });
@@ -613,35 +617,42 @@ impl Measure<'_> {
         err2.sqrt()
     }
 
-    /// Calls `visit` with the limit samples of the vertices that levels m+1..=fine add inside
+    /// Calls `visit` with the limit samples of the vertices that levels m+1..=upto add inside
     /// face `f` of level `m` and on its edges, but those on the base edges `skip`: each once
     /// (the edges' shared with the neighbouring face too), by the nested numbering (the
     /// descendants of a level-j edge e at level t are `[e 2^(t-j), (e+1) 2^(t-j))`, and face
     /// g of level i has the interior edges `2 ne_i + 3g + s` at level i+1).
-    fn for_samples(&self, m: u32, f: usize, skip: &[usize], visit: &mut impl FnMut(DVec3)) {
+    fn for_samples(
+        &self,
+        m: u32,
+        f: usize,
+        skip: &[usize],
+        upto: u32,
+        visit: &mut impl FnMut(DVec3),
+    ) {
         let lm = self.r.full(m);
         let on_base = self.l0().ne() << m;
         for &e in &lm.face_edges[3 * f..3 * f + 3] {
             let e = e as usize;
             if !(e < on_base && skip.contains(&(e >> m))) {
-                self.edge_samples(m, e, visit);
+                self.edge_samples(m, e, upto, visit);
             }
         }
-        for i in m..self.fine.saturating_sub(1) {
+        for i in m..upto.saturating_sub(1) {
             let li = self.r.full(i);
             let span = 1usize << (2 * (i - m));
             for g in f * span..(f + 1) * span {
                 for s in 0..3 {
-                    self.edge_samples(i + 1, 2 * li.ne() + 3 * g + s, visit);
+                    self.edge_samples(i + 1, 2 * li.ne() + 3 * g + s, upto, visit);
                 }
             }
         }
     }
 
-    /// Calls `visit` with the limit samples of the vertices that levels j+1..=fine add on
+    /// Calls `visit` with the limit samples of the vertices that levels j+1..=upto add on
     /// edge `e` of level `j`.
-    fn edge_samples(&self, j: u32, e: usize, visit: &mut impl FnMut(DVec3)) {
-        for t in j..self.fine {
+    fn edge_samples(&self, j: u32, e: usize, upto: u32, visit: &mut impl FnMut(DVec3)) {
+        for t in j..upto {
             let nv = self.r.full(t).nv;
             let d0 = e << (t - j);
             for &p in &self.limit[nv + d0..nv + d0 + (1 << (t - j))] {
@@ -695,16 +706,17 @@ impl Measure<'_> {
     }
 
     /// The measurements of base triangle `k`: a sparse face's at every level (its chains'
-    /// errors, measured once per edge); a dense face's at its two finest levels (its tail)
-    /// and from level 0 up to the first within `tolerance`, the levels that fail stopping at
-    /// their first sample beyond it (the others are measured if the face is raised to them).
+    /// errors, measured once per edge); a dense face's from the surface to the output at its
+    /// two finest levels (its tail: the ratio of the two), and both ways from level 0 up to
+    /// the first within `tolerance`, the levels that fail stopping at their first sample
+    /// beyond it (the others are measured if the face is raised to them).
     fn face_errors(&self, k: usize, edge_errors: &[f64], tolerance: f64) -> FaceErrors {
         let per = self.fine as usize;
         let n = per - 1;
         let mut out = FaceErrors::default();
-        let e = &mut out.error[..per];
         let unit = self.plan.map_or(DENSE, |p| p.unit[k]);
         if unit != DENSE {
+            let e = &mut out.error[..per];
             let l0 = self.l0();
             e.fill(0.0);
             let faces = if unit as usize == k {
@@ -722,23 +734,47 @@ impl Measure<'_> {
                     }
                 }
             }
-        } else {
-            e[n] = self.dense_error(k, n as u32, f64::INFINITY);
-            if n > 0 {
-                e[n - 1] = self.dense_error(k, n as u32 - 1, f64::INFINITY);
-            }
+            out.tail = tail_beyond_samples(&out.error[..per]);
+            return out;
         }
-        out.tail = tail_beyond_samples(&out.error[..per]);
-        if unit == DENSE {
-            for m in 0..n.saturating_sub(1) {
-                let x = self.dense_error(k, m as u32, tolerance - out.tail);
-                out.error[m] = x;
-                if x + out.tail <= tolerance {
-                    break;
-                }
+        let mut to_output = [f64::NAN; super::MAX_LEVEL as usize];
+        let finest = n.saturating_sub(1)..=n;
+        for m in finest.clone() {
+            to_output[m] = self.surface_to_output(k, m as u32, f64::INFINITY);
+        }
+        out.tail = tail_beyond_samples(&to_output[..per]);
+        let within = tolerance - out.tail;
+        for (m, &known) in to_output.iter().enumerate().take(per) {
+            let mut x = known;
+            if !finest.contains(&m) {
+                x = self.surface_to_output(k, m as u32, within);
+            }
+            if x <= within {
+                x = x.max(self.output_to_surface(k, m as u32, within));
+            }
+            out.error[m] = x;
+            if x <= within {
+                break;
             }
         }
         out
+    }
+
+    /// The error of showing base triangle `k` at level `m`: both ways, [`Self::surface_to_output`]
+    /// and [`Self::output_to_surface`].
+    fn dense_error(&self, k: usize, m: u32) -> f64 {
+        self.surface_to_output(k, m, f64::INFINITY)
+            .max(self.output_to_surface(k, m, f64::INFINITY))
+    }
+
+    /// Triangle `f` of level `m`, corners at their limit positions.
+    fn level_triangle(&self, m: u32, f: usize) -> [DVec3; 3] {
+        let c = &self.r.full(m).faces[3 * f..3 * f + 3];
+        [
+            self.limit[c[0] as usize],
+            self.limit[c[1] as usize],
+            self.limit[c[2] as usize],
+        ]
     }
 
     /// The largest distance from a level-`fine` limit sample inside base triangle `k` to the
@@ -749,29 +785,25 @@ impl Measure<'_> {
     /// distance from the output, which continues in the neighbouring triangles.
     ///
     /// Stops as soon as the error exceeds `stop_above` (a level that fails needs no more).
-    fn dense_error(&self, k: usize, m: u32, stop_above: f64) -> f64 {
+    fn surface_to_output(&self, k: usize, m: u32, stop_above: f64) -> f64 {
         if m >= self.fine {
             return 0.0;
         }
-        let lm = self.r.full(m);
-        let tri = |f: usize| {
-            let c = &lm.faces[3 * f..3 * f + 3];
-            [
-                self.limit[c[0] as usize],
-                self.limit[c[1] as usize],
-                self.limit[c[2] as usize],
-            ]
-        };
-        let samples = self.max_nearest(k, m, &[], &tri, stop_above);
-        if samples > stop_above {
-            return samples;
+        self.max_nearest(k, m, &[], &|f| self.level_triangle(m, f), stop_above)
+    }
+
+    /// [`Self::output_error`] of the level-`m` triangles of base triangle `k`.
+    fn output_to_surface(&self, k: usize, m: u32, stop_above: f64) -> f64 {
+        if m >= self.fine {
+            return 0.0;
         }
-        samples.max(self.output_error(k, m, &tri, stop_above))
+        self.output_error(k, m, &|f| self.level_triangle(m, f), stop_above)
     }
 
     /// The other direction: the largest distance from the output to the limit surface,
     /// measured at the points of the level-`m` triangles of base triangle `k` (as `tri`
-    /// gives them) that lie over the level-(m+1) and level-(m+2) vertices, each to the
+    /// gives them) that lie over their edges' midpoints and the level-(m+2) vertices inside
+    /// them, each to the
     /// limit surface around that vertex (the level-`fine` triangles of the level-(fine-1)
     /// faces at it, corners at their limit positions; a nearest point beyond them only makes
     /// the distance larger). Samples near the output do not make the output near them: a
@@ -807,9 +839,10 @@ impl Measure<'_> {
         err2.sqrt()
     }
 
-    /// The vertices that the `depth` levels after `m` add on and inside face `f` of level
-    /// `m`, with their barycentric coordinates in it (edge midpoints of the parameter
-    /// domain, by the children layout of [`super::next_level::child_faces`]).
+    /// Points of face `f` of level `m` with their barycentric coordinates in it: the level-m+1
+    /// vertices (its edges' midpoints) and, with `depth` 2, the level-m+2 vertices inside it
+    /// (midpoints in the parameter domain, by the children layout of
+    /// [`super::next_level::child_faces`]).
     fn points_over(&self, m: u32, f: usize, depth: u32, out: &mut Vec<(u32, [f64; 3])>) {
         let lm = self.r.full(m);
         let e = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -828,20 +861,14 @@ impl Measure<'_> {
         if depth < 2 {
             return;
         }
-        // Children in `child_faces` order: corner c (c0 m0 m2, m0 c1 m1, m2 m1 c2), middle.
-        let corners = [
-            [e[0], mids[0], mids[2]],
-            [mids[0], e[1], mids[1]],
-            [mids[2], mids[1], e[2]],
-            [mids[0], mids[1], mids[2]],
-        ];
+        // The middle child (`child_faces` order: the three corner children, then the middle
+        // one, m0 m1 m2): the midpoints of its edges are the level-(m+2) vertices inside the
+        // face, the others lie on its edges between the points above and its corners.
         let l1 = self.r.full(m + 1);
-        for (c, b) in corners.iter().enumerate() {
-            let g = 4 * f + c;
-            let fe = &l1.face_edges[3 * g..3 * g + 3];
-            for s in 0..3 {
-                out.push((l1.nv as u32 + fe[s], mid(b[s], b[(s + 1) % 3])));
-            }
+        let g = 4 * f + 3;
+        let fe = &l1.face_edges[3 * g..3 * g + 3];
+        for s in 0..3 {
+            out.push((l1.nv as u32 + fe[s], mid(mids[s], mids[(s + 1) % 3])));
         }
     }
 
