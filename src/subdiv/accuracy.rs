@@ -28,8 +28,8 @@
 //! level `n - 1` to `n` (`h²` for smooth surfaces: `ρ = 1/4`; slower near extraordinary
 //! vertices, which the measurement sees), so the tail beyond the samples is the geometric
 //! series `e(n) ρ / (1 - ρ)`, `e` measured from the surface to the output (the other
-//! direction is measured only at the levels a triangle may be shown at, which is most of
-//! the cost saved). `ρ` is taken per base triangle from its own measurements,
+//! direction searches around every point, so it is measured only at the levels a triangle
+//! may be shown at). `ρ` is taken per base triangle from its own measurements,
 //! clamped to `[1/4, 1/2]`: below 1/4 the ratio of two tiny errors is noise, above 1/2 the
 //! triangle is not yet in the regime where the series applies, and a tail of at most `e(n)`
 //! keeps the estimate safe. A base triangle gets the coarsest level `m` with `e(m) + tail <=
