@@ -18,7 +18,7 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::pipeline::{
-    decode_surface, encode_fitted, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
+    decode_surface, encode_fitted, sidecar_hints, Detail, ModelEncodeOptions, SurfaceOptions,
 };
 
 #[path = "../tests/common/mod.rs"]
@@ -76,8 +76,15 @@ fn bench_codec(c: &mut Criterion) {
         });
         g.bench_function(BenchmarkId::new("fitted_surface", name), |b| {
             b.iter(|| {
-                decode_surface(&fitted, &Limits::default(), &SurfaceOptions::default())
-                    .expect("decode")
+                decode_surface(
+                    &fitted,
+                    &Limits::default(),
+                    &SurfaceOptions {
+                        detail: Detail::DefaultLevel,
+                        ..Default::default()
+                    },
+                )
+                .expect("decode")
             })
         });
         g.finish();

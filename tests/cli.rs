@@ -57,18 +57,43 @@ fn encode_info_decode_roundtrip() {
         out.to_str().unwrap(),
     ]);
     assert!(ok, "{text}");
-    let (decoded, _) = scode::io::read_mesh(&out).unwrap();
-    // the boss plate is all planes and one cylinder: sparse boundary patches by default
+    // By default to the file's tolerance: few triangles on a plate of planes and a cylinder.
     assert!(
-        decoded.face_count() > 500,
-        "decoded surface has {} faces",
-        decoded.face_count()
+        text.contains("tolerance") && text.contains("estimated distance to the limit surface"),
+        "{text}"
     );
+    let (decoded, _) = scode::io::read_mesh(&out).unwrap();
     assert_eq!(decoded.groups.len(), 8);
+    let uniform = tmp("boss_decoded_uniform.obj");
+    let (ok, text) = scode(&[
+        "decode",
+        "--level",
+        "4",
+        fitted.to_str().unwrap(),
+        "-o",
+        uniform.to_str().unwrap(),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("(level 4;"), "{text}");
+    let (uniform, _) = scode::io::read_mesh(&uniform).unwrap();
+    // sparse boundary patches by default
+    assert!(
+        uniform.face_count() > 500,
+        "level 4 has {} faces",
+        uniform.face_count()
+    );
+    assert!(
+        decoded.face_count() < uniform.face_count() / 2,
+        "to the tolerance {} faces, level 4 {}",
+        decoded.face_count(),
+        uniform.face_count()
+    );
     let dense = tmp("boss_decoded_dense.obj");
     let (ok, text) = scode(&[
         "decode",
         "--dense-boundary",
+        "--level",
+        "4",
         fitted.to_str().unwrap(),
         "-o",
         dense.to_str().unwrap(),
@@ -76,11 +101,41 @@ fn encode_info_decode_roundtrip() {
     assert!(ok, "{text}");
     let (dense, _) = scode::io::read_mesh(&dense).unwrap();
     assert!(
-        dense.face_count() > 4 * decoded.face_count(),
+        dense.face_count() > 4 * uniform.face_count(),
         "dense {} vs sparse {} faces",
         dense.face_count(),
+        uniform.face_count()
+    );
+    // A looser tolerance takes fewer triangles, a tighter one more; relative to the diagonal
+    // with --relative.
+    let faces_at = |args: &[&str]| {
+        let out = tmp("boss_decoded_tol.obj");
+        let mut all = vec!["decode"];
+        all.extend_from_slice(args);
+        all.extend([fitted.to_str().unwrap(), out.to_str().unwrap()]);
+        let (ok, text) = scode(&all);
+        assert!(ok, "{text}");
+        scode::io::read_mesh(&out).unwrap().0.face_count()
+    };
+    let loose = faces_at(&["--tolerance", "0.02", "--relative"]);
+    let tight = faces_at(&["--tolerance", "0.0002", "--relative"]);
+    assert!(
+        loose <= decoded.face_count() && decoded.face_count() <= tight && loose < tight,
+        "{loose} / {} / {tight}",
         decoded.face_count()
     );
+    for bad in [
+        vec!["--tolerance", "0.1", "--level", "2"],
+        vec!["--relative"],
+        vec!["--tolerance", "-1"],
+        vec!["--tolerance", "0.1", "--no-limit"],
+    ] {
+        let mut all = vec!["decode"];
+        all.extend(bad.iter().copied());
+        all.extend([fitted.to_str().unwrap(), out.to_str().unwrap()]);
+        let (status, text) = scode_status(&all);
+        assert_eq!(status, 1, "{bad:?}: {text}");
+    }
 
     let raw = tmp("boss_raw.scode");
     let (ok, text) = scode(&["encode", "--raw", &example(), "-o", raw.to_str().unwrap()]);
@@ -511,11 +566,17 @@ fn triangle_at_level(level: u8) -> PathBuf {
 #[test]
 fn decoding_is_refused_beyond_the_memory_budget() {
     // Level 13 of one triangle is 67 M triangles: more than the command line's 4 GiB budget,
-    // refused before subdividing; a level asked for on the command line is checked the same
-    // way.
+    // refused before subdividing; any level asked for is checked the same way, and so is a
+    // decode to a tolerance (by default, and charged for the finest level it may show).
     let file = triangle_at_level(13);
     let out = tmp("level13.obj");
-    let (ok, text) = scode(&["decode", file.to_str().unwrap(), out.to_str().unwrap()]);
+    let (ok, text) = scode(&[
+        "decode",
+        "--level",
+        "13",
+        file.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
     assert!(!ok, "{text}");
     assert!(
         text.contains("limit exceeded: decode memory with subdivision"),

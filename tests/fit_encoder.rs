@@ -136,7 +136,10 @@ fn fandisk_at_the_seed_coders_operating_point() {
     let surface = scode::pipeline::decode_surface(
         &bytes,
         &Limits::default(),
-        &scode::pipeline::SurfaceOptions::default(),
+        &scode::pipeline::SurfaceOptions {
+            detail: scode::pipeline::Detail::DefaultLevel,
+            ..Default::default()
+        },
     )
     .unwrap();
     let rel = scode::metrics::measure_against_input(&surface.mesh, &input)
@@ -310,7 +313,7 @@ fn closed_patches_are_fitted_onto_their_exact_surfaces() {
     use scode::fit::encoder::ExactSurface;
     use scode::mesh::AnalyticSurface;
     use scode::mesh::PatchKind;
-    use scode::pipeline::{decode_surface, SurfaceOptions};
+    use scode::pipeline::{decode_surface, Detail, SurfaceOptions};
     let (r, step) = (10.0f64, 15usize);
     let (rings, around) = (180 / step, 360 / step);
     let mut m = scode::ControlMesh::new();
@@ -355,7 +358,11 @@ fn closed_patches_are_fitted_onto_their_exact_surfaces() {
     let hints = [SurfaceHint::Freeform, SurfaceHint::Freeform];
     let (bytes, report) = encode_fitted(&m, &hints, &opts).unwrap();
     assert!(report.within_tolerance, "{:?}", report.error);
-    let decoded = decode_surface(&bytes, &Limits::default(), &SurfaceOptions::default())
+    let opts = SurfaceOptions {
+        detail: Detail::DefaultLevel,
+        ..Default::default()
+    };
+    let decoded = decode_surface(&bytes, &Limits::default(), &opts)
         .unwrap()
         .mesh;
     let radial: Vec<f64> = decoded.positions.iter().map(|p| p.length() - r).collect();

@@ -3,9 +3,11 @@
 //! them with `scripts/sweep.sh` (release build).
 
 mod common;
+mod decode_support;
 mod fit_support;
 mod step_support;
 use common::corpus_dir;
+use decode_support::check_decode_to_tolerance;
 use fit_support::check_model;
 use scode::pipeline::Effort;
 use step_support::{
@@ -84,5 +86,15 @@ fn fitted_corpus_models_within_tolerance() {
         ("tess/block_fillet3_fine.obj", 6.0),
     ] {
         check_model(&dir.join(name), min_ratio);
+    }
+}
+
+/// `decode_accuracy.rs`' `corpus_models_decode_to_their_tolerance` on the larger models:
+/// hundreds of faces, freeform surfaces, fillets and tori.
+#[test]
+fn larger_corpus_models_decode_to_their_tolerance() {
+    let Some(dir) = corpus_dir() else { return };
+    for name in ["Ventilator_fine", "bug33398_fine", "trj6_b1-ec-214_fine"] {
+        check_decode_to_tolerance(&dir.join(format!("tess/{name}.obj")));
     }
 }

@@ -2,11 +2,13 @@
 //! the command-line tool's default limits scaled down together by `SCALE` (counts, input size
 //! and memory budget; the work bound is per element already), so an input costs what it would
 //! cost a default decode at a sixteenth of the scale. Must never panic, and a decode that
-//! fails must fail within its budget.
+//! fails must fail within its budget. A control mesh that decodes is then decoded to a
+//! tolerance too, as `scode decode` does by default, on a small budget of triangles.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use scode::codec::{decode_with_usage, inspect, Limits};
+use scode::codec::{decode_with_usage, inspect, Content, Limits};
+use scode::subdiv::{subdivide_to_tolerance, AccuracyOptions};
 
 const SCALE: u64 = 16;
 
@@ -34,5 +36,17 @@ fuzz_target!(|data: &[u8]| {
         assert!(usage.work <= limits.max_work_per_element * (elements + 1));
         let info = inspect(data, &limits).expect("inspect agrees with decode");
         assert_eq!(info.total_bytes, data.len());
+        if let Content::ControlMesh { default_level } = d.header.content {
+            let opts = AccuracyOptions {
+                max_level: u32::from(default_level).min(2),
+                max_faces: 1 << 14,
+                ..Default::default()
+            };
+            if let Ok(out) = subdivide_to_tolerance(&d.mesh, &opts) {
+                out.mesh
+                    .validate()
+                    .expect("a surface decoded to a tolerance must be valid");
+            }
+        }
     }
 });

@@ -8,14 +8,15 @@ use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::io::{self, ReadReport};
 use scode::mesh::{BoundarySurface, PatchKind};
 use scode::subdiv::{self, SubdivOptions};
-use scode::ControlMesh;
+use scode::{ControlMesh, Tolerance};
 
 use super::exit::CliError;
 use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, SubdivideArgs, Writes};
 use scode::fit::encoder::SurfaceHint;
 use scode::io::step;
 use scode::pipeline::{
-    decode_surface, encode_fitted, encode_step, sidecar_hints, ModelEncodeOptions, SurfaceOptions,
+    decode_surface, encode_fitted, encode_step, sidecar_hints, Detail, ModelEncodeOptions,
+    SurfaceOptions,
 };
 
 /// Reads a `.scode` file for decoding with `limits`: its size (from the file's metadata) is
@@ -355,9 +356,23 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
         .into());
     }
     let limits = args.limits.limits();
+    if let Some(t) = args.tolerance {
+        if !(t > 0.0 && t.is_finite()) {
+            return Err(
+                scode::Error::Parameter(format!("--tolerance must be positive, got {t}")).into(),
+            );
+        }
+    }
     let bytes = read_scode(&args.input, &limits)?;
+    let detail = match (args.level, args.tolerance) {
+        (Some(level), _) => Detail::Level(level),
+        (None, Some(t)) => Detail::Tolerance(Tolerance::new(t, args.relative)),
+        // Level positions are not the limit surface a tolerance is measured against.
+        (None, None) if args.no_limit => Detail::DefaultLevel,
+        (None, None) => Detail::FileTolerance,
+    };
     let opts = SurfaceOptions {
-        level: args.level,
+        detail,
         limit: if args.limit {
             Some(true)
         } else if args.no_limit {
@@ -375,15 +390,41 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
         quantize: args.quantize,
     };
     io::write_mesh_with(output, &surface.mesh, surface.normals.as_deref(), &write)?;
+    let how = match &surface.accuracy {
+        None => format!("level {}", surface.level),
+        Some(a) => format!(
+            "tolerance {:.4e}, levels {}, estimated distance to the limit surface at most {:.4e}",
+            a.tolerance,
+            level_histogram(&a.triangles_per_level),
+            a.bound
+        ),
+    };
     println!(
-        "wrote {}: {} vertices, {} faces (level {}; decode and subdivide {:.1} ms)",
+        "wrote {}: {} vertices, {} faces ({how}; decode and subdivide {:.1} ms)",
         output.display(),
         surface.mesh.vertex_count(),
         surface.mesh.face_count(),
-        surface.level,
         t_decode.as_secs_f64() * 1e3,
     );
+    if let Some(a) = surface.accuracy.as_ref().filter(|a| a.bound > a.tolerance) {
+        println!(
+            "note: some control triangles need a level beyond {} to meet the tolerance; \
+             --tolerance with a smaller value allows finer levels",
+            a.max_level
+        );
+    }
     Ok(())
+}
+
+/// "0:12 1:40 3:2": control triangles per level shown, levels with none left out.
+fn level_histogram(per_level: &[usize]) -> String {
+    let parts: Vec<String> = per_level
+        .iter()
+        .enumerate()
+        .filter(|&(_, &n)| n > 0)
+        .map(|(m, n)| format!("{m}:{n}"))
+        .collect();
+    parts.join(" ")
 }
 
 fn boundary_output(dense: bool) -> subdiv::BoundaryPatchOutput {
@@ -591,7 +632,14 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         }
     }
     if let Some(reference) = &args.against {
-        let surface = decode_surface(&bytes, &limits, &SurfaceOptions::default())?;
+        let surface = decode_surface(
+            &bytes,
+            &limits,
+            &SurfaceOptions {
+                detail: Detail::DefaultLevel,
+                ..Default::default()
+            },
+        )?;
         let level = surface.level;
         let (input, _) = io::read_mesh(reference)?;
         let r = scode::metrics::measure_against_input(&surface.mesh, &input)?;

@@ -94,8 +94,15 @@ pub enum Command {
     Encode(EncodeArgs),
     /// Decompress a .scode file into a mesh (format chosen by the output extension).
     ///
-    /// A raw-mode file decodes to the stored mesh. A control-mesh file is subdivided to
-    /// --level (default: the level stored in the file).
+    /// A raw-mode file decodes to the stored mesh. A control-mesh file is decoded to an
+    /// accuracy: each triangle of the control mesh is subdivided to the coarsest level whose
+    /// output lies within the tolerance of the surface the file describes (its limit
+    /// surface), so flat and gently curved faces take few triangles and tight fillets more;
+    /// neighbouring faces at different levels are stitched without cracks, and planes and
+    /// cylinder/cone belts come out as few triangles. The tolerance is --tolerance, else the
+    /// one the file was encoded for (files do not store it: 1e-3 of the diagonal, the
+    /// encoder's default, but no more than the file's quantisation grid allows).
+    /// --level N subdivides every face uniformly to level N instead.
     ///
     /// glTF output (.glb, .gltf) is laid out for CAD viewers: one triangle primitive per body
     /// (connected part) with the CAD face as a per-vertex feature id (_FEATURE_ID_0,
@@ -103,6 +110,9 @@ pub enum Command {
     /// sharp edges as a line primitive; scode reads the faces back from it.
     ///
     /// Examples: scode decode part.scode part.obj
+    ///           scode decode --tolerance 0.05 part.scode coarse.stl
+    ///           scode decode --tolerance 2e-4 --relative part.scode fine.obj
+    ///           scode decode --level 4 part.scode uniform.obj
     ///           scode decode --quantize part.scode part.glb
     #[command(verbatim_doc_comment)]
     Decode(DecodeArgs),
@@ -320,15 +330,29 @@ pub struct DecodeArgs {
     pub input: PathBuf,
     #[command(flatten)]
     pub output: OutputArg,
-    /// Subdivision level for control-mesh files (default: the file's own default level).
+    /// Largest distance between the output and the file's limit surface, in model units
+    /// (with --relative, a fraction of the surface's bounding-box diagonal). Each control
+    /// triangle gets the coarsest level whose measured distance from the limit surface
+    /// (against the limit points of the next level, plus the shrinking remainder beyond
+    /// them) is within it. Looser than the file's: fewer triangles, e.g. for a preview;
+    /// tighter: more, up to one level beyond the file's default level per factor 4.
+    /// Default: the tolerance the file was encoded for.
+    #[arg(long, value_name = "T", conflicts_with = "level")]
+    pub tolerance: Option<f64>,
+    /// Read --tolerance as a fraction of the bounding-box diagonal.
+    #[arg(long, requires = "tolerance")]
+    pub relative: bool,
+    /// Subdivide every face of a control mesh uniformly to this level instead of decoding to
+    /// a tolerance (the file's default level is the surface the encoder measured).
     #[arg(long, value_name = "N")]
     pub level: Option<u32>,
     /// Move output vertices to the limit surface and write normals (always on for fitted
     /// control meshes unless --no-limit).
     #[arg(long)]
     pub limit: bool,
-    /// Keep level-N positions instead of limit positions for fitted control meshes.
-    #[arg(long, conflicts_with = "limit")]
+    /// Keep level-N positions instead of limit positions for fitted control meshes (a
+    /// uniform level: the file's default level unless --level).
+    #[arg(long, conflicts_with_all = ["limit", "tolerance"])]
     pub no_limit: bool,
     /// Output boundary patches (planes, cylinders, cones) as the full 1-to-4 grid instead of
     /// S-CODE's sparse triangulation.

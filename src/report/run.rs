@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::io;
 use crate::mesh::ControlMesh;
 use crate::metrics::{measure_against_input, raw_binary_bytes, RateDistortion};
-use crate::pipeline::{decode_surface, SurfaceOptions};
+use crate::pipeline::{decode_surface, Detail, SurfaceOptions};
 
 /// What to run.
 #[derive(Clone, Debug, PartialEq)]
@@ -421,8 +421,15 @@ fn run_scode_point(
     let mut surface = None;
     for _ in 0..opts.runs.max(1) {
         let t = Instant::now();
-        let s = decode_surface(&bytes, &Limits::default(), &SurfaceOptions::default())
-            .map_err(|e| format!("cannot decode: {e}"))?;
+        let s = decode_surface(
+            &bytes,
+            &Limits::default(),
+            &SurfaceOptions {
+                detail: Detail::DefaultLevel,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| format!("cannot decode: {e}"))?;
         decode_seconds.push(t.elapsed().as_secs_f64());
         surface = Some(s);
     }

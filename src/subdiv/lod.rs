@@ -58,9 +58,54 @@ pub(crate) fn extract(
     levels: &[u8],
     mode: BoundaryPatchOutput,
 ) -> Result<AdaptiveMesh> {
-    let n = r.max_level();
+    extract_at(r, r.max_level(), pos, normals, levels, mode).map(|(mesh, _)| mesh)
+}
+
+/// Level-`top` vertex `j` (`0..=2^top`) along base edge `e`, in its stored direction, by the
+/// index arithmetic of [`sparse::base_edge_chain`] (no level-`top` edge array is read, so a
+/// level below the refinement's finest needs nothing beyond the levels already built).
+/// `level_nv[i]` is the vertex count of level i.
+#[inline]
+pub(crate) fn edge_vertex(
+    l0: &super::topology::Level,
+    level_nv: &[usize],
+    top: u32,
+    e: usize,
+    j: usize,
+) -> u32 {
+    if j == 0 {
+        return l0.edges[e][0];
+    }
+    if j == 1usize << top {
+        return l0.edges[e][1];
+    }
+    let tz = j.trailing_zeros();
+    let lev = top - 1 - tz;
+    (level_nv[lev as usize] + (e << lev) + (j >> (tz + 1))) as u32
+}
+
+/// [`extract`] with level `top <= r.max_level()` as the finest level shown: `pos` holds the
+/// positions of the level-`top` vertices (a prefix of every finer level's ids), so a
+/// refinement built one level deeper than its output (to measure it) shows levels up to
+/// `top` without building the connectivity of its finest level. Also returns the map from
+/// level-`top` vertex ids to output vertex ids (`u32::MAX` for vertices not used).
+pub(crate) fn extract_at(
+    r: &Refinement,
+    top: u32,
+    pos: &[DVec3],
+    normals: Option<&[DVec3]>,
+    levels: &[u8],
+    mode: BoundaryPatchOutput,
+) -> Result<(AdaptiveMesh, Vec<u32>)> {
+    if top > r.max_level() {
+        return Err(Error::Parameter(format!(
+            "level {top} shown, refinement built to {}",
+            r.max_level()
+        )));
+    }
+    let n = top;
     let l0 = r.full(0);
-    let ln = r.full(n);
+    let level_nv: Vec<usize> = (0..n).map(|m| r.full(m).nv).collect();
     if levels.len() != l0.nf() {
         return Err(Error::Parameter(format!(
             "{} per-face levels given, the mesh has {} base triangles",
@@ -74,10 +119,10 @@ pub(crate) fn extract(
             levels[k]
         )));
     }
-    if pos.len() != ln.nv {
-        return Err(Error::Parameter(
-            "positions do not match the finest level".into(),
-        ));
+    if pos.len() != r.level(n).vertex_count() {
+        return Err(Error::Parameter(format!(
+            "positions do not match level {n}"
+        )));
     }
     let plan = match mode {
         BoundaryPatchOutput::Sparse => SparsePlan::new(l0, &r.base),
@@ -96,13 +141,7 @@ pub(crate) fn extract(
     let e0 = l0.ne();
     let span = 1usize << n;
     // x_j along base edge e (j = 0..=2^n), in the stored direction a -> b
-    let x = |e: usize, j: usize| -> u32 {
-        if j == span {
-            ln.edges[e * span + span - 1][1]
-        } else {
-            ln.edges[e * span + j][0]
-        }
-    };
+    let x = |e: usize, j: usize| -> u32 { edge_vertex(l0, &level_nv, n, e, j) };
 
     // Gap filling.
     let mut disp = pos.to_vec();
@@ -240,8 +279,23 @@ pub(crate) fn extract(
         }
     }
 
-    // Compact: keep used vertices in index order, then the centroids.
-    let total = pos.len() + centroids.len();
+    let (mesh, mut remap) = compact(&disp, normals, &centroids, tris, groups);
+    remap.truncate(pos.len());
+    Ok((mesh, remap))
+}
+
+/// The output mesh of [`extract_at`]: keeps the used vertices of `disp` (gap-filled
+/// positions) in index order, then the stitching centroids (vertex ids from `disp.len()` on,
+/// the mean of their three corners), and renumbers `tris`. Returns the mesh and the map from
+/// old to new vertex ids (`u32::MAX` for vertices not used).
+fn compact(
+    disp: &[DVec3],
+    normals: Option<&[DVec3]>,
+    centroids: &[[u32; 3]],
+    mut tris: Vec<[u32; 3]>,
+    groups: Vec<u32>,
+) -> (AdaptiveMesh, Vec<u32>) {
+    let total = disp.len() + centroids.len();
     let mut remap = vec![u32::MAX; total];
     for t in &tris {
         for &v in t {
@@ -257,13 +311,13 @@ pub(crate) fn extract(
         }
         remap[v] = next;
         next += 1;
-        if v < pos.len() {
+        if v < disp.len() {
             positions.push(disp[v]);
             if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
                 on.push(nn[v]);
             }
         } else {
-            let cs = centroids[v - pos.len()];
+            let cs = centroids[v - disp.len()];
             positions.push(cs.iter().map(|&i| disp[i as usize]).sum::<DVec3>() / 3.0);
             if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
                 on.push(normalize_or_zero(cs.iter().map(|&i| nn[i as usize]).sum()));
@@ -275,10 +329,11 @@ pub(crate) fn extract(
             *v = remap[*v as usize];
         }
     }
-    Ok(AdaptiveMesh {
+    let mesh = AdaptiveMesh {
         positions,
         normals: out_normals,
         triangles: tris,
         face_groups: groups,
-    })
+    };
+    (mesh, remap)
 }

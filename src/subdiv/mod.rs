@@ -23,7 +23,9 @@
 //! count). Parallelism is over vertices / edges / faces of a level, which balances better
 //! than over base faces and needs no stitching of per-face results.
 
+mod accuracy;
 mod eval;
+mod flips;
 mod frame;
 mod lod;
 mod masks;
@@ -45,6 +47,10 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
+pub use accuracy::{
+    subdivide_to_tolerance, AccuracyOptions, AccurateSurface,
+    MEMORY_PER_TRIANGLE as MEMORY_PER_ACCURATE_TRIANGLE,
+};
 pub use lod::{lod_corner_face, AdaptiveMesh};
 pub use masks::{loop_beta, loop_omega};
 pub use sparse::BoundaryPatchOutput;

@@ -42,6 +42,21 @@ pub(crate) fn for_each_mut<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) + 
     }
 }
 
+/// Calls `f(i, x_i)` for every element, in parallel from two elements on: for elements that
+/// each take long (a base triangle's measurement over thousands of points), where
+/// [`for_each_mut`]'s threshold would keep a few thousand of them on one thread.
+pub(crate) fn for_each_heavy<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
+    #[cfg(feature = "parallel")]
+    if data.len() >= 2 {
+        use rayon::prelude::*;
+        data.par_iter_mut().enumerate().for_each(|(i, x)| f(i, x));
+        return;
+    }
+    for (i, x) in data.iter_mut().enumerate() {
+        f(i, x);
+    }
+}
+
 /// Calls `f(i, segment_i)` where segment i is `data[offsets[i]..offsets[i + 1]]`
 /// (`offsets[0] == 0`, `offsets.last() == data.len()`).
 pub(crate) fn for_each_segment_mut<T: Send>(

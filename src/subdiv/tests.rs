@@ -9,6 +9,8 @@ use super::test_support::{self, load_corpus};
 use super::*;
 use crate::mesh::{Axis, BoundarySurface, PatchKind};
 
+mod accuracy;
+
 fn v3(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
 }
