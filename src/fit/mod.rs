@@ -24,6 +24,7 @@ mod refine;
 mod rounds;
 pub mod segment;
 mod solve;
+mod support;
 
 #[cfg(test)]
 pub(crate) mod test_support;
