@@ -60,6 +60,8 @@ fi
 
 echo "== cargo test"
 PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test --all-targets
+echo "== cargo test --doc (the API's examples)"
+cargo test --doc
 
 echo "== wasm/ engine (native): clippy and tests"
 WASM_NATIVE_TARGET="${CARGO_TARGET_DIR:-$PWD/target}"
