@@ -357,8 +357,8 @@ pub struct Surface {
 }
 
 /// Decodes a `.scode` file to a triangle surface. Malformed or hostile input is an
-/// [`Error`] (never a panic), and a file whose decode would exceed `opts.limits` is
-/// [`Error::LimitsExceeded`].
+/// [`Error`](crate::Error) (never a panic), and a file whose decode would exceed `opts.limits` is
+/// [`Error::LimitsExceeded`](crate::Error::LimitsExceeded).
 ///
 /// ```
 /// let err = scode::decode(b"not a scode file", &scode::DecodeOptions::default()).unwrap_err();

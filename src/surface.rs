@@ -74,7 +74,7 @@ pub const DEFAULT_RELATIVE_TOLERANCE: f64 = 1e-3;
 
 /// How many quantisation steps the tolerance of a fitted file is at most. The encoder picks
 /// the fewest bits whose Euclidean quantisation error `sqrt(3)/2 step` is at most a quarter
-/// of the tolerance `t` ([`bits_for_tolerance`]): the bit count rounds up, so the nominal
+/// of the tolerance `t` (`pipeline::bits_for_tolerance`): the bit count rounds up, so the nominal
 /// step over the model's extent `E` exceeds `t / (4 sqrt(3))`, and the grid's box is at
 /// least the input's box widened by 1/32 of its extent on each side, so `step > (17/16) t /
 /// (4 sqrt(3))`, i.e. `t < 6.53 step`; fitting may then coarsen the grid, which only makes
