@@ -153,6 +153,7 @@ pub use crate::pipeline::Effort;
 /// What [`encode`] compresses.
 #[cfg(feature = "encoder")]
 #[derive(Clone, Copy, Debug)]
+#[non_exhaustive]
 pub enum Input<'a> {
     /// A triangle mesh with face groups.
     Mesh(&'a Mesh),
@@ -196,6 +197,7 @@ impl Default for EncodeOptions {
 /// The result of [`encode`].
 #[cfg(feature = "encoder")]
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Encoded {
     /// The `.scode` file.
     pub bytes: Vec<u8>,
@@ -341,6 +343,7 @@ impl DecodeOptions {
 
 /// A decoded surface: the result of [`decode`].
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Surface {
     /// The triangles, each with its CAD face (group) and the group names; sharp edges are
     /// the creases of the surface (CAD-face boundaries among them).
@@ -386,6 +389,7 @@ pub fn decode(bytes: &[u8], opts: &DecodeOptions) -> Result<Surface> {
 
 /// What [`inspect`] reports about a `.scode` file.
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Info {
     /// Format version (major, minor).
     pub version: (u8, u8),
