@@ -26,12 +26,23 @@ fi
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 cargo fmt --manifest-path wasm/Cargo.toml --all -- --check
+cargo fmt --manifest-path tests/embed/Cargo.toml -- --check
 
 echo "== viewer/pkg built from the current decoder sources"
 viewer/build.sh --check
 
 echo "== decoder-only library (no default features)"
 cargo check --lib --no-default-features
+
+echo "== an embedder of the library (tests/embed: no default features, plus the mesh encoder)"
+# It builds through the documented API alone, and none of the command-line tool's, the
+# plots' or the STEP reader's dependencies come with it.
+cargo check --manifest-path tests/embed/Cargo.toml --target-dir "${CARGO_TARGET_DIR:-target}" --locked
+EMBED_DEPS=$(cargo tree --manifest-path tests/embed/Cargo.toml --locked -e normal --prefix none)
+if echo "$EMBED_DEPS" | grep -E '^(clap|anyhow|indicatif|plotters|png|mimalloc|truck-[a-z]+|ruststep) '; then
+  echo "error: the embedder's build pulls in the dependencies above" >&2
+  exit 1
+fi
 
 echo "== cargo clippy (with the sweep tests, which cargo test leaves out)"
 cargo clippy --all-targets --features sweep -- -D warnings
@@ -49,6 +60,8 @@ fi
 
 echo "== cargo test"
 PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test --all-targets
+echo "== cargo test --doc (the API's examples)"
+cargo test --doc
 
 echo "== wasm/ engine (native): clippy and tests"
 WASM_NATIVE_TARGET="${CARGO_TARGET_DIR:-$PWD/target}"

@@ -1,32 +1,90 @@
-//! scode: a subdivision-surface codec for CAD models.
+//! scode: a subdivision-surface codec and file format (`.scode`) for CAD models.
 //!
-//! The pipeline reads top to bottom in the module list: a [`mesh::ControlMesh`] is read by
-//! [`io`], refined by [`subdiv`], produced from CAD faces by [`fit`], stored by [`codec`],
-//! and measured by [`metrics`]. Each layer uses only the ones above it in this list
-//! (`codec` and `metrics` never depend on `fit`).
+//! The encoder fits each CAD face of a model with a subdivision patch on one watertight
+//! control mesh and stores that mesh; the decoder subdivides it back to a triangle surface
+//! whose triangles keep their CAD face.
 //!
-//! Features: `encoder` (default) enables `io`, `fit`, `metrics` and `pipeline` and their
-//! dependencies; without it the crate is the decoder alone (`codec`, `mesh`, `subdiv`).
+//! # API
+//!
+//! - [`encode`] compresses an [`Input`] (a [`Mesh`] with face groups, a mesh file, or a STEP
+//!   file) to `.scode` bytes with [`EncodeOptions`], returning [`Encoded`].
+//! - [`decode`] turns `.scode` bytes into a [`Surface`] with [`DecodeOptions`]: to the
+//!   tolerance the file was encoded for (default), to a tolerance, or to a uniform level,
+//!   with limit positions and normals, within [`Limits`].
+//! - [`inspect`] reads a file's header and sections ([`Info`]).
+//! - Every fallible call returns [`Error`], which says what kind of problem it was
+//!   (`Format`, `LimitsExceeded`, `Input`, `Parameter`, `Mesh`, `Io`).
+//!
+//! ```
+//! # fn main() -> scode::Result<()> {
+//! // Four triangles, one CAD face each.
+//! let mesh = scode::Mesh {
+//!     positions: vec![[0., 0., 0.], [1., 0., 0.], [0., 1., 0.], [0., 0., 1.]],
+//!     triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+//!     groups: vec![0, 1, 2, 3],
+//!     ..Default::default()
+//! };
+//! let encoded = scode::encode(scode::Input::Mesh(&mesh), &scode::EncodeOptions::default())?;
+//! let surface = scode::decode(&encoded.bytes, &scode::DecodeOptions::level(2))?;
+//! assert_eq!(surface.mesh.triangles.len(), surface.mesh.groups.len());
+//! assert_eq!(scode::inspect(&encoded.bytes)?.groups, 4);
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! # Features
+//!
+//! - `encoder` (default): [`encode`] of meshes and mesh files (fitting, mesh readers,
+//!   distance metrics). Without it the crate is the decoder alone ([`decode`], [`inspect`]).
+//! - `step` (default): STEP input ([`Input::Step`]).
+//! - `parallel` (default): multi-threaded refinement and fitting (rayon); same results.
+//! - `legacy-formats` (default): decoding of format versions 1 and 2.
+//! - `cli`, `report`, `mimalloc` (default): the `scode` command-line tool, its reports and
+//!   plots, and its allocator. An embedder turns default features off:
+//!   `scode = { version = "0.1", default-features = false, features = ["encoder"] }`.
+//!
+//! # Internal modules
+//!
+//! The modules below the API (hidden from this documentation) are public for the `scode`
+//! command-line tool, the WebAssembly viewer, the tests and the benches; they follow the
+//! layers mesh, io, subdiv, fit, codec, metrics, pipeline, and are not a stable interface.
 #![forbid(unsafe_code)]
 
+#[doc(hidden)]
 pub mod error;
+#[doc(hidden)]
 pub mod mesh;
 
 #[cfg(feature = "encoder")]
+#[doc(hidden)]
 pub mod io;
+#[doc(hidden)]
 pub mod subdiv;
 
 #[cfg(feature = "encoder")]
+#[doc(hidden)]
 pub mod fit;
 
+#[doc(hidden)]
 pub mod codec;
 #[cfg(feature = "encoder")]
+#[doc(hidden)]
 pub mod metrics;
 
+#[doc(hidden)]
+pub mod surface;
+
 #[cfg(feature = "encoder")]
+#[doc(hidden)]
 pub mod pipeline;
 #[cfg(feature = "report")]
+#[doc(hidden)]
 pub mod report;
 
+mod api;
+
+pub use api::*;
 pub use error::{Error, Result};
-pub use mesh::{ControlMesh, Tolerance};
+#[doc(hidden)]
+pub use mesh::ControlMesh;
+pub use mesh::Tolerance;

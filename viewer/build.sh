@@ -20,7 +20,8 @@ ROOT=$(pwd)
 sources_hash() {
   {
     ls wasm/Cargo.toml wasm/Cargo.lock wasm/crc32-small/Cargo.toml viewer/build.sh
-    find wasm/src wasm/crc32-small/src src/lib.rs src/error.rs src/mesh src/codec src/subdiv \
+    find wasm/src wasm/crc32-small/src src/lib.rs src/error.rs src/api.rs src/surface.rs \
+      src/mesh src/codec src/subdiv \
       -type f -name '*.rs' ! -name tests.rs ! -name test_support.rs ! -path '*/tests/*'
   } | LC_ALL=C sort | xargs sha256sum | sha256sum | cut -d' ' -f1
 }

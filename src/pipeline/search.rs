@@ -205,7 +205,7 @@ pub(crate) fn smallest_traversal_start(
 }
 
 #[cfg(feature = "step")]
-pub use step::{encode_step, StepTessellation, STEP_TESSELLATIONS};
+pub use step::{encode_step, encode_step_bytes, StepTessellation, STEP_TESSELLATIONS};
 
 #[cfg(feature = "step")]
 mod step {
@@ -214,7 +214,7 @@ mod step {
     use super::{encode_fitted, Effort};
     use crate::error::Result;
     use crate::fit::encoder::FitReport;
-    use crate::io::step::{read_step_tessellations, StepModel};
+    use crate::io::step::{read_step_tessellations_bytes, StepModel};
     use crate::mesh::ControlMesh;
     use crate::pipeline::{
         same_faces, step_exact_surfaces, step_hints, step_options_for, ModelEncodeOptions,
@@ -313,6 +313,16 @@ mod step {
         path: &Path,
         opts: &ModelEncodeOptions,
     ) -> Result<(StepModel, Vec<u8>, FitReport)> {
+        let bytes = std::fs::read(path).map_err(|e| crate::error::Error::io(path, e))?;
+        encode_step_bytes(path, &bytes, opts)
+    }
+
+    /// [`encode_step`] on the file's bytes; `path` only names the file in messages.
+    pub fn encode_step_bytes(
+        path: &Path,
+        bytes: &[u8],
+        opts: &ModelEncodeOptions,
+    ) -> Result<(StepModel, Vec<u8>, FitReport)> {
         let variants = opts.effort.step_tessellations();
         let step_opts: Vec<_> = variants
             .iter()
@@ -324,7 +334,7 @@ mod step {
                 o
             })
             .collect();
-        let models = read_step_tessellations(path, &step_opts)?;
+        let models = read_step_tessellations_bytes(path, bytes, &step_opts)?;
         let mut best: Option<(StepModel, Vec<u8>, FitReport)> = None;
         let mut first_error = None;
         let mut fitted_meshes: Vec<ControlMesh> = Vec::new();

@@ -282,13 +282,22 @@ pub fn read_step_tessellations(
     path: &Path,
     tessellations: &[StepOptions],
 ) -> Result<Vec<StepModel>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    read_step_tessellations_bytes(path, &bytes, tessellations)
+}
+
+/// [`read_step_tessellations`] on bytes already in memory; `path` is only used in messages.
+pub fn read_step_tessellations_bytes(
+    path: &Path,
+    bytes: &[u8],
+    tessellations: &[StepOptions],
+) -> Result<Vec<StepModel>> {
     let Some(first) = tessellations.first() else {
         return Err(Error::Parameter(
             "read_step_tessellations: no tessellation asked for".into(),
         ));
     };
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let parsed = parse_and_convert(path, &bytes, first)?;
+    let parsed = parse_and_convert(path, bytes, first)?;
     tessellations
         .iter()
         .map(|opts| tessellate::tessellate(path, parsed.clone(), opts))
