@@ -24,10 +24,10 @@
 //! `s`, which is `ρ^(s-m)` times that of level `m`: `ρ = 1/4` on smooth surfaces (the error
 //! shrinks with the triangles' size squared), slower near extraordinary vertices. So the
 //! error `e(m)` of level `m` is at most `E(m) + ρ^(s-m) e(m)`, i.e. `e(m) <= E(m) / (1 -
-//! ρ^(s-m))`, the estimate used, with `ρ` taken per base triangle (per chain) as `E(m) / E(m
-//! - 1)`, clamped to `[1/4, 1/2]`: below 1/4 the ratio of two tiny errors is noise, above 1/2
-//! the triangle is not yet in the regime where the series applies, and 1/2 keeps the
-//! estimate safe; level 0, which has no level before, takes `1/2`. The finest level shown,
+//! ρ^(s-m))`, the estimate used, with `ρ` taken per base triangle (per chain) as the ratio
+//! `E(m) / E(m-1)`, clamped to `[1/4, 1/2]`: below 1/4 the ratio of two tiny errors is noise,
+//! above 1/2 the triangle is not yet in the regime where the series applies, and 1/2 keeps
+//! the estimate safe; level 0, which has no level before, takes `1/2`. The finest level shown,
 //! `n`, is not measured (that would take the level after it): its estimate is `ρ e(n - 1)`
 //! with the ratio of level `n - 1`. A base triangle gets the coarsest level `m` with `e(m) <=
 //! tolerance` (level `n` when none does: its estimate is then reported above the tolerance).
