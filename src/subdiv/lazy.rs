@@ -31,6 +31,12 @@ pub(crate) struct LazyLimits<'a> {
     have_normal: Vec<u64>,
 }
 
+/// `n` zero vectors, allocated zeroed rather than written (`vec![DVec3::ZERO; n]` writes
+/// every element): the pages never written are never mapped.
+fn zeroed(n: usize) -> Vec<DVec3> {
+    bytemuck::allocation::zeroed_vec(n)
+}
+
 /// Sets bit `i`; whether it was clear.
 #[inline]
 fn set(bits: &mut [u64], i: usize) -> bool {
@@ -72,15 +78,14 @@ impl<'a> LazyLimits<'a> {
         let mut pos = vec![control.to_vec()];
         let mut have = vec![vec![u64::MAX; nv[0].div_ceil(64)]];
         for &n in &nv[1..] {
-            // Zeroed allocations: pages never written are never mapped.
-            pos.push(vec![DVec3::ZERO; n]);
+            pos.push(zeroed(n));
             have.push(vec![0u64; n.div_ceil(64)]);
         }
         let last = nv[top as usize];
         LazyLimits {
             r,
-            limit: vec![DVec3::ZERO; last],
-            normal: vec![DVec3::ZERO; last],
+            limit: zeroed(last),
+            normal: zeroed(last),
             have_limit: vec![0u64; last.div_ceil(64)],
             have_normal: vec![0u64; last.div_ceil(64)],
             nv,
@@ -126,9 +131,11 @@ impl<'a> LazyLimits<'a> {
         let mut todo: Vec<Vec<u32>> = vec![Vec::new(); top as usize + 1];
         let mut rings: Vec<Vec<u32>> = vec![Vec::new(); top as usize + 1];
         for &v in verts {
-            let done = get(&self.have_limit, v as usize)
-                && (!normals || get(&self.have_normal, v as usize));
-            if done {
+            // Marked when queued, so that a vertex asked for many times is evaluated once.
+            let i = v as usize;
+            let limit = set(&mut self.have_limit, i);
+            let normal = normals && set(&mut self.have_normal, i);
+            if !(limit || normal) {
                 continue;
             }
             let b = self.birth(v);
@@ -163,10 +170,8 @@ impl<'a> LazyLimits<'a> {
                     )
                 };
                 self.limit[i] = lim;
-                set(&mut self.have_limit, i);
                 if let Some(nn) = nor {
                     self.normal[i] = nn;
-                    set(&mut self.have_normal, i);
                 }
             }
         }
