@@ -307,10 +307,13 @@ section_decode() {
   echo "limit positions and normals: the decode and subdivision time \`scode decode\` reports (file"
   echo "writing excluded), median of $DECODE_RUNS runs, and output triangles per second; and"
   echo "\`scode decode FILE.scode OUT.obj\`, to the file's tolerance (the default): its triangles"
-  echo "and time."
+  echo "and time; beside it \`draco_decoder\` on the input's Draco file (\`-qp 10 -cl 10\`): the"
+  echo "decode time it reports (whole milliseconds), median of $DECODE_RUNS runs, and scode's time to the"
+  echo "tolerance over it where Draco's is at least 10 ms (both in-process times; \`farm-bench --vs\`"
+  echo "gives the whole processes' ratio)."
   echo
-  echo "| model | bytes | level | output triangles | decode + subdivide (ms) | M triangles / s | to the tolerance: triangles | ms |"
-  echo "|---|---:|---:|---:|---:|---:|---:|---:|"
+  echo "| model | bytes | level | output triangles | decode + subdivide (ms) | M triangles / s | to the tolerance: triangles | ms | Draco decode (ms) | ratio |"
+  echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
   for name in fandisk four_cone_fine screw_fine block_fillet3_fine bug3883_xr2-ct-214_plate_fine bug33398_fine; do
     wanted "$name" || continue
     m="$CORPUS/tess/$name.obj"
@@ -340,7 +343,18 @@ section_decode() {
     done
     acc_ms=$(median <"$OUT/decode/$name.acc.ms")
     acc_tris=$(grab 's/^wrote .*: [0-9]* vertices, \([0-9]*\) faces.*/\1/p' "$log.acc")
-    echo "| $name | $(stat -c %s "$dir/$name.scode") | $level | $tris | $ms | $rate | $acc_tris | $acc_ms |"
+    local draco_ms="" ratio=""
+    if [ -n "$DRACO" ] && command -v draco_decoder >/dev/null &&
+      "$DRACO" -i "$m" -o "$OUT/decode/$name.drc" -qp 10 -cl 10 >/dev/null 2>&1; then
+      : >"$OUT/decode/$name.draco.ms"
+      for ((n = 0; n < DECODE_RUNS; n++)); do
+        draco_decoder -i "$OUT/decode/$name.drc" -o "$OUT/decode/$name.draco.ply" >"$log.draco" 2>&1 || break
+        grab 's/.*(\([0-9.]*\) ms to decode).*/\1/p' "$log.draco" >>"$OUT/decode/$name.draco.ms"
+      done
+      draco_ms=$(median <"$OUT/decode/$name.draco.ms")
+      ratio=$(awk -v a="$acc_ms" -v b="$draco_ms" 'BEGIN { if (b >= 10) printf "%.1fx", a / b }')
+    fi
+    echo "| $name | $(stat -c %s "$dir/$name.scode") | $level | $tris | $ms | $rate | $acc_tris | $acc_ms | ${draco_ms:-$NO_DRACO} | $ratio |"
     rows=$((rows + 1))
   done
   no_rows "$rows"

@@ -214,7 +214,7 @@ fn decode_to_tolerance(
     let diagonal = decoded.mesh.diagonal();
     let file_t = file_relative.resolve(diagonal).min(cap);
     let asked = tolerance.resolve(diagonal);
-    // The measurement refines one level beyond the finest shown.
+    // `subdivide_to_tolerance` shows at most level MAX_LEVEL - 1.
     let deepest = crate::subdiv::MAX_LEVEL - 1;
     let mut max_level = default_level.min(deepest);
     if asked > 0.0 && asked < file_t {

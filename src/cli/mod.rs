@@ -333,7 +333,7 @@ pub struct DecodeArgs {
     /// Largest distance between the output and the file's limit surface, in model units
     /// (with --relative, a fraction of the surface's bounding-box diagonal). Each control
     /// triangle gets the coarsest level whose measured distance from the limit surface
-    /// (against the limit points of the next level, plus the shrinking remainder beyond
+    /// (against the limit points two levels finer, plus the shrinking remainder beyond
     /// them) is within it. Looser than the file's: fewer triangles, e.g. for a preview;
     /// tighter: more, up to one level beyond the file's default level per factor 4.
     /// Default: the tolerance the file was encoded for.

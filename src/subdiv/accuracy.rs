@@ -1,47 +1,50 @@
 //! Subdivision to an accuracy: every base triangle is shown at the coarsest level whose
 //! output lies within a tolerance of the limit surface, crack-free ([`super::lod`]).
 //!
-//! The rule. The refinement is built one level deeper than the finest level shown: `N = n +
-//! 1` for output levels `0..=n`. The limit positions of the level-`N` vertices are samples of
-//! the limit surface, `2^(N-m)` of them along every edge of a level-`m` triangle, so the
-//! error of showing base triangle `k` at level `m` is *measured*, not guessed, both ways:
+//! The rule. Showing base triangle `k` at level `m` is measured against the limit points of
+//! the vertices of level `s = m + 2` over it (`s = m + 1` for the level before the finest
+//! shown, whose next-but-one level the refinement does not have), its *samples*, both ways:
+//! `E(m)` is the largest of
 //!
-//! * output densely (closed patches, dense cylinder/cone groups), from the surface to the
-//!   output: the largest distance from the limit sample of a level-`N` vertex inside a
-//!   level-`m` triangle (its edges included) to that triangle or, when nearer, to a
-//!   triangle around its corners in the same CAD face (corners at their limit positions):
-//!   a sample may lie beyond its own triangle along the surface, which is no distance, but
-//!   not across a crease, where the neighbour is another surface. From the output to the
-//!   surface: the largest distance from the points of the level-`m` triangles over their
-//!   edges' midpoints and the level-(m+2) vertices inside them to the level-`N` triangles
-//!   around those vertices (a triangle whose samples all lie nearer its neighbours can
+//! * output densely (closed patches, dense cylinder/cone groups): the distances from the
+//!   samples to the level-`m` triangles (corners at their limit points) holding them or,
+//!   when nearer, to a triangle around their corners in the same CAD face (a sample may lie
+//!   beyond its own triangle along the surface, which is no distance, but not across a
+//!   crease, where the neighbour is another surface); and from the output to the samples'
+//!   mesh: the distances from the points of the level-`m` triangles over the samples to the
+//!   level-`s` triangles at them (a triangle whose samples lie nearer its neighbours can
 //!   stand off the surface);
 //! * output sparsely (plane patches, belts of cylinders and cones, `sparse`): the output
 //!   uses only points on the split edges, and between them the patch is planar (a plane) or
-//!   ruled along straight rulings (a belt), so the error is that of the split edges'
-//!   chains: the largest distance from a level-`N` sample on the edge to the chords of the
-//!   level-`m` chain over it.
+//!   ruled along straight rulings (a belt), so the error is that of the split edges' chains:
+//!   the largest distance from a level-`s` sample on the edge to the chords of the level-`m`
+//!   chain over it.
 //!
-//! Between the samples the limit surface can stray further from the level-`N` mesh through
-//! them; how far is bounded by the same measurement one level up: the distance between
-//! level `N` and the limit shrinks by the factor `ρ` by which the measured error shrinks from
-//! level `n - 1` to `n` (`h²` for smooth surfaces: `ρ = 1/4`; slower near extraordinary
-//! vertices, which the measurement sees), so the tail beyond the samples is the geometric
-//! series `e(n) ρ / (1 - ρ)`, `e` measured from the surface to the output (the other
-//! direction searches around every point, so it is measured only at the levels a triangle
-//! may be shown at). `ρ` is taken per base triangle from its own measurements,
-//! clamped to `[1/4, 1/2]`: below 1/4 the ratio of two tiny errors is noise, above 1/2 the
-//! triangle is not yet in the regime where the series applies, and a tail of at most `e(n)`
-//! keeps the estimate safe. A base triangle gets the coarsest level `m` with `e(m) + tail <=
-//! tolerance` (level `n` when none does: its bound is then reported above the tolerance).
+//! Between the samples the limit surface strays from the samples' mesh by the error of level
+//! `s`, which is `ρ^(s-m)` times that of level `m`: `ρ = 1/4` on smooth surfaces (the error
+//! shrinks with the triangles' size squared), slower near extraordinary vertices. So the
+//! error `e(m)` of level `m` is at most `E(m) + ρ^(s-m) e(m)`, i.e. `e(m) <= E(m) / (1 -
+//! ρ^(s-m))`, the estimate used, with `ρ` taken per base triangle (per chain) as the ratio
+//! `E(m) / E(m-1)`, clamped to `[1/4, 1/2]`: below 1/4 the ratio of two tiny errors is noise,
+//! above 1/2 the triangle is not yet in the regime where the series applies, and 1/2 keeps
+//! the estimate safe; level 0, which has no level before, takes `1/2`. The finest level shown,
+//! `n`, is not measured (that would take the level after it): its estimate is `ρ e(n - 1)`
+//! with the ratio of level `n - 1`. A base triangle gets the coarsest level `m` with `e(m) <=
+//! tolerance` (level `n` when none does: its estimate is then reported above the tolerance).
+//!
+//! The samples are few: a triangle shown at level `m` needs the limit points of its
+//! level-`s` vertices and what they depend on, which [`LazyLimits`] evaluates on demand, level
+//! by level, from the positions those depend on. Most base triangles of a CAD model stop at
+//! level 0 or 1, so the decode evaluates a small share of the finest level's vertices and
+//! never builds that level's connectivity.
 //!
 //! Each base triangle is measured as if its neighbours were at its level. Gap filling
 //! (`spec/subdivision.md` §7) shows a base edge between two levels at the coarser side's
-//! chords and moves the finer side's vertices onto them, so after the first choice every
-//! base triangle next to a coarser one is measured again as the output shows it (moved
-//! vertices, the coarser neighbour's triangles, and the moved vertices to the surface along
-//! the edge); where that exceeds the tolerance the coarser neighbour is raised a level,
-//! until nothing changes (levels only rise, so this ends).
+//! chords and moves the finer side's vertices onto them: every point of a triangle with moved
+//! corners moves by at most the largest of its corners' moves, so a base triangle next to a
+//! coarser one is within its estimate plus the largest distance its moved vertices travel
+//! (from their limit points to the chords); where that exceeds the tolerance the coarser
+//! neighbour is raised a level, until nothing changes (levels only rise, so this ends).
 //!
 //! Last, the edges inside plane patches are flipped toward well-shaped triangles
 //! ([`super::flips`]), which moves the surface by at most [`FLIP_SHARE`] of the tolerance,
@@ -49,6 +52,8 @@
 
 use glam::DVec3;
 
+use super::lazy::LazyLimits;
+use super::next_level::child_faces;
 use super::sparse::{base_edge_chain, SparsePlan, DENSE};
 use super::topology::{Level, NONE};
 use super::{flips, lod, masks::eclass, par, BoundaryPatchOutput, Refinement};
@@ -107,14 +112,13 @@ pub struct AccurateSurface {
 }
 
 /// Memory [`subdivide_to_tolerance`] takes per triangle of level `max_level`, the finest it
-/// can show: the connectivity of levels 0 to `max_level` (about 68 bytes per triangle of a
-/// level, so 90 for all of them), the positions of level `max_level + 1` and their limit
-/// positions (two vertices per triangle of `max_level`, 24 bytes each: 96), and the
-/// positions of level `max_level`, their limit normals and the gap-filled copy the extraction
-/// makes (half a vertex per triangle each: 36). The output is a fraction of a uniform
-/// level's. A decoder charges this before refining, as it charges
-/// [`super::MEMORY_PER_TRIANGLE`] for a uniform level.
-pub const MEMORY_PER_TRIANGLE: u64 = 220;
+/// can show: the connectivity of levels 0 to `max_level - 1` (about 68 bytes per triangle of
+/// a level, so 23 for all of them), the address space of the positions of every level and of
+/// the limit points and normals of level `max_level` (a vertex per two triangles, 24 bytes
+/// each: 60, mapped only where evaluated), and the gap-filled copy and renumbering the
+/// extraction makes (16). The output is a fraction of a uniform level's. A decoder charges
+/// this before refining, as it charges [`super::MEMORY_PER_TRIANGLE`] for a uniform level.
+pub const MEMORY_PER_TRIANGLE: u64 = 100;
 
 /// Subdivides `mesh` so that every base triangle is shown at the coarsest level (at most
 /// `opts.max_level`) whose output is within the tolerance of the limit surface (the rule is
@@ -151,47 +155,30 @@ pub fn subdivide_to_tolerance(
             bound: 0.0,
         });
     }
-    // Level n + 1 is only evaluated (positions and limit positions), never triangulated.
-    let r = Refinement::with_max_faces(mesh, n + 1, opts.max_faces.saturating_mul(4))?;
-    let (mut fine, mut at_n) = (Vec::new(), Vec::new());
-    r.positions_into(&mesh.positions, n + 1, &mut fine, &mut at_n)?;
-    // `positions_into` leaves level n in its scratch buffer, except for level 0, which it
-    // reads from the control points.
-    if n == 0 {
-        at_n = mesh.positions.clone();
-    }
-    let limit = r.limit_positions(&fine, n + 1)?;
-    drop(fine);
-    let tolerance = resolve_tolerance(&limit, opts)?;
+    // Level n's connectivity is read through level n - 1, never built; level 0 is measured
+    // against level 1.
+    let r = Refinement::with_max_faces(mesh, n.max(1), opts.max_faces.saturating_mul(4))?;
+    let mut lazy = LazyLimits::new(&r, &mesh.positions);
+    let nv0 = mesh.positions.len() as u32;
+    lazy.evaluate(&(0..nv0).collect::<Vec<u32>>(), false);
+    let tolerance = resolve_tolerance(&lazy.limit()[..nv0 as usize], opts)?;
     let plan = match opts.boundary_patches {
         BoundaryPatchOutput::Sparse => SparsePlan::new(r.full(0), &r.base),
         BoundaryPatchOutput::Dense => None,
     };
     let m = Measure {
         r: &r,
-        limit: &limit,
-        fine: n + 1,
+        top: n,
         plan: plan.as_ref(),
         floor: tolerance * 1e-6,
+        level_nv: (0..=r.max_level())
+            .map(|j| r.level(j).vertex_count())
+            .collect(),
     };
     // The flips of plane patches afterwards may move the surface by a small share of the
     // tolerance: the levels are chosen for the rest.
-    let (levels, bound) = m.choose_levels(tolerance * (1.0 - FLIP_SHARE));
-    let normals = if opts.normals {
-        Some(r.limit_normals(&at_n, n)?)
-    } else {
-        None
-    };
-    drop(at_n);
-    let nv_n = r.level(n).vertex_count();
-    let (out, remap) = lod::extract_at(
-        &r,
-        n,
-        &limit[..nv_n],
-        normals.as_deref(),
-        &levels,
-        opts.boundary_patches,
-    )?;
+    let (levels, bound) = m.choose_levels(&mut lazy, tolerance * (1.0 - FLIP_SHARE));
+    let (out, remap) = m.extract(&mut lazy, &levels, opts)?;
     let mut mesh_out = out.to_control_mesh(&mesh.groups);
     mesh_out.sharp_edges = m.sharp_edges(&levels, n, &remap);
     mesh_out.corners = mesh
@@ -273,17 +260,66 @@ fn resolve_tolerance(limit: &[DVec3], opts: &AccuracyOptions) -> Result<f64> {
     }
 }
 
-/// What the measurement reads: the refinement (built to level `fine`) and the limit
-/// positions of the level-`fine` vertices.
+/// What the measurement reads: the refinement (built to level `max(top, 1)`), the sparse
+/// plan and the vertex counts of its levels.
 struct Measure<'a> {
     r: &'a Refinement,
-    limit: &'a [DVec3],
-    fine: u32,
+    /// The finest level shown.
+    top: u32,
     plan: Option<&'a SparsePlan>,
     /// Distances below this are not told apart (a millionth of the tolerance): a flat
     /// face's points lie on its triangles up to rounding, and measuring each of them to the
     /// triangles around would cost a flat face as much as a curved one.
     floor: f64,
+    /// Vertex count of every level of the refinement.
+    level_nv: Vec<usize>,
+}
+
+/// The measurements of one base triangle at each level (NaN: not measured; a lower bound
+/// where the measurement stopped beyond the tolerance).
+#[derive(Clone, Copy)]
+struct Errors {
+    /// `E(m)`, measured against the samples.
+    raw: [f64; super::MAX_LEVEL as usize],
+    /// `e(m)`, the estimated error.
+    est: [f64; super::MAX_LEVEL as usize],
+}
+
+impl Errors {
+    const NONE: Errors = Errors {
+        raw: [f64::NAN; super::MAX_LEVEL as usize],
+        est: [f64::NAN; super::MAX_LEVEL as usize],
+    };
+}
+
+/// `ρ` at level `m` from the measurements `raw` (module documentation): `E(m) / E(m - 1)`
+/// clamped to `[1/4, 1/2]`, or `1/2` without a level before. Where `E(m - 1)` stopped early
+/// it is a lower bound, which only makes the ratio larger.
+fn ratio(raw: &[f64], m: usize) -> f64 {
+    if m == 0 || raw[m - 1].is_nan() || raw[m - 1] <= 0.0 || raw[m].is_nan() {
+        return 0.5;
+    }
+    (raw[m] / raw[m - 1]).clamp(0.25, 0.5)
+}
+
+/// `e(m) = E(m) / (1 - ρ^d)` for samples `d` levels finer.
+fn estimate(raw: &[f64], m: usize, d: u32) -> f64 {
+    raw[m] / (1.0 - ratio(raw, m).powi(d as i32))
+}
+
+/// The estimated errors of the base edges that sparse output shows as chains, `top + 1`
+/// levels per edge (NaN: not measured).
+struct EdgeErrors {
+    per: usize,
+    /// `e(m)` and `E(m)` of every edge.
+    e: Vec<f64>,
+    raw: Vec<f64>,
+}
+
+impl EdgeErrors {
+    fn get(&self, e: usize, m: u32) -> f64 {
+        self.e[e * self.per + m as usize]
+    }
 }
 
 impl Measure<'_> {
@@ -291,20 +327,399 @@ impl Measure<'_> {
         self.r.full(0)
     }
 
+    /// The faces of the sparse unit of base triangle `k` (itself twice for a plane face),
+    /// `None` for a dense face.
+    fn unit(&self, k: usize) -> Option<[usize; 2]> {
+        match self.plan.map_or(DENSE, |p| p.unit[k]) {
+            DENSE => None,
+            u => Some([k, u as usize]),
+        }
+    }
+
+    /// The base edges of a sparse unit that its output shows as chains (its split edges).
+    fn chain_edges(&self, unit: [usize; 2], out: &mut Vec<usize>) {
+        let (l0, plan) = (self.l0(), self.plan.expect("a sparse unit has a plan"));
+        for f in unit {
+            for &e in &l0.face_edges[3 * f..3 * f + 3] {
+                if plan.split[e as usize] && !out.contains(&(e as usize)) {
+                    out.push(e as usize);
+                }
+            }
+        }
+    }
+
+    /// The base triangle across base edge `e` from `k` (`NONE` on a boundary).
+    fn across(&self, e: usize, k: usize) -> u32 {
+        let [a, b] = self.l0().edge_faces[e];
+        if a as usize == k {
+            b
+        } else {
+            a
+        }
+    }
+
     /// Per base triangle the coarsest level within `tolerance` (belt quads at the finer of
     /// their two), then raised where gap filling takes a finer neighbour beyond it; and the
     /// largest estimated error of the output.
-    fn choose_levels(&self, tolerance: f64) -> (Vec<u8>, f64) {
+    fn choose_levels(&self, lazy: &mut LazyLimits, tolerance: f64) -> (Vec<u8>, f64) {
         let nf = self.l0().nf();
-        let edge_errors = self.edge_errors();
-        let mut errors = vec![FaceErrors::default(); nf];
-        par::for_each_heavy(&mut errors, |k, e| {
-            *e = self.face_errors(k, &edge_errors, tolerance);
-        });
-        let mut levels: Vec<u8> = errors.iter().map(|e| e.first_within(tolerance)).collect();
+        let top = self.top;
+        let mut errors = vec![Errors::NONE; nf];
+        let per = top as usize + 1;
+        let mut edges = EdgeErrors {
+            per,
+            e: vec![f64::NAN; self.l0().ne() * per],
+            raw: vec![f64::NAN; self.l0().ne() * per],
+        };
+        let mut levels = vec![top as u8; nf];
+        let mut open: Vec<usize> = (0..nf).collect();
+        for m in 0..=top {
+            // Level top derives from level top - 1, so that one is measured in full.
+            let stop = if m + 1 >= top {
+                f64::INFINITY
+            } else {
+                tolerance
+            };
+            self.measure(lazy, &open, m, stop, &mut errors, &mut edges);
+            open.retain(|&k| {
+                let within = errors[k].est[m as usize] <= tolerance;
+                if within {
+                    levels[k] = m as u8;
+                }
+                !within
+            });
+            if open.is_empty() {
+                break;
+            }
+        }
         self.pair_belts(&mut levels);
-        let bound = self.settle_gap_filling(&mut levels, &edge_errors, &mut errors, tolerance);
+        let bound = self.settle_gap_filling(lazy, &mut levels, &mut errors, &mut edges, tolerance);
         (levels, bound)
+    }
+
+    /// Measures base triangles `faces` at level `m` where not measured yet; a dense face's
+    /// measurement stops once its `E(m)` exceeds `stop`.
+    fn measure(
+        &self,
+        lazy: &mut LazyLimits,
+        faces: &[usize],
+        m: u32,
+        stop: f64,
+        errors: &mut [Errors],
+        edges: &mut EdgeErrors,
+    ) {
+        let mi = m as usize;
+        let (mut dense, mut chains, mut sparse) = (Vec::new(), Vec::new(), Vec::new());
+        for &k in faces.iter().filter(|&&k| errors[k].est[mi].is_nan()) {
+            match self.unit(k) {
+                Some(u) => {
+                    self.chain_edges(u, &mut chains);
+                    sparse.push(k);
+                }
+                None => dense.push(k),
+            }
+        }
+        self.measure_edges(lazy, &chains, m, edges);
+        let mut on_unit = Vec::new();
+        for &k in &sparse {
+            on_unit.clear();
+            self.chain_edges(self.unit(k).expect("sparse"), &mut on_unit);
+            errors[k].est[mi] = on_unit.iter().fold(0.0, |a, &e| a.max(edges.get(e, m)));
+        }
+        if dense.is_empty() {
+            return;
+        }
+        if m > 0 && m == self.top {
+            let unmeasured: Vec<usize> = dense
+                .iter()
+                .copied()
+                .filter(|&k| errors[k].raw[mi - 1].is_nan())
+                .collect();
+            self.measure(lazy, &unmeasured, m - 1, f64::INFINITY, errors, edges);
+            for &k in &dense {
+                let e = &mut errors[k];
+                e.est[mi] = ratio(&e.raw, mi - 1) * e.est[mi - 1];
+            }
+            return;
+        }
+        let mut want = Vec::new();
+        for &k in &dense {
+            self.sample_vertices(k, m, &mut want);
+        }
+        lazy.evaluate(&want, false);
+        let limit = lazy.limit();
+        let mut values = vec![0.0f64; dense.len()];
+        par::for_each_heavy(&mut values, |i, v| {
+            // e(m) >= E(m): a level whose E(m) exceeds the limit fails whatever its ratio.
+            *v = self.dense_error(limit, dense[i], m, stop);
+        });
+        for (&k, v) in dense.iter().zip(values) {
+            let e = &mut errors[k];
+            e.raw[mi] = v;
+            e.est[mi] = estimate(&e.raw, mi, self.sample_level(m) - m);
+        }
+    }
+
+    /// The estimated errors of the chains of base edges `chains` at level `m` where not
+    /// measured yet.
+    fn measure_edges(
+        &self,
+        lazy: &mut LazyLimits,
+        chains: &[usize],
+        m: u32,
+        edges: &mut EdgeErrors,
+    ) {
+        let todo: Vec<usize> = chains
+            .iter()
+            .copied()
+            .filter(|&e| edges.get(e, m).is_nan())
+            .collect();
+        if todo.is_empty() {
+            return;
+        }
+        if m > 0 && m == self.top {
+            self.measure_edges(lazy, &todo, m - 1, edges);
+            for &e in &todo {
+                let i = e * edges.per + m as usize;
+                edges.e[i] = ratio(&edges.raw[i - m as usize..i], m as usize - 1) * edges.e[i - 1];
+            }
+            return;
+        }
+        let l0 = self.l0();
+        let sl = self.sample_level(m);
+        let mut chain = Vec::new();
+        let mut want = Vec::new();
+        for &e in &todo {
+            base_edge_chain(l0, &self.level_nv, sl, e, &mut chain);
+            want.extend_from_slice(&chain);
+        }
+        lazy.evaluate(&want, false);
+        for &e in &todo {
+            base_edge_chain(l0, &self.level_nv, sl, e, &mut chain);
+            let (i, at) = (e * edges.per, m as usize);
+            edges.raw[i + at] = chain_error(&chain, lazy.limit(), sl - m);
+            edges.e[i + at] = estimate(&edges.raw[i..i + at + 1], at, sl - m);
+        }
+    }
+
+    /// The level whose limit points sample level `m`: two levels finer where the
+    /// refinement has that level's vertices, else one.
+    fn sample_level(&self, m: u32) -> u32 {
+        (m + 2).min(self.r.max_level())
+    }
+
+    /// The corners of the level-`s` descendants of face `g` of level `m`, into `out`.
+    fn descendant_corners(&self, g: usize, m: u32, s: u32, out: &mut Vec<u32>) {
+        let q = 1usize << (2 * (s - m));
+        if s < self.r.max_level() {
+            out.extend_from_slice(&self.r.full(s).faces[3 * g * q..3 * (g + 1) * q]);
+        } else {
+            let prev = self.r.full(s - 1);
+            for h in g * q / 4..(g + 1) * q / 4 {
+                out.extend_from_slice(&child_faces(prev, h));
+            }
+        }
+    }
+
+    /// The vertices whose limit points the measurement of dense base triangle `k` at level
+    /// `m` reads: those of the sample level's faces over its level-`m` faces and over the
+    /// faces around them.
+    fn sample_vertices(&self, k: usize, m: u32, out: &mut Vec<u32>) {
+        let lm = self.r.full(m);
+        let s = self.sample_level(m);
+        let q = 1usize << (2 * m);
+        let mut around = Vec::new();
+        for f in k * q..(k + 1) * q {
+            self.descendant_corners(f, m, s, out);
+            faces_around(lm, f, &mut around);
+            for &g in around.iter().filter(|&&g| g as usize >> (2 * m) != k) {
+                self.descendant_corners(g as usize, m, s, out);
+            }
+        }
+    }
+
+    /// The vertices of the output of base triangle `k` at level `m`: the corners of its
+    /// level-`m` faces, or for a sparse face the chains along its edges.
+    fn output_vertices(&self, k: usize, m: u32, out: &mut Vec<u32>) {
+        if let Some(u) = self.unit(k) {
+            let mut chain = Vec::new();
+            for f in u {
+                for &e in &self.l0().face_edges[3 * f..3 * f + 3] {
+                    base_edge_chain(self.l0(), &self.level_nv, m, e as usize, &mut chain);
+                    out.extend_from_slice(&chain);
+                }
+            }
+            return;
+        }
+        if m == 0 {
+            out.extend_from_slice(&self.l0().faces[3 * k..3 * k + 3]);
+        } else if m < self.r.max_level() {
+            let q = 1usize << (2 * m);
+            out.extend_from_slice(&self.r.full(m).faces[3 * k * q..3 * (k + 1) * q]);
+        } else {
+            let prev = self.r.full(m - 1);
+            let q = 1usize << (2 * (m - 1));
+            for g in k * q..(k + 1) * q {
+                out.extend_from_slice(&child_faces(prev, g));
+            }
+        }
+    }
+
+    /// `E(m)` of dense base triangle `k` (the module's documentation), from the limit points
+    /// `limit` of the sample level `s`; stops as soon as it exceeds `stop_above`. Distances
+    /// below `self.floor` are not told apart.
+    fn dense_error(&self, limit: &[DVec3], k: usize, m: u32, stop_above: f64) -> f64 {
+        let lm = self.r.full(m);
+        let tri = |g: usize| {
+            let c = &lm.faces[3 * g..3 * g + 3];
+            [
+                limit[c[0] as usize],
+                limit[c[1] as usize],
+                limit[c[2] as usize],
+            ]
+        };
+        self.dense_error_of(limit, k, m, stop_above, &tri)
+    }
+
+    /// [`Self::dense_error`] of the output whose level-`m` faces (of `k` and around it) are
+    /// the triangles `tri` gives.
+    fn dense_error_of(
+        &self,
+        limit: &[DVec3],
+        k: usize,
+        m: u32,
+        stop_above: f64,
+        tri: &impl Fn(usize) -> [DVec3; 3],
+    ) -> f64 {
+        let lm = self.r.full(m);
+        let s = self.sample_level(m);
+        let q = 1usize << (2 * m);
+        let group = self.r.base.group[k];
+        let (mut around, mut ring, mut near, mut faces) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut points = Vec::new();
+        let mut err2 = self.floor * self.floor;
+        for f in k * q..(k + 1) * q {
+            let t = tri(f);
+            ring.clear();
+            points.clear();
+            self.points_over(m, f, s - m, &mut points);
+            for &(x, b) in &points {
+                let p = limit[x as usize];
+                // From the surface to the output: the sample to its own triangle, or to the
+                // nearest around it in the same CAD face.
+                if point_triangle_distance_squared(p, &t) > err2 {
+                    if ring.is_empty() {
+                        faces_around(lm, f, &mut around);
+                        ring.push(t);
+                        ring.extend(
+                            around
+                                .iter()
+                                .filter(|&&g| self.r.base.group[g as usize >> (2 * m)] == group)
+                                .map(|&g| tri(g as usize)),
+                        );
+                    }
+                    err2 = err2.max(nearest(p, &ring, err2.sqrt()));
+                }
+                // From the output to the samples' mesh: the output's point over the sample
+                // to the sample level's triangles at the sample.
+                let o = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
+                if (o - p).length_squared() > err2 {
+                    self.samples_around(x, s, limit, &mut faces, &mut near);
+                    err2 = err2.max(nearest(o, &near, err2.sqrt()));
+                }
+            }
+            if err2 > stop_above * stop_above {
+                break;
+            }
+        }
+        err2.sqrt()
+    }
+
+    /// The vertices of levels `m + 1 ..= m + depth` (`depth` 1 or 2) on face `f` of level
+    /// `m` and inside it, with their barycentric coordinates in it (midpoints in the
+    /// parameter domain, by the children layout of [`child_faces`]): the midpoints of its
+    /// edges, then the quarter points of its edges and the midpoints of its middle child's
+    /// edges.
+    fn points_over(&self, m: u32, f: usize, depth: u32, out: &mut Vec<(u32, [f64; 3])>) {
+        let lm = self.r.full(m);
+        let corner = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let mid = |a: [f64; 3], b: [f64; 3]| {
+            [
+                (a[0] + b[0]) / 2.0,
+                (a[1] + b[1]) / 2.0,
+                (a[2] + b[2]) / 2.0,
+            ]
+        };
+        let c = &lm.faces[3 * f..3 * f + 3];
+        let fe = &lm.face_edges[3 * f..3 * f + 3];
+        let mids = [
+            mid(corner[0], corner[1]),
+            mid(corner[1], corner[2]),
+            mid(corner[2], corner[0]),
+        ];
+        let nv = lm.nv as u32;
+        for side in 0..3 {
+            out.push((nv + fe[side], mids[side]));
+        }
+        if depth < 2 {
+            return;
+        }
+        let l1 = self.r.full(m + 1);
+        let nv1 = l1.nv as u32;
+        for side in 0..3 {
+            // The halves of edge e are the level-(m+1) edges 2e and 2e + 1; each has one end
+            // at a corner of f, and its midpoint lies a quarter of the way from that corner.
+            let e = fe[side] as usize;
+            for h in [2 * e, 2 * e + 1] {
+                let [a, b] = l1.edges[h];
+                let end = if a < nv { a } else { b };
+                let at = if end == c[side] { side } else { (side + 1) % 3 };
+                out.push((nv1 + h as u32, mid(corner[at], mids[side])));
+            }
+        }
+        // The middle child (`child_faces` order: the three corner children, then the middle
+        // one, m0 m1 m2): the midpoints of its edges are the level-(m+2) vertices inside f.
+        let g = 4 * f + 3;
+        let ge = &l1.face_edges[3 * g..3 * g + 3];
+        for side in 0..3 {
+            out.push((nv1 + ge[side], mid(mids[side], mids[(side + 1) % 3])));
+        }
+    }
+
+    /// Into `near`: the level-`s` triangles (corners at their limit points) at vertex `x`
+    /// of level `s - 1` or `s`, the children of the level-`(s - 1)` faces at it.
+    fn samples_around(
+        &self,
+        x: u32,
+        s: u32,
+        limit: &[DVec3],
+        faces: &mut Vec<u32>,
+        near: &mut Vec<[DVec3; 3]>,
+    ) {
+        let last = self.r.full(s - 1);
+        faces.clear();
+        if (x as usize) < last.nv {
+            for &e in last.ring(x as usize) {
+                faces.extend(last.edge_faces[e as usize].iter().filter(|&&g| g != NONE));
+            }
+            faces.sort_unstable();
+            faces.dedup();
+        } else {
+            let d = x as usize - last.nv;
+            faces.extend(last.edge_faces[d].iter().filter(|&&g| g != NONE));
+        }
+        near.clear();
+        for &g in faces.iter() {
+            let c = child_faces(last, g as usize);
+            near.extend(c.chunks_exact(3).map(|t| {
+                [
+                    limit[t[0] as usize],
+                    limit[t[1] as usize],
+                    limit[t[2] as usize],
+                ]
+            }));
+        }
     }
 
     /// Both faces of a belt quad at the finer of their levels (the extraction shows them so).
@@ -326,44 +741,42 @@ impl Measure<'_> {
         l0.face_edges[3 * k..3 * k + 3]
             .iter()
             .filter_map(move |&e| {
-                let [a, b] = l0.edge_faces[e as usize];
-                let o = if a as usize == k { b } else { a };
+                let o = self.across(e as usize, k);
                 (o != NONE).then_some(o as usize)
             })
     }
 
     /// Raises the coarser neighbours of every base triangle that gap filling takes beyond
-    /// the tolerance (or beyond its own bound, where not even level n meets the tolerance)
-    /// until none is, and returns the largest bound of the output. Levels only rise and are
-    /// at most n, so this ends; each round checks only the triangles next to a raised one.
+    /// the tolerance (or beyond its own estimate, where not even level `top` meets the
+    /// tolerance) until none is, and returns the largest estimate of the output. Levels only
+    /// rise and are at most `top`, so this ends; each round checks only the triangles next
+    /// to a raised one.
     fn settle_gap_filling(
         &self,
+        lazy: &mut LazyLimits,
         levels: &mut [u8],
-        edge_errors: &[f64],
-        errors: &mut [FaceErrors],
+        errors: &mut [Errors],
+        edges: &mut EdgeErrors,
         tolerance: f64,
     ) -> f64 {
         let nf = levels.len();
-        let top = (self.fine - 1) as u8;
+        let top = self.top as u8;
         let mut bounds = vec![0.0f64; nf];
         let mut check: Vec<usize> = (0..nf).collect();
-        let partner = |f: usize| match self.plan.map_or(DENSE, |p| p.unit[f]) {
-            DENSE => f,
-            u => u as usize,
-        };
+        let partner = |f: usize| self.unit(f).map_or(f, |u| u[1]);
         while !check.is_empty() {
-            self.measure_missing(&check, levels, errors);
+            self.prepare_shown(lazy, &check, levels, errors, edges);
             let mut shown = vec![0.0f64; check.len()];
             {
-                let (lv, errs): (&[u8], &[FaceErrors]) = (levels, errors);
+                let (lv, errs, eds, limit): (&[u8], &[Errors], &EdgeErrors, &[DVec3]) =
+                    (levels, errors, edges, lazy.limit());
                 par::for_each_heavy(&mut shown, |i, out| {
-                    let k = check[i];
-                    *out = self.shown_error(k, lv, edge_errors, &errs[k]) + errs[k].tail;
+                    *out = self.shown_error(check[i], lv, errs, eds, limit);
                 });
             }
             let mut raise = Vec::new();
             for (&k, &b) in check.iter().zip(&shown) {
-                let own = errors[k].bound(levels[k]);
+                let own = errors[k].est[levels[k] as usize];
                 if b > tolerance.max(own) {
                     // A belt quad shows the edges of both its faces.
                     let unit = [k, partner(k)];
@@ -399,506 +812,213 @@ impl Measure<'_> {
         bounds.iter().fold(0.0f64, |a, &b| a.max(b))
     }
 
-    /// Measures the base triangles of `faces` at their `levels` where that is not measured
-    /// yet (levels above the first one within the tolerance are measured when a triangle is
-    /// raised to them).
-    fn measure_missing(&self, faces: &[usize], levels: &[u8], errors: &mut [FaceErrors]) {
-        let missing: Vec<usize> = faces
-            .iter()
-            .copied()
-            .filter(|&k| errors[k].error[levels[k] as usize].is_nan())
-            .collect();
-        let mut values = vec![0.0f64; missing.len()];
-        par::for_each_heavy(&mut values, |i, v| {
-            let k = missing[i];
-            *v = self.dense_error(k, u32::from(levels[k]));
-        });
-        for (&k, v) in missing.iter().zip(values) {
-            errors[k].error[levels[k] as usize] = v;
+    /// Measures what [`Self::shown_error`] reads of base triangles `faces` at `levels`:
+    /// each at its level, the chains of sparse faces at the levels they are shown at, and
+    /// the limit points of the vertices gap filling moves.
+    fn prepare_shown(
+        &self,
+        lazy: &mut LazyLimits,
+        faces: &[usize],
+        levels: &[u8],
+        errors: &mut [Errors],
+        edges: &mut EdgeErrors,
+    ) {
+        for m in 0..=self.top {
+            let at: Vec<usize> = faces
+                .iter()
+                .copied()
+                .filter(|&k| u32::from(levels[k]) == m)
+                .collect();
+            self.measure(lazy, &at, m, f64::INFINITY, errors, edges);
+            let mut chains = Vec::new();
+            for &k in &at {
+                let Some(u) = self.unit(k) else { continue };
+                let mut own = Vec::new();
+                self.chain_edges(u, &mut own);
+                for f in u {
+                    for &e in &self.l0().face_edges[3 * f..3 * f + 3] {
+                        let o = self.across(e as usize, f);
+                        if own.contains(&(e as usize))
+                            && o != NONE
+                            && u32::from(levels[o as usize]) < m
+                        {
+                            chains.push((e as usize, levels[o as usize]));
+                        }
+                    }
+                }
+            }
+            for j in 0..m {
+                let on: Vec<usize> = chains
+                    .iter()
+                    .filter(|&&(_, l)| u32::from(l) == j)
+                    .map(|&(e, _)| e)
+                    .collect();
+                self.measure_edges(lazy, &on, j, edges);
+            }
+            let mut want = Vec::new();
+            for &k in at.iter().filter(|&&k| self.unit(k).is_none()) {
+                self.output_vertices(k, m, &mut want);
+            }
+            lazy.evaluate(&want, false);
         }
     }
 
-    /// The measured error of base triangle `k` as the output shows it at `levels`: a base
+    /// The estimated error of base triangle `k` as the output shows it at `levels`: a base
     /// edge next to a coarser triangle shows that triangle's chords, and the vertices of `k`
     /// on it are moved onto them (gap filling).
-    fn shown_error(&self, k: usize, levels: &[u8], edge_errors: &[f64], own: &FaceErrors) -> f64 {
+    fn shown_error(
+        &self,
+        k: usize,
+        levels: &[u8],
+        errors: &[Errors],
+        edges: &EdgeErrors,
+        limit: &[DVec3],
+    ) -> f64 {
         let m = levels[k];
         let l0 = self.l0();
-        let per = self.fine as usize;
-        let unit = self.plan.map_or(DENSE, |p| p.unit[k]);
-        if unit != DENSE {
-            // A sparse face shows every split edge at the coarser of its two sides' chords.
+        if let Some(u) = self.unit(k) {
+            // A sparse face shows every split edge at the coarser of its two sides' chains.
+            let mut own = Vec::new();
+            self.chain_edges(u, &mut own);
             let mut err = 0.0f64;
-            let faces = if unit as usize == k {
-                [k, k]
-            } else {
-                [k, unit as usize]
-            };
-            for f in faces {
-                for &be in &l0.face_edges[3 * f..3 * f + 3] {
-                    let be = be as usize;
-                    let [a, b] = l0.edge_faces[be];
-                    let o = if a as usize == f { b } else { a };
+            for f in u {
+                for &e in &l0.face_edges[3 * f..3 * f + 3] {
+                    let e = e as usize;
+                    if !own.contains(&e) {
+                        continue;
+                    }
+                    let o = self.across(e, f);
                     let shown = if o == NONE {
                         m
                     } else {
                         m.min(levels[o as usize])
                     };
-                    if let Some(ee) = edge_errors.get(be * per..(be + 1) * per) {
-                        err = err.max(ee[shown as usize]);
-                    }
-                    if shown < m {
-                        err = err.max(self.chord_to_surface(be, m.into(), shown.into()));
-                    }
+                    err = err.max(edges.get(e, shown.into()));
                 }
             }
             return err;
         }
-        let mut moved: Vec<(u32, DVec3)> = Vec::new();
-        let mut skip = Vec::new();
-        for &be in &l0.face_edges[3 * k..3 * k + 3] {
-            let be = be as usize;
-            let [a, b] = l0.edge_faces[be];
-            let o = if a as usize == k { b } else { a };
+        let mut moved = Vec::new();
+        for &e in &l0.face_edges[3 * k..3 * k + 3] {
+            let o = self.across(e as usize, k);
             if o != NONE && levels[o as usize] < m {
-                self.gap_filled(be, m as u32, levels[o as usize] as u32, &mut moved);
-                skip.push(be);
+                self.gap_filled(
+                    limit,
+                    e as usize,
+                    m.into(),
+                    levels[o as usize].into(),
+                    &mut moved,
+                );
             }
         }
+        let own = errors[k].est[m as usize];
         if moved.is_empty() {
-            return own.error[m as usize];
+            return own;
         }
-        let mut chords = 0.0f64;
-        for &be in &skip {
-            let [a, b] = l0.edge_faces[be];
-            let o = if a as usize == k { b } else { a };
-            chords = chords.max(self.chord_to_surface(be, m.into(), levels[o as usize].into()));
+        let far = moved
+            .iter()
+            .fold(0.0f64, |a, &(v, p)| {
+                a.max((p - limit[v as usize]).length_squared())
+            })
+            .sqrt();
+        if u32::from(m) == self.top && self.top > 0 {
+            // Not measured: every point of a triangle moves by at most the largest move of
+            // its corners.
+            return own + far;
         }
+        // Measured as shown: k's triangles with the moved corners, the coarser neighbours'
+        // own triangles.
         moved.sort_unstable_by_key(|&(v, _)| v);
         let at = |v: u32| match moved.binary_search_by_key(&v, |&(x, _)| x) {
             Ok(i) => moved[i].1,
-            Err(_) => self.limit[v as usize],
+            Err(_) => limit[v as usize],
         };
-        let m = m as u32;
+        let m = u32::from(m);
         let lm = self.r.full(m);
         let shown = |g: usize| {
             let base = g >> (2 * m);
             let lo = u32::from(levels[base]);
-            let (l, g) = if base == k || lo >= m {
+            if base == k {
+                let c = &lm.faces[3 * g..3 * g + 3];
+                return [at(c[0]), at(c[1]), at(c[2])];
+            }
+            let (l, g) = if lo >= m {
                 (lm, g)
             } else {
                 (self.r.full(lo), g >> (2 * (m - lo)))
             };
             let c = &l.faces[3 * g..3 * g + 3];
-            if base == k {
-                [at(c[0]), at(c[1]), at(c[2])]
-            } else {
-                [
-                    self.limit[c[0] as usize],
-                    self.limit[c[1] as usize],
-                    self.limit[c[2] as usize],
-                ]
-            }
+            [
+                limit[c[0] as usize],
+                limit[c[1] as usize],
+                limit[c[2] as usize],
+            ]
         };
-        // Moving vertices along the edge slides the triangles next to it along the surface,
-        // so a sample is measured to the nearest of the triangles shown around its own (the
-        // coarser neighbour's across the edge).
-        self.max_nearest(k, m, &skip, &shown, f64::INFINITY)
-            .max(chords)
-            .max(self.output_error(k, m, &shown, f64::INFINITY))
+        let raw = self.dense_error_of(limit, k, m, f64::INFINITY, &shown);
+        let d = self.sample_level(m) - m;
+        let rho = ratio(&errors[k].raw, m as usize).powi(d as i32);
+        (raw / (1.0 - rho)).min(own + far)
     }
 
-    /// The largest distance from the vertices gap filling moves onto the coarser side's
-    /// chords of base edge `e` (shown at `fine` and `coarse`) to the limit surface next to
-    /// the edge. The samples on either side are measured to the output, not the output to
-    /// them, and a chord can leave the surface where neither side's samples see it: on a
-    /// curved face an edge whose limit curve bends sideways within the surface has its
-    /// chord inside the solid. The surface next to the edge is the level-`fine` strip of
-    /// triangles along it, with their corners at their limit positions; a nearest point
-    /// beyond the strip only makes the distance larger.
-    fn chord_to_surface(&self, e: usize, fine: u32, coarse: u32) -> f64 {
-        let mut moved = Vec::new();
-        self.gap_filled(e, fine, coarse, &mut moved);
-        let last = self.r.full(self.fine - 1);
-        let span = 1usize << (self.fine - 1);
-        let mut strip = Vec::with_capacity(8 * span);
-        for d in e * span..(e + 1) * span {
-            for f in last.edge_faces[d] {
-                if f == NONE {
-                    continue;
-                }
-                let c = super::next_level::child_faces(last, f as usize);
-                strip.extend(c.chunks_exact(3).map(|t| {
-                    [
-                        self.limit[t[0] as usize],
-                        self.limit[t[1] as usize],
-                        self.limit[t[2] as usize],
-                    ]
-                }));
-            }
-        }
-        let mut err = 0.0f64;
-        for (_, q) in moved {
-            err = err.max(nearest(q, &strip, err).sqrt());
-        }
-        err
-    }
-
-    /// The largest distance from the limit samples inside base triangle `k` (but those on
-    /// the base edges `skip`) to the nearest of the triangles around the level-`m` face
-    /// holding each (its own and those around its corners in the same CAD face, as `tri`
-    /// gives them); stops as soon as it exceeds `stop_above`. Distances below
-    /// `self.floor` are not told apart.
-    ///
-    /// Every sample's distance to its own triangle is an upper bound on its distance; only
-    /// samples whose own distance exceeds the largest distance found so far can raise it,
-    /// and they are few once the sample with the largest own distance sets it, so a first
-    /// pass over a coarser grid of samples finds such a sample and a second measures it
-    /// first and then only those to the triangles around. The samples are visited, not stored: a base triangle at a deep
-    /// level has millions.
-    fn max_nearest(
+    /// Appends the vertices gap filling moves on base edge `e` shown at level `fine` on one
+    /// side and `coarse` on the other, with their moved positions on the chords of the
+    /// coarser side (the spec's `(1 - t) x_j0 + t x_j0+s`, as the extraction computes them).
+    fn gap_filled(
         &self,
-        k: usize,
-        m: u32,
-        skip: &[usize],
-        tri: &impl Fn(usize) -> [DVec3; 3],
-        stop_above: f64,
-    ) -> f64 {
-        let lm = self.r.full(m);
-        let q = 1usize << (2 * m);
-        // The largest distance to its own triangle among the samples two levels down: the
-        // error varies smoothly, so that sample sets a threshold near the final one.
-        let mut first = (0.0f64, DVec3::ZERO, u32::MAX);
-        let upto = (m + 2).min(self.fine);
-        for f in k * q..(k + 1) * q {
-            let t = tri(f);
-            self.for_samples(m, f, skip, upto, &mut |p| {
-                let own = point_triangle_distance_squared(p, &t);
-                if own > first.0 {
-                    first = (own, p, f as u32);
-                }
-            });
-        }
-        let group = self.r.base.group[k];
-        let (mut around, mut tris) = (Vec::new(), Vec::new());
-        let mut ring_of = u32::MAX;
-        let mut err2 = self.floor * self.floor;
-        let mut measure = |p: DVec3, f: u32, own: f64, err2: &mut f64| {
-            if own <= *err2 {
-                return;
-            }
-            if ring_of != f {
-                faces_around(lm, f as usize, &mut around);
-                tris.clear();
-                tris.push(tri(f as usize));
-                // Only within the CAD face: across a crease the neighbour is another surface,
-                // and a sample near it is no nearer the output of its own.
-                tris.extend(
-                    around
-                        .iter()
-                        .filter(|&&g| self.r.base.group[g as usize >> (2 * m)] == group)
-                        .map(|&g| tri(g as usize)),
-                );
-                ring_of = f;
-            }
-            *err2 = err2.max(nearest(p, &tris, err2.sqrt()));
-        };
-        if first.2 != u32::MAX {
-            measure(first.1, first.2, first.0, &mut err2);
-        }
-        for f in k * q..(k + 1) * q {
-            if err2 > stop_above * stop_above {
-                break;
-            }
-            let t = tri(f);
-            self.for_samples(m, f, skip, self.fine, &mut |p| {
-                let own = point_triangle_distance_squared(p, &t);
-                measure(p, f as u32, own, &mut err2);
-            });
-        }
-        err2.sqrt()
-    }
-
-    /// Calls `visit` with the limit samples of the vertices that levels m+1..=upto add inside
-    /// face `f` of level `m` and on its edges, but those on the base edges `skip`: each once
-    /// (the edges' shared with the neighbouring face too), by the nested numbering (the
-    /// descendants of a level-j edge e at level t are `[e 2^(t-j), (e+1) 2^(t-j))`, and face
-    /// g of level i has the interior edges `2 ne_i + 3g + s` at level i+1).
-    fn for_samples(
-        &self,
-        m: u32,
-        f: usize,
-        skip: &[usize],
-        upto: u32,
-        visit: &mut impl FnMut(DVec3),
+        limit: &[DVec3],
+        e: usize,
+        fine: u32,
+        coarse: u32,
+        out: &mut Vec<(u32, DVec3)>,
     ) {
-        let lm = self.r.full(m);
-        let on_base = self.l0().ne() << m;
-        for &e in &lm.face_edges[3 * f..3 * f + 3] {
-            let e = e as usize;
-            if !(e < on_base && skip.contains(&(e >> m))) {
-                self.edge_samples(m, e, upto, visit);
-            }
-        }
-        for i in m..upto.saturating_sub(1) {
-            let li = self.r.full(i);
-            let span = 1usize << (2 * (i - m));
-            for g in f * span..(f + 1) * span {
-                for s in 0..3 {
-                    self.edge_samples(i + 1, 2 * li.ne() + 3 * g + s, upto, visit);
-                }
-            }
-        }
-    }
-
-    /// Calls `visit` with the limit samples of the vertices that levels j+1..=upto add on
-    /// edge `e` of level `j`.
-    fn edge_samples(&self, j: u32, e: usize, upto: u32, visit: &mut impl FnMut(DVec3)) {
-        for t in j..upto {
-            let nv = self.r.full(t).nv;
-            let d0 = e << (t - j);
-            for &p in &self.limit[nv + d0..nv + d0 + (1 << (t - j))] {
-                visit(p);
-            }
-        }
-    }
-
-    /// Appends the vertices that gap filling moves on base edge `e` shown at level `fine`
-    /// on one side and `coarse` on the other, with their moved positions (the spec's
-    /// `(1 - t) x_j0 + t x_j0+s`, the same arithmetic as the extraction).
-    fn gap_filled(&self, e: usize, fine: u32, coarse: u32, out: &mut Vec<(u32, DVec3)>) {
         let l0 = self.l0();
-        let level_nv: Vec<usize> = (0..fine).map(|j| self.r.full(j).nv).collect();
         let s = 1usize << (fine - coarse);
-        let x = |j: usize| lod::edge_vertex(l0, &level_nv, fine, e, j);
+        let x = |j: usize| lod::edge_vertex(l0, &self.level_nv, fine, e, j);
         for j in 1..1usize << fine {
             if j % s != 0 {
                 let j0 = j / s * s;
                 let t = (j - j0) as f64 / s as f64;
-                let (a, b) = (self.limit[x(j0) as usize], self.limit[x(j0 + s) as usize]);
+                let (a, b) = (limit[x(j0) as usize], limit[x(j0 + s) as usize]);
                 out.push((x(j), a * (1.0 - t) + b * t));
             }
         }
     }
 
-    /// Per base edge that sparse output uses as a chain (split edges of sparse faces): the
-    /// error of its level-m chain for m = 0..fine (`fine` entries per edge; zeros for other
-    /// edges).
-    fn edge_errors(&self) -> Vec<f64> {
-        let per = self.fine as usize;
-        let Some(plan) = self.plan else {
-            return Vec::new();
-        };
-        let l0 = self.l0();
-        let level_nv: Vec<usize> = (0..self.fine).map(|j| self.r.full(j).nv).collect();
-        let mut out = vec![0.0; l0.ne() * per];
-        par::for_each_chunk_mut(&mut out, per, |e, errs| {
-            let [fl, fr] = l0.edge_faces[e];
-            let sparse = |f: u32| f != NONE && plan.unit[f as usize] != DENSE;
-            if !plan.split[e] || !(sparse(fl) || sparse(fr)) {
-                return;
-            }
-            let mut chain = Vec::new();
-            base_edge_chain(l0, &level_nv, self.fine, e, &mut chain);
-            for (m, err) in errs.iter_mut().enumerate() {
-                *err = chain_error(&chain, self.limit, self.fine - m as u32);
-            }
-        });
-        out
-    }
-
-    /// The measurements of base triangle `k`: a sparse face's at every level (its chains'
-    /// errors, measured once per edge); a dense face's from the surface to the output at its
-    /// two finest levels (its tail: the ratio of the two), and both ways from level 0 up to
-    /// the first within `tolerance`, the levels that fail stopping at their first sample
-    /// beyond it (the others are measured if the face is raised to them).
-    fn face_errors(&self, k: usize, edge_errors: &[f64], tolerance: f64) -> FaceErrors {
-        let per = self.fine as usize;
-        let n = per - 1;
-        let mut out = FaceErrors::default();
-        let unit = self.plan.map_or(DENSE, |p| p.unit[k]);
-        if unit != DENSE {
-            let e = &mut out.error[..per];
-            let l0 = self.l0();
-            e.fill(0.0);
-            let faces = if unit as usize == k {
-                [k, k]
-            } else {
-                [k, unit as usize]
-            };
-            for f in faces {
-                for &be in &l0.face_edges[3 * f..3 * f + 3] {
-                    let be = be as usize;
-                    if let Some(ee) = edge_errors.get(be * per..(be + 1) * per) {
-                        for (x, &y) in e.iter_mut().zip(ee) {
-                            *x = x.max(y);
-                        }
-                    }
-                }
-            }
-            out.tail = tail_beyond_samples(&out.error[..per]);
-            return out;
-        }
-        let mut to_output = [f64::NAN; super::MAX_LEVEL as usize];
-        let finest = n.saturating_sub(1)..=n;
-        for m in finest.clone() {
-            to_output[m] = self.surface_to_output(k, m as u32, f64::INFINITY);
-        }
-        out.tail = tail_beyond_samples(&to_output[..per]);
-        let within = tolerance - out.tail;
-        for (m, &known) in to_output.iter().enumerate().take(per) {
-            let mut x = known;
-            if !finest.contains(&m) {
-                x = self.surface_to_output(k, m as u32, within);
-            }
-            if x <= within {
-                x = x.max(self.output_to_surface(k, m as u32, within));
-            }
-            out.error[m] = x;
-            if x <= within {
-                break;
-            }
-        }
-        out
-    }
-
-    /// The error of showing base triangle `k` at level `m`: both ways, [`Self::surface_to_output`]
-    /// and [`Self::output_to_surface`].
-    fn dense_error(&self, k: usize, m: u32) -> f64 {
-        self.surface_to_output(k, m, f64::INFINITY)
-            .max(self.output_to_surface(k, m, f64::INFINITY))
-    }
-
-    /// Triangle `f` of level `m`, corners at their limit positions.
-    fn level_triangle(&self, m: u32, f: usize) -> [DVec3; 3] {
-        let c = &self.r.full(m).faces[3 * f..3 * f + 3];
-        [
-            self.limit[c[0] as usize],
-            self.limit[c[1] as usize],
-            self.limit[c[2] as usize],
-        ]
-    }
-
-    /// The largest distance from a level-`fine` limit sample inside base triangle `k` to the
-    /// level-`m` surface near it: the level-`m` triangle holding the sample (corners at their
-    /// limit positions) and, when that is further, the triangles around its corners. The
-    /// samples of a triangle are parametrically inside it but may lie beyond its edges along
-    /// the surface (the limit parametrisation is not the triangles' own); that sliding is no
-    /// distance from the output, which continues in the neighbouring triangles.
-    ///
-    /// Stops as soon as the error exceeds `stop_above` (a level that fails needs no more).
-    fn surface_to_output(&self, k: usize, m: u32, stop_above: f64) -> f64 {
-        if m >= self.fine {
-            return 0.0;
-        }
-        self.max_nearest(k, m, &[], &|f| self.level_triangle(m, f), stop_above)
-    }
-
-    /// [`Self::output_error`] of the level-`m` triangles of base triangle `k`.
-    fn output_to_surface(&self, k: usize, m: u32, stop_above: f64) -> f64 {
-        if m >= self.fine {
-            return 0.0;
-        }
-        self.output_error(k, m, &|f| self.level_triangle(m, f), stop_above)
-    }
-
-    /// The other direction: the largest distance from the output to the limit surface,
-    /// measured at the points of the level-`m` triangles of base triangle `k` (as `tri`
-    /// gives them) that lie over their edges' midpoints and the level-(m+2) vertices inside
-    /// them, each to the
-    /// limit surface around that vertex (the level-`fine` triangles of the level-(fine-1)
-    /// faces at it, corners at their limit positions; a nearest point beyond them only makes
-    /// the distance larger). Samples near the output do not make the output near them: a
-    /// triangle whose samples all lie nearer its neighbours can stand off the surface.
-    fn output_error(
+    /// The output: every base triangle at its level, gap-filled and stitched, at limit
+    /// points (with their normals when asked); and the map from level-`top` vertex ids to
+    /// output vertices.
+    fn extract(
         &self,
-        k: usize,
-        m: u32,
-        tri: &impl Fn(usize) -> [DVec3; 3],
-        stop_above: f64,
-    ) -> f64 {
-        let q = 1usize << (2 * m);
-        let depth = (self.fine - m).min(2);
-        let (mut points, mut around, mut near) = (Vec::new(), Vec::new(), Vec::new());
-        let mut err2 = self.floor * self.floor;
-        for f in k * q..(k + 1) * q {
-            let t = tri(f);
-            points.clear();
-            self.points_over(m, f, depth, &mut points);
-            for &(x, b) in &points {
-                let p = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
-                // The limit point of the vertex is on the surface: an upper bound at once.
-                if (p - self.limit[x as usize]).length_squared() <= err2 {
-                    continue;
-                }
-                self.surface_around(x, &mut around, &mut near);
-                err2 = err2.max(nearest(p, &near, err2.sqrt()));
-                if err2 > stop_above * stop_above {
-                    return err2.sqrt();
-                }
+        lazy: &mut LazyLimits,
+        levels: &[u8],
+        opts: &AccuracyOptions,
+    ) -> Result<(lod::AdaptiveMesh, Vec<u32>)> {
+        let mut want = Vec::new();
+        for (k, &m) in levels.iter().enumerate() {
+            self.output_vertices(k, m.into(), &mut want);
+        }
+        lazy.evaluate(&want, opts.normals);
+        let nv = self.level_nv[self.top as usize];
+        loop {
+            let normals = opts.normals.then(|| &lazy.normals()[..nv]);
+            let (out, remap) = lod::extract_at(
+                self.r,
+                self.top,
+                &lazy.limit()[..nv],
+                normals,
+                levels,
+                opts.boundary_patches,
+            )?;
+            // The output's vertices are those asked for above; should the extraction read
+            // one more, it is evaluated and the output made again.
+            let missing: Vec<u32> = (0..nv as u32)
+                .filter(|&v| remap[v as usize] != u32::MAX && !lazy.has(v, opts.normals))
+                .collect();
+            if missing.is_empty() {
+                return Ok((out, remap));
             }
-        }
-        err2.sqrt()
-    }
-
-    /// Points of face `f` of level `m` with their barycentric coordinates in it: the level-m+1
-    /// vertices (its edges' midpoints) and, with `depth` 2, the level-m+2 vertices inside it
-    /// (midpoints in the parameter domain, by the children layout of
-    /// [`super::next_level::child_faces`]).
-    fn points_over(&self, m: u32, f: usize, depth: u32, out: &mut Vec<(u32, [f64; 3])>) {
-        let lm = self.r.full(m);
-        let e = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-        let mid = |a: [f64; 3], b: [f64; 3]| {
-            [
-                (a[0] + b[0]) / 2.0,
-                (a[1] + b[1]) / 2.0,
-                (a[2] + b[2]) / 2.0,
-            ]
-        };
-        let fe = &lm.face_edges[3 * f..3 * f + 3];
-        let mids = [mid(e[0], e[1]), mid(e[1], e[2]), mid(e[2], e[0])];
-        for s in 0..3 {
-            out.push((lm.nv as u32 + fe[s], mids[s]));
-        }
-        if depth < 2 {
-            return;
-        }
-        // The middle child (`child_faces` order: the three corner children, then the middle
-        // one, m0 m1 m2): the midpoints of its edges are the level-(m+2) vertices inside the
-        // face, the others lie on its edges between the points above and its corners.
-        let l1 = self.r.full(m + 1);
-        let g = 4 * f + 3;
-        let fe = &l1.face_edges[3 * g..3 * g + 3];
-        for s in 0..3 {
-            out.push((l1.nv as u32 + fe[s], mid(mids[s], mids[(s + 1) % 3])));
-        }
-    }
-
-    /// Into `near`: the level-`fine` triangles (corners at their limit positions) of the
-    /// level-(fine-1) faces at vertex `x` (a vertex of any level up to `fine`).
-    fn surface_around(&self, x: u32, faces: &mut Vec<u32>, near: &mut Vec<[DVec3; 3]>) {
-        let last = self.r.full(self.fine - 1);
-        faces.clear();
-        if (x as usize) < last.nv {
-            for &e in last.ring(x as usize) {
-                faces.extend(last.edge_faces[e as usize].iter().filter(|&&g| g != NONE));
-            }
-            faces.sort_unstable();
-            faces.dedup();
-        } else {
-            let d = x as usize - last.nv;
-            faces.extend(last.edge_faces[d].iter().filter(|&&g| g != NONE));
-        }
-        near.clear();
-        for &g in faces.iter() {
-            let c = super::next_level::child_faces(last, g as usize);
-            near.extend(c.chunks_exact(3).map(|t| {
-                [
-                    self.limit[t[0] as usize],
-                    self.limit[t[1] as usize],
-                    self.limit[t[2] as usize],
-                ]
-            }));
+            debug_assert!(false, "the output reads {} more vertices", missing.len());
+            lazy.evaluate(&missing, opts.normals);
         }
     }
 
@@ -911,7 +1031,6 @@ impl Measure<'_> {
         remap: &[u32],
     ) -> std::collections::BTreeSet<(u32, u32)> {
         let l0 = self.l0();
-        let level_nv: Vec<usize> = (0..top).map(|j| self.r.full(j).nv).collect();
         let mut out = std::collections::BTreeSet::new();
         for e in 0..l0.ne() {
             if l0.eclass[e] & eclass::SHARP == 0 {
@@ -927,7 +1046,7 @@ impl Measure<'_> {
             let mut j = 0;
             while j <= 1usize << top {
                 let v = remap
-                    .get(lod::edge_vertex(l0, &level_nv, top, e, j) as usize)
+                    .get(lod::edge_vertex(l0, &self.level_nv, top, e, j) as usize)
                     .copied()
                     .unwrap_or(u32::MAX);
                 if prev != u32::MAX && v != u32::MAX {
@@ -939,53 +1058,6 @@ impl Measure<'_> {
         }
         out
     }
-}
-
-/// The measurements of one base triangle.
-#[derive(Clone, Copy, Debug)]
-struct FaceErrors {
-    /// Measured error at each level shown (`0..=n`); NaN where not measured, a lower bound
-    /// where the measurement stopped beyond the tolerance.
-    error: [f64; super::MAX_LEVEL as usize],
-    /// How far beyond the samples the limit surface may stray (see
-    /// [`tail_beyond_samples`]).
-    tail: f64,
-}
-
-impl Default for FaceErrors {
-    fn default() -> Self {
-        FaceErrors {
-            error: [f64::NAN; super::MAX_LEVEL as usize],
-            tail: 0.0,
-        }
-    }
-}
-
-impl FaceErrors {
-    /// The estimated error of showing the triangle at level `m`.
-    fn bound(&self, m: u8) -> f64 {
-        self.error[m as usize] + self.tail
-    }
-
-    /// The first level measured within `tolerance`, else the finest measured.
-    fn first_within(&self, tolerance: f64) -> u8 {
-        let measured = self.error.iter().rposition(|e| !e.is_nan()).unwrap_or(0);
-        let m = (0..=measured).find(|&m| self.bound(m as u8) <= tolerance);
-        m.unwrap_or(measured) as u8
-    }
-}
-
-/// How far the limit surface may stray from the mesh through the level-`n + 1` samples,
-/// from the measured errors of levels `0..=n` (see the module documentation).
-fn tail_beyond_samples(e: &[f64]) -> f64 {
-    let n = e.len() - 1;
-    let last = e[n];
-    let rho = if n == 0 || e[n - 1].is_nan() || e[n - 1] <= 0.0 {
-        0.25
-    } else {
-        (last / e[n - 1]).clamp(0.25, 0.5)
-    };
-    last * rho / (1.0 - rho)
 }
 
 /// The squared distance from `p` to the nearest of `tris`, or any value at most `below²`

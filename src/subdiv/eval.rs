@@ -12,7 +12,7 @@ use glam::DVec3;
 use super::frame::Frame;
 use super::masks::{crease_limit_weights, eclass, normalize_or_zero, vclass, ValenceTables};
 use super::next_level::Connectivity;
-use super::topology::{Base, Level, NONE};
+use super::topology::{Base, NONE};
 
 /// Subdivision mask of old vertex `v` (its new position at the next level).
 #[inline]
@@ -215,9 +215,9 @@ fn face_frame(base: &Base, j: u32, f: u32) -> Option<&Frame> {
 
 /// Face of wedge `i` of `v`'s ring (between ring edges i and i+1).
 #[inline]
-fn wedge_face(l: &Level, v: usize, e: u32) -> u32 {
-    let [a, _] = l.edges[e as usize];
-    let ef = l.edge_faces[e as usize];
+fn wedge_face(l: &impl Connectivity, v: usize, e: u32) -> u32 {
+    let [a, _] = l.edge_ends(e as usize);
+    let ef = l.edge_faces(e as usize);
     if a as usize == v {
         ef[0]
     } else {
@@ -229,7 +229,7 @@ fn wedge_face(l: &Level, v: usize, e: u32) -> u32 {
 /// the normalised mean of their sector normals, or with `wedge = Some(i)` the normal of the
 /// sector containing ring wedge i (the face between ring edges i and i+1).
 pub(crate) fn eval_normal(
-    l: &Level,
+    l: &impl Connectivity,
     t: &ValenceTables,
     base: &Base,
     j: u32,
@@ -237,19 +237,31 @@ pub(crate) fn eval_normal(
     v: usize,
     wedge: Option<usize>,
 ) -> DVec3 {
-    let c = l.vclass[v];
-    let ring = l.ring(v);
+    let c = l.vertex_class(v);
+    // The ring on the stack (valences above 32 are rare enough to allocate).
+    let (mut small, mut large) = ([0u32; 32], Vec::new());
+    let it = l.ring_edges(v);
+    let ring: &[u32] = if it.len() <= small.len() {
+        let n = it.len();
+        for (s, e) in small.iter_mut().zip(it) {
+            *s = e;
+        }
+        &small[..n]
+    } else {
+        large.extend(it);
+        &large
+    };
     if ring.is_empty() {
         return DVec3::ZERO;
     }
     let pv = p[v];
-    let is_boundary = l.edge_faces[ring[0] as usize][1] == NONE;
+    let is_boundary = l.edge_faces(ring[0] as usize)[1] == NONE;
     let nw = if is_boundary {
         ring.len() - 1
     } else {
         ring.len()
     };
-    let ring_pt = |i: usize| p[l.other(ring[i % ring.len()], v as u32) as usize];
+    let ring_pt = |i: usize| p[l.other_end(ring[i % ring.len()], v as u32) as usize];
     // area-weighted face normal sum of the wedges [i0, i0 + n)
     let fan_normal = |pts: &dyn Fn(usize) -> DVec3, centre: DVec3, i0: usize, n: usize| {
         let mut s = DVec3::ZERO;
@@ -289,7 +301,8 @@ pub(crate) fn eval_normal(
     // Crease / corner: one step later (reference §5.2-5.3).
     let vp = eval_vertex(l, t, base, p, v);
     let q = |i: usize| eval_edge(l, base, p, ring[i % ring.len()] as usize);
-    let is_crease_edge = |i: usize| l.eclass[ring[i % ring.len()] as usize] & eclass::CREASE != 0;
+    let is_crease_edge =
+        |i: usize| l.edge_class(ring[i % ring.len()] as usize) & eclass::CREASE != 0;
     let Some(start) = (0..ring.len()).find(|&i| is_crease_edge(i)) else {
         // a tagged corner without creases: no curve tangents; use the fan normal
         return normalize_or_zero(fan_normal(&ring_pt, pv, 0, nw));

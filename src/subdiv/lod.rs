@@ -11,6 +11,7 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 
 use super::masks::normalize_or_zero;
+use super::next_level::{child_face_edges, child_faces, Connectivity, NextLevel};
 use super::sparse::{self, BoundaryPatchOutput, SparsePlan, DENSE};
 use super::topology::NONE;
 use super::Refinement;
@@ -144,7 +145,10 @@ pub(crate) fn extract_at(
     let x = |e: usize, j: usize| -> u32 { edge_vertex(l0, &level_nv, n, e, j) };
 
     // Gap filling.
-    let mut disp = pos.to_vec();
+    // Gap-filled positions, by vertex id: few vertices move, so they are kept beside `pos`
+    // rather than in a copy of it (a refinement's finest level has many more vertices than
+    // an output to an accuracy uses).
+    let mut moved: Vec<(u32, DVec3)> = Vec::new();
     for e in 0..e0 {
         let [fl, fr] = l0.edge_faces[e];
         if fr == NONE {
@@ -163,7 +167,7 @@ pub(crate) fn extract_at(
                 let j0 = j / s * s;
                 let t = (j - j0) as f64 / s as f64;
                 let (a, b) = (pos[x(e, j0) as usize], pos[x(e, j0 + s) as usize]);
-                disp[x(e, j) as usize] = a * (1.0 - t) + b * t;
+                moved.push((x(e, j), a * (1.0 - t) + b * t));
             }
             j += step;
         }
@@ -218,17 +222,17 @@ pub(crate) fn extract_at(
             }
         }
         let m = levels[k] as u32;
-        let lm = r.full(m);
+        let faces = LevelFaces::new(r, m);
         let g = r.base.group[k];
         let q = 1usize << (2 * m);
         for f in k * q..(k + 1) * q {
-            let c = &lm.faces[3 * f..3 * f + 3];
+            let (c, fe) = faces.face(f);
             poly.clear();
             let mut edges_with_extras = 0;
             let mut extra_edge = 0;
             for (s, &cs) in c.iter().enumerate() {
                 poly.push(cs);
-                let eps = lm.face_edges[3 * f + s] as usize;
+                let eps = fe[s] as usize;
                 if eps >= e0 << m {
                     continue;
                 }
@@ -247,7 +251,7 @@ pub(crate) fn extract_at(
                 let seg = eps - (be << m);
                 let per = 1usize << (n - m);
                 let step = 1usize << (n - lo);
-                let forward = lm.edges[eps][0] == cs;
+                let forward = faces.edge_start(eps) == cs;
                 let cnt = per / step;
                 for t in 1..cnt {
                     let tt = if forward { t } else { cnt - t };
@@ -279,9 +283,83 @@ pub(crate) fn extract_at(
         }
     }
 
+    // A vertex on an edge between two levels moves once (the edge's coarser side decides).
+    moved.sort_unstable_by_key(|&(v, _)| v);
+    let disp = Displaced { pos, moved };
     let (mesh, mut remap) = compact(&disp, normals, &centroids, tris, groups);
     remap.truncate(pos.len());
     Ok((mesh, remap))
+}
+
+/// The faces of one level as the extraction reads them: from the level's arrays, or for a
+/// refinement's finest level (whose arrays a decode to an accuracy does not build) from the
+/// level before, by the index arithmetic of its refinement.
+enum LevelFaces<'a> {
+    Built(&'a super::topology::Level),
+    Next(NextLevel<'a>),
+}
+
+impl<'a> LevelFaces<'a> {
+    fn new(r: &'a Refinement, m: u32) -> LevelFaces<'a> {
+        if m > 0 && m == r.max_level() && r.finest.get().is_none() {
+            LevelFaces::Next(NextLevel {
+                l: r.full(m - 1),
+                base: &r.base,
+                j: m - 1,
+            })
+        } else {
+            LevelFaces::Built(r.full(m))
+        }
+    }
+
+    /// Corners and edges of face `f`.
+    #[inline]
+    fn face(&self, f: usize) -> ([u32; 3], [u32; 3]) {
+        match self {
+            LevelFaces::Built(l) => (
+                [l.faces[3 * f], l.faces[3 * f + 1], l.faces[3 * f + 2]],
+                [
+                    l.face_edges[3 * f],
+                    l.face_edges[3 * f + 1],
+                    l.face_edges[3 * f + 2],
+                ],
+            ),
+            LevelFaces::Next(nl) => {
+                let (c, e) = (child_faces(nl.l, f / 4), child_face_edges(nl.l, f / 4));
+                let i = 3 * (f % 4);
+                ([c[i], c[i + 1], c[i + 2]], [e[i], e[i + 1], e[i + 2]])
+            }
+        }
+    }
+
+    /// The first end of edge `e` in its stored orientation.
+    #[inline]
+    fn edge_start(&self, e: usize) -> u32 {
+        match self {
+            LevelFaces::Built(l) => l.edges[e][0],
+            LevelFaces::Next(nl) => nl.edge_ends(e)[0],
+        }
+    }
+}
+
+/// Positions after gap filling: `pos`, but the vertices in `moved` (sorted by id).
+struct Displaced<'a> {
+    pos: &'a [DVec3],
+    moved: Vec<(u32, DVec3)>,
+}
+
+impl Displaced<'_> {
+    fn len(&self) -> usize {
+        self.pos.len()
+    }
+
+    #[inline]
+    fn at(&self, v: usize) -> DVec3 {
+        match self.moved.binary_search_by_key(&(v as u32), |&(x, _)| x) {
+            Ok(i) => self.moved[i].1,
+            Err(_) => self.pos[v],
+        }
+    }
 }
 
 /// The output mesh of [`extract_at`]: keeps the used vertices of `disp` (gap-filled
@@ -289,7 +367,7 @@ pub(crate) fn extract_at(
 /// the mean of their three corners), and renumbers `tris`. Returns the mesh and the map from
 /// old to new vertex ids (`u32::MAX` for vertices not used).
 fn compact(
-    disp: &[DVec3],
+    disp: &Displaced<'_>,
     normals: Option<&[DVec3]>,
     centroids: &[[u32; 3]],
     mut tris: Vec<[u32; 3]>,
@@ -312,13 +390,13 @@ fn compact(
         remap[v] = next;
         next += 1;
         if v < disp.len() {
-            positions.push(disp[v]);
+            positions.push(disp.at(v));
             if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
                 on.push(nn[v]);
             }
         } else {
             let cs = centroids[v - disp.len()];
-            positions.push(cs.iter().map(|&i| disp[i as usize]).sum::<DVec3>() / 3.0);
+            positions.push(cs.iter().map(|&i| disp.at(i as usize)).sum::<DVec3>() / 3.0);
             if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
                 on.push(normalize_or_zero(cs.iter().map(|&i| nn[i as usize]).sum()));
             }

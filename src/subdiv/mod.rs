@@ -27,6 +27,7 @@ mod accuracy;
 mod eval;
 mod flips;
 mod frame;
+mod lazy;
 mod lod;
 mod masks;
 mod next_level;

@@ -67,12 +67,6 @@ impl Level {
         let r = self.rings.get().expect("rings are built before use");
         &r.edges[r.offsets[v] as usize..r.offsets[v + 1] as usize]
     }
-    /// The other end of edge `e` seen from `v`.
-    #[inline]
-    pub fn other(&self, e: u32, v: u32) -> u32 {
-        let [a, b] = self.edges[e as usize];
-        a ^ b ^ v
-    }
     /// Vertex of face `f` opposite to its edge `e`.
     #[inline]
     pub fn opposite(&self, f: u32, e: u32) -> u32 {

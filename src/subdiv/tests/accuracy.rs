@@ -310,3 +310,35 @@ fn flips_make_a_plane_fan_well_shaped_and_keep_its_outline() {
     flips::flip_to_well_shaped(&m.positions, &mut kept, &groups, &[true], &fixed, 1e-9);
     assert_eq!(kept, fan);
 }
+
+#[test]
+fn limits_evaluated_on_demand_match_a_full_evaluation() {
+    // `LazyLimits` evaluates each vertex at the level it is born at, and only the positions
+    // it depends on: the same limit points as the finest level evaluated everywhere, and the
+    // same normals for the vertices of that level (read through the level before).
+    for (name, m) in models() {
+        let r = Refinement::new(&m, 3).unwrap();
+        let p3 = r.positions(&m.positions).unwrap();
+        let lim = r.limit_positions(&p3, 3).unwrap();
+        let nn = r.limit_normals(&p3, 3).unwrap();
+        let mut lazy = crate::subdiv::lazy::LazyLimits::new(&r, &m.positions);
+        // A scattered third first: the second call adds the rest without redoing it.
+        let some: Vec<u32> = (0..p3.len() as u32).filter(|v| v % 3 == 1).collect();
+        lazy.evaluate(&some, false);
+        assert!(some
+            .iter()
+            .all(|&v| lazy.has(v, false) && !lazy.has(v, true)));
+        let all: Vec<u32> = (0..p3.len() as u32).collect();
+        lazy.evaluate(&all, true);
+        let born3 = r.level(2).vertex_count();
+        for v in 0..p3.len() {
+            assert!(close(lazy.limit()[v], lim[v], 1e-12), "{name} v{v}");
+            let n = lazy.normals()[v];
+            if v >= born3 {
+                assert!(close(n, nn[v], 1e-12), "{name} v{v}: {n:?} {:?}", nn[v]);
+            } else {
+                assert!(n == DVec3::ZERO || n.dot(nn[v]) > 0.5, "{name} v{v}");
+            }
+        }
+    }
+}

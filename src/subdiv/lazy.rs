@@ -1,0 +1,230 @@
+//! Positions, limit points and limit normals of chosen vertices only.
+//!
+//! A decode to an accuracy shows most base triangles at a coarse level and measures each at
+//! one level finer, so it needs the limit points of a small share of a refinement's vertices.
+//! Each level-`j` position depends on the level-`j - 1` positions of its mask (the vertex's
+//! ring, or the ends and opposite corners of its edge), and the limit point and normal of a
+//! vertex on its ring at the level it was born at (the limit masks are eigenvectors of the
+//! subdivision, so any level gives the same point). [`LazyLimits`] evaluates, level by level,
+//! exactly the positions the asked-for limit points depend on, into arrays indexed by the
+//! nested vertex ids; nothing else is touched, so the untouched pages of those arrays are
+//! never even mapped.
+
+use glam::DVec3;
+
+use super::masks::ValenceTables;
+use super::next_level::{Connectivity, NextLevel};
+use super::{eval, Refinement};
+
+/// Limit points (and normals) of chosen vertices of a refinement, evaluated on demand.
+pub(crate) struct LazyLimits<'a> {
+    r: &'a Refinement,
+    /// Vertex count of every level `0..=r.max_level()`.
+    nv: Vec<usize>,
+    /// Positions of every level, valid where `have` is set.
+    pos: Vec<Vec<DVec3>>,
+    have: Vec<Vec<u64>>,
+    /// Limit points and normals by vertex id (any level's ids: they are nested).
+    limit: Vec<DVec3>,
+    normal: Vec<DVec3>,
+    have_limit: Vec<u64>,
+    have_normal: Vec<u64>,
+}
+
+/// `n` zero vectors, allocated zeroed rather than written (`vec![DVec3::ZERO; n]` writes
+/// every element): the pages never written are never mapped.
+fn zeroed(n: usize) -> Vec<DVec3> {
+    bytemuck::allocation::zeroed_vec(n)
+}
+
+/// Sets bit `i`; whether it was clear.
+#[inline]
+fn set(bits: &mut [u64], i: usize) -> bool {
+    let (w, b) = (i / 64, 1u64 << (i % 64));
+    let clear = bits[w] & b == 0;
+    bits[w] |= b;
+    clear
+}
+
+#[inline]
+fn get(bits: &[u64], i: usize) -> bool {
+    bits[i / 64] & (1u64 << (i % 64)) != 0
+}
+
+/// Appends the vertices of `c` that the limit point of `v` reads (its limit mask: on a crease
+/// only the crease's neighbours) or, with `normal`, `v` and its whole ring.
+fn support_into(
+    c: &impl Connectivity,
+    t: &ValenceTables,
+    v: u32,
+    normal: bool,
+    out: &mut Vec<u32>,
+) {
+    if normal {
+        out.push(v);
+        out.extend(c.ring_edges(v as usize).map(|e| c.other_end(e, v)));
+    } else {
+        eval::limit_mask(c, t, v as usize, &mut |x, _| out.push(x));
+    }
+}
+
+impl<'a> LazyLimits<'a> {
+    /// Nothing evaluated yet but the control points (level 0). `r` must be built to level 1
+    /// at least.
+    pub fn new(r: &'a Refinement, control: &[DVec3]) -> LazyLimits<'a> {
+        let top = r.max_level();
+        debug_assert!(top >= 1);
+        let nv: Vec<usize> = (0..=top).map(|j| r.level(j).vertex_count()).collect();
+        let mut pos = vec![control.to_vec()];
+        let mut have = vec![vec![u64::MAX; nv[0].div_ceil(64)]];
+        for &n in &nv[1..] {
+            pos.push(zeroed(n));
+            have.push(vec![0u64; n.div_ceil(64)]);
+        }
+        let last = nv[top as usize];
+        LazyLimits {
+            r,
+            limit: zeroed(last),
+            normal: zeroed(last),
+            have_limit: vec![0u64; last.div_ceil(64)],
+            have_normal: vec![0u64; last.div_ceil(64)],
+            nv,
+            pos,
+            have,
+        }
+    }
+
+    /// Limit points by vertex id (of the finest level; valid where asked for).
+    pub fn limit(&self) -> &[DVec3] {
+        &self.limit
+    }
+
+    /// Limit normals by vertex id (valid where asked for).
+    pub fn normals(&self) -> &[DVec3] {
+        &self.normal
+    }
+
+    /// Whether the limit point (and, with `normal`, the normal) of `v` is evaluated.
+    pub fn has(&self, v: u32, normal: bool) -> bool {
+        get(&self.have_limit, v as usize) && (!normal || get(&self.have_normal, v as usize))
+    }
+
+    /// The level vertex `v` is born at.
+    fn birth(&self, v: u32) -> u32 {
+        self.nv.iter().position(|&n| (v as usize) < n).unwrap_or(0) as u32
+    }
+
+    /// The last level, seen through the one before (its arrays are not built).
+    fn finest(&self) -> NextLevel<'a> {
+        let top = self.r.max_level();
+        NextLevel {
+            l: self.r.full(top - 1),
+            base: &self.r.base,
+            j: top - 1,
+        }
+    }
+
+    /// Evaluates the limit points of `verts` (and with `normals` their limit normals) that
+    /// are not evaluated yet.
+    pub fn evaluate(&mut self, verts: &[u32], normals: bool) {
+        let top = self.r.max_level();
+        let mut todo: Vec<Vec<u32>> = vec![Vec::new(); top as usize + 1];
+        let mut rings: Vec<Vec<u32>> = vec![Vec::new(); top as usize + 1];
+        for &v in verts {
+            // Marked when queued, so that a vertex asked for many times is evaluated once.
+            let i = v as usize;
+            let limit = set(&mut self.have_limit, i);
+            let normal = normals && set(&mut self.have_normal, i);
+            if !(limit || normal) {
+                continue;
+            }
+            let b = self.birth(v);
+            todo[b as usize].push(v);
+            let (t, ring) = (&self.r.tables, &mut rings[b as usize]);
+            if b < top {
+                support_into(self.r.full(b), t, v, normals, ring);
+            } else {
+                support_into(&self.finest(), t, v, normals, ring);
+            }
+        }
+        for (b, ring) in rings.iter_mut().enumerate() {
+            self.positions(b as u32, ring);
+        }
+        let (t, base) = (&self.r.tables, &self.r.base);
+        for (b, vs) in todo.iter().enumerate() {
+            let b = b as u32;
+            let p = &self.pos[b as usize];
+            for &v in vs {
+                let i = v as usize;
+                let (lim, nor) = if b < top {
+                    let l = self.r.full(b);
+                    (
+                        eval::eval_limit(l, t, base, p, i),
+                        normals.then(|| eval::eval_normal(l, t, base, b, p, i, None)),
+                    )
+                } else {
+                    let l = self.finest();
+                    (
+                        eval::eval_limit(&l, t, base, p, i),
+                        normals.then(|| eval::eval_normal(&l, t, base, b, p, i, None)),
+                    )
+                };
+                self.limit[i] = lim;
+                if let Some(nn) = nor {
+                    self.normal[i] = nn;
+                }
+            }
+        }
+    }
+
+    /// Evaluates the level-`j` positions of `verts` and everything they depend on.
+    fn positions(&mut self, j: u32, verts: &mut Vec<u32>) {
+        if j == 0 {
+            return;
+        }
+        let j = j as usize;
+        let mut queue: Vec<Vec<u32>> = vec![Vec::new(); j + 1];
+        queue[j] = std::mem::take(verts);
+        queue[j].retain(|&v| set(&mut self.have[j], v as usize));
+        let t = &self.r.tables;
+        // The masks of level i's new positions read level i - 1, whose arrays are built.
+        for i in (1..=j).rev() {
+            let (lower, upper) = queue.split_at_mut(i);
+            let (below, at) = (&mut lower[i - 1], &upper[0]);
+            if i == 1 {
+                break;
+            }
+            let l = self.r.full(i as u32 - 1);
+            let (nv, have) = (self.nv[i - 1], &mut self.have[i - 1]);
+            let mut emit = |x: u32, _: f64| {
+                if set(have, x as usize) {
+                    below.push(x);
+                }
+            };
+            for &v in at {
+                if (v as usize) < nv {
+                    eval::vertex_mask(l, t, v as usize, &mut emit);
+                } else {
+                    eval::edge_mask(l, v as usize - nv, &mut emit);
+                }
+            }
+        }
+        let base = &self.r.base;
+        for (i, vs) in queue.iter().enumerate().skip(1) {
+            let l = self.r.full(i as u32 - 1);
+            let nv = self.nv[i - 1];
+            let (lower, upper) = self.pos.split_at_mut(i);
+            let (src, dst) = (&lower[i - 1], &mut upper[0]);
+            for &v in vs {
+                let v = v as usize;
+                dst[v] = if v < nv {
+                    eval::eval_vertex(l, t, base, src, v)
+                } else {
+                    eval::eval_edge(l, base, src, v - nv)
+                };
+            }
+        }
+        *verts = std::mem::take(&mut queue[j]);
+        verts.clear();
+    }
+}
