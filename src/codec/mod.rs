@@ -15,6 +15,9 @@
 //! returns the renumbering so callers and tests can compare exactly.
 
 pub mod bytes;
+#[cfg(any(test, feature = "fuzzing"))]
+#[doc(hidden)]
+pub mod craft;
 pub mod facefixer;
 pub mod geometry;
 mod names;
