@@ -329,13 +329,12 @@ pub fn build(d: &Description) -> (Vec<u8>, u64) {
     put_section(&mut out, SEC_HEADER, &header_bytes, false, true);
     let replaced = |id: u8| d.sections.iter().find(|s| s.id == id && id != SEC_HEADER);
     for (id, payload) in &sections {
-        if let Some(s) = replaced(*id) {
-            put_described(&mut out, s);
-        } else if *id == SEC_CONNECTIVITY && labels.is_some() {
-            let (conn, _) = labels.as_ref().expect("checked");
-            put_section(&mut out, *id, conn, true, false);
-        } else {
-            put_section(&mut out, *id, payload, true, false);
+        match (replaced(*id), &labels) {
+            (Some(s), _) => put_described(&mut out, s),
+            (None, Some((conn, _))) if *id == SEC_CONNECTIVITY => {
+                put_section(&mut out, *id, conn, true, false)
+            }
+            _ => put_section(&mut out, *id, payload, true, false),
         }
     }
     for s in &d.sections {
