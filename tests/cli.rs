@@ -318,6 +318,97 @@ fn exit_statuses_are_listed_and_used() {
     assert_eq!(status, 4, "{text}");
 }
 
+/// A dense sphere (a UV grid of `n x n` quads, poles fanned), as OBJ text: a fitted encode of
+/// it takes far longer than a fraction of a second.
+fn dense_sphere_obj(n: u32) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    writeln!(s, "v 0 0 1").unwrap();
+    for i in 1..n {
+        let th = std::f64::consts::PI * f64::from(i) / f64::from(n);
+        for j in 0..n {
+            let ph = 2.0 * std::f64::consts::PI * f64::from(j) / f64::from(n);
+            writeln!(
+                s,
+                "v {} {} {}",
+                th.sin() * ph.cos(),
+                th.sin() * ph.sin(),
+                th.cos()
+            )
+            .unwrap();
+        }
+    }
+    writeln!(s, "v 0 0 -1").unwrap();
+    let ring = |i: u32, j: u32| 2 + (i - 1) * n + j % n;
+    let south = 2 + (n - 1) * n;
+    for j in 0..n {
+        writeln!(s, "f 1 {} {}", ring(1, j), ring(1, j + 1)).unwrap();
+        writeln!(s, "f {south} {} {}", ring(n - 1, j + 1), ring(n - 1, j)).unwrap();
+    }
+    for i in 1..n - 1 {
+        for j in 0..n {
+            let (a, b) = (ring(i, j), ring(i, j + 1));
+            let (c, d) = (ring(i + 1, j + 1), ring(i + 1, j));
+            writeln!(s, "f {a} {d} {c} {b}").unwrap();
+        }
+    }
+    s
+}
+
+/// `encode --max-seconds`: an encode over its budget ends with status 4 and a message naming
+/// the option, writes nothing and leaves the input as it was; one within it succeeds; a
+/// budget that is not a positive number of seconds is a usage error.
+#[test]
+fn max_seconds_bounds_the_whole_encode() {
+    let input = tmp("dense_sphere.obj");
+    std::fs::write(&input, dense_sphere_obj(300)).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let out = tmp("dense_sphere.scode");
+    let _ = std::fs::remove_file(&out);
+    let t0 = std::time::Instant::now();
+    let (status, text) = scode_status(&[
+        "encode",
+        "--max-seconds",
+        "0.3",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    let took = t0.elapsed();
+    assert_eq!(status, 4, "{text}");
+    assert!(
+        text.contains("did not finish within 0.3 s (--max-seconds)")
+            && text.contains("not written"),
+        "{text}"
+    );
+    assert!(
+        !out.exists(),
+        "an encode over its budget wrote {}",
+        out.display()
+    );
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+    eprintln!("stopped after {took:?}");
+    let (status, text) = scode_status(&[
+        "encode",
+        "--raw",
+        "--max-seconds",
+        "600",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 0, "{text}");
+    assert!(out.exists());
+    for bad in ["0", "-1", "nan", "inf", "soon"] {
+        let (status, text) = scode_status(&[
+            "encode",
+            "--max-seconds",
+            bad,
+            input.to_str().unwrap(),
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(status, 1, "{bad}: {text}");
+    }
+}
+
 /// An OS error is printed once, after the path it is about.
 #[test]
 fn os_errors_are_printed_once() {

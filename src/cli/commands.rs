@@ -49,8 +49,60 @@ fn read_scode(path: &Path, limits: &Limits) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// Set when `encode --max-seconds` gives up on the encode; its output is then never written.
+/// [`write_file`] holds the lock while it writes, so a file is written whole or not at all
+/// and the one that gives up knows which.
+static GAVE_UP: std::sync::Mutex<bool> = std::sync::Mutex::new(false);
+
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    let gave_up = GAVE_UP.lock().unwrap_or_else(|e| e.into_inner());
+    if *gave_up {
+        return Err(CliError::TimeLimit("over the time limit: nothing written".into()).into());
+    }
     std::fs::write(path, bytes).map_err(|e| scode::Error::io(path, e).into())
+}
+
+/// `encode` with a whole-encode time budget (`--max-seconds`): the encode runs in its own
+/// thread; past the budget the output is barred (see [`GAVE_UP`]) and the error returned,
+/// and `main` returning ends the process, which stops every thread of the encode (the
+/// fitting's and the STEP reader's alike) wherever it is, with no cooperation needed.
+pub fn encode_within(args: EncodeArgs, seconds: f64) -> Result<()> {
+    use std::sync::mpsc::RecvTimeoutError;
+    let input = args.input.clone();
+    let output = args
+        .output
+        .path()
+        .map_or_else(|_| "the output".to_string(), |p| p.display().to_string());
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::Builder::new()
+        .name("scode-encode".into())
+        .spawn(move || {
+            let _ = tx.send(encode(&args));
+        })
+        .context("cannot start the encode thread")?;
+    match rx.recv_timeout(std::time::Duration::from_secs_f64(seconds)) {
+        Ok(result) => return result,
+        Err(RecvTimeoutError::Disconnected) => {
+            return Err(anyhow::anyhow!(
+                "the encode of {} panicked (a bug; please report it)",
+                input.display()
+            ))
+        }
+        Err(RecvTimeoutError::Timeout) => {}
+    }
+    let mut gave_up = GAVE_UP.lock().unwrap_or_else(|e| e.into_inner());
+    // An encode that wrote its file while the lock was being taken is done: report it.
+    if let Ok(result) = rx.try_recv() {
+        return result;
+    }
+    *gave_up = true;
+    Err(CliError::TimeLimit(format!(
+        "{}: the encode did not finish within {seconds} s (--max-seconds); stopped, {} not \
+         written",
+        input.display(),
+        output
+    ))
+    .into())
 }
 
 fn is_scode(path: &Path) -> bool {

@@ -305,6 +305,11 @@ pub struct EncodeArgs {
     /// with status 6, so a model with holes is never written unnoticed.
     #[arg(long)]
     pub allow_skipped: bool,
+    /// Longest time the whole encode (reading, fitting, writing) may take, in seconds. Over
+    /// it scode stops every thread of the encode by exiting, writes nothing, and exits with
+    /// status 4. Default: no limit (a STEP file's own reading timeouts still apply).
+    #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
+    pub max_seconds: Option<f64>,
     /// Print what the reader repaired and per-stage timings.
     #[arg(short, long)]
     pub verbose: bool,
@@ -492,13 +497,28 @@ pub struct ViewArgs {
 }
 
 /// `--effort`'s values, with the library's message for an unknown one.
+/// A positive, finite number of seconds (at most a year).
+fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v > 0.0 && v <= 365.0 * 86400.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "must be a positive number of seconds up to a year, got {s}"
+        ))
+    }
+}
+
 fn parse_effort(s: &str) -> std::result::Result<Effort, String> {
     s.parse().map_err(|e: scode::Error| e.to_string())
 }
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Encode(a) => commands::encode(&a),
+        Command::Encode(a) => match a.max_seconds {
+            Some(seconds) => commands::encode_within(a, seconds),
+            None => commands::encode(&a),
+        },
         Command::Decode(a) => commands::decode(&a),
         Command::Info(a) => commands::info(&a),
         Command::Subdivide(a) => commands::subdivide(&a),

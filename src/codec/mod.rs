@@ -15,6 +15,9 @@
 //! returns the renumbering so callers and tests can compare exactly.
 
 pub mod bytes;
+#[cfg(any(test, feature = "fuzzing"))]
+#[doc(hidden)]
+pub mod craft;
 pub mod facefixer;
 pub mod geometry;
 mod names;
@@ -893,6 +896,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         }
     }
     mesh.validate()?;
+    mesh.check_extent()?;
     if mesh.face_count() > 0 && mesh.groups.is_empty() {
         return Err(Error::Mesh("faces but no groups".into()));
     }
@@ -1041,6 +1045,16 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             Quantizer::for_positions(&covered, bits, opts.step_scale)
         }
     };
+    if !quant.extent.is_finite() {
+        // A finite diagonal leaves room for this only through `step_scale` or `grid_covers`.
+        return Err(Error::Parameter(format!(
+            "the quantisation grid's box overflows f64: the vertices' extent {:e} times the \
+             step scale {} (with the box the grid must cover) is not finite",
+            mesh.bounding_box()
+                .map_or(0.0, |(lo, hi)| (hi - lo).max_element()),
+            opts.step_scale
+        )));
+    }
     let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
 
     // Creases section.

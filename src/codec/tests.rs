@@ -322,6 +322,48 @@ fn encoder_rejects_bad_input() {
     assert!(matches!(encode(&bad, &opts()), Err(Error::Mesh(_))));
 }
 
+/// Finite coordinates whose box overflows (near f64::MAX, or any beyond about 1e154, where
+/// the diagonal overflows) are refused as a parameter error naming the two vertices, for a
+/// raw and a control-mesh encode, instead of a file whose grid the decoder refuses; so is a
+/// finite mesh whose given grid box overflows. Coordinates just below stay encodable.
+#[test]
+fn coordinates_whose_box_overflows_are_refused() {
+    for (lo, hi) in [(-1.7e308, 1.7e308), (-1.0, 1.7e308), (-1e155, 1e155)] {
+        let mut m = cube();
+        m.positions[2].y = lo;
+        m.positions[5].y = hi;
+        for content in [Content::RawMesh, Content::ControlMesh { default_level: 2 }] {
+            let e = encode(&m, &EncodeOptions { content, ..opts() }).unwrap_err();
+            let Error::Parameter(msg) = &e else {
+                panic!("{lo} .. {hi}: {e:?}")
+            };
+            assert!(msg.contains("coordinates too large"), "{msg}");
+            assert!(
+                msg.contains("vertex 2") && msg.contains("vertex 5"),
+                "{msg}"
+            );
+        }
+    }
+    let e = encode(
+        &cube(),
+        &EncodeOptions {
+            grid_covers: Some([DVec3::splat(-1.7e308), DVec3::splat(1.7e308)]),
+            ..opts()
+        },
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&e, Error::Parameter(m) if m.contains("grid's box overflows")),
+        "{e:?}"
+    );
+    let mut big = cube();
+    big.positions[2].y = -1e150;
+    big.positions[5].y = 1e150;
+    let bytes = encode(&big, &opts()).unwrap();
+    let d = decode(&bytes, &Limits::default()).unwrap();
+    assert_eq!(d.mesh.vertex_count(), big.vertex_count());
+}
+
 #[test]
 fn decoder_rejects_versions_trailing_bytes_and_limits() {
     let b = encode(&cube(), &opts()).unwrap();

@@ -204,6 +204,45 @@ impl ControlMesh {
             .unwrap_or(0.0)
     }
 
+    /// An error ([`Error::Parameter`]) when the bounding box of the vertices has no finite
+    /// diagonal, naming the vertices at the ends of its longest side. Every distance,
+    /// tolerance and quantisation step of the encoder comes from coordinate differences
+    /// (squared, for distances): finite coordinates near 1e154 or beyond make them infinite,
+    /// and the encoded file would hold a grid the decoder refuses. (The mesh readers refuse
+    /// such files when they read them, naming the line.)
+    pub fn check_extent(&self) -> Result<()> {
+        let Some(&first) = self.positions.first() else {
+            return Ok(());
+        };
+        let (mut lo, mut hi) = ([0usize; 3], [0usize; 3]);
+        let (mut lo_p, mut hi_p) = (first, first);
+        for (i, p) in self.positions.iter().enumerate() {
+            for k in 0..3 {
+                if p[k] < lo_p[k] {
+                    (lo_p[k], lo[k]) = (p[k], i);
+                }
+                if p[k] > hi_p[k] {
+                    (hi_p[k], hi[k]) = (p[k], i);
+                }
+            }
+        }
+        let size = hi_p - lo_p;
+        if size.length().is_finite() {
+            return Ok(());
+        }
+        let k = (0..3)
+            .max_by(|&a, &b| size[a].total_cmp(&size[b]))
+            .unwrap_or(0);
+        Err(Error::Parameter(format!(
+            "coordinates too large: vertex {} at {:?} and vertex {} at {:?} span a bounding \
+             box whose diagonal overflows f64 (scale the model down)",
+            lo[k],
+            self.positions[lo[k]].to_array(),
+            hi[k],
+            self.positions[hi[k]].to_array()
+        )))
+    }
+
     /// Checks the structural invariants every consumer relies on: offsets consistent, all
     /// indices in range, faces of degree >= 3 without repeated vertices, finite positions,
     /// sharp edges and corners referencing existing vertices. Does not check manifoldness

@@ -164,6 +164,9 @@ pub(crate) fn encode_fitted_once(
     hints: &[SurfaceHint],
     opts: &ModelEncodeOptions,
 ) -> Result<(Vec<u8>, FitReport)> {
+    // Before the tolerance is resolved against the diagonal, so that the error names the
+    // coordinates rather than an infinite tolerance.
+    input.check_extent()?;
     let extent = input
         .bounding_box()
         .map(|(lo, hi)| (hi - lo).max_element())

@@ -93,6 +93,17 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
 /// [`parse`] with `opts` (whether external buffer files may be read at all).
 pub fn parse_with(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<RawMesh> {
     let input_err = |detail: String| Error::input(path, detail);
+    // The gltf crate subtracts the header's size from its total length unchecked (an
+    // overflow panic in builds with overflow checks).
+    if let Some(len) = bytes.strip_prefix(b"glTF").and_then(|b| b.get(4..8)) {
+        let total = u32::from_le_bytes([len[0], len[1], len[2], len[3]]);
+        if total < 12 {
+            return Err(input_err(format!(
+                "invalid glTF: the GLB header's total length {total} is less than the header's \
+                 12 bytes"
+            )));
+        }
+    }
     let gltf = gltf::Gltf::from_slice_without_validation(bytes)
         .map_err(|e| input_err(format!("invalid glTF: {e}")))?;
     for ext in gltf.extensions_required() {
@@ -1244,6 +1255,13 @@ mod tests {
         // Truncated container, garbage, and an index out of range.
         assert!(read(&bytes[..bytes.len() - 8], MeshFormat::Glb).is_err());
         assert!(read(b"glTF\x02\0\0\0garbage", MeshFormat::Glb).is_err());
+        // A total length below the header's size (found by fuzzing: the gltf crate's
+        // subtraction overflowed).
+        let short = read(b"glTF\x02\0\0\0\x04\0\0\0\x10\0\0\0JSON{}", MeshFormat::Glb);
+        assert!(
+            matches!(&short, Err(Error::Input { detail, .. }) if detail.contains("total length 4")),
+            "{short:?}"
+        );
         assert!(read(b"{not json", MeshFormat::Gltf).is_err());
         let (doc, mut bin) = split_glb(&bytes);
         let indices = &doc["accessors"][doc["meshes"][0]["primitives"][0]["indices"]
