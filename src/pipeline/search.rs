@@ -171,7 +171,10 @@ pub fn encode_fitted(
 
 /// Encodes `control` with its face list rotated to start at `starts` evenly spaced faces and
 /// returns the smallest file (the fit's own order on a tie), noting a start other than the
-/// first in `report`. `bytes` is the encoding of the fit's own order.
+/// first in `report`. `bytes` is the encoding of the fit's own order, the one the fit
+/// measured: a start is a candidate only when it decodes to the same surface
+/// ([`decoded_surface_key`]; the codec numbers groups without names in traversal order,
+/// and where two analytic patches meet the group order picks the frame of their edge).
 pub(crate) fn smallest_traversal_start(
     control: &ControlMesh,
     encode_opts: &EncodeOptions,
@@ -183,12 +186,17 @@ pub(crate) fn smallest_traversal_start(
     let starts = starts.min(n);
     let first_len = bytes.len();
     let mut best_start = 0;
+    let limits = codec::Limits::default();
+    let Some(measured) = decoded_surface_key(&bytes, &limits) else {
+        return bytes;
+    };
     for k in 1..starts {
         let start = k * n / starts;
         let rotated = rotate_faces(control, start);
         // A start the codec refuses is just not a candidate (the first one stands).
         if let Ok(b) = codec::encode(&rotated, encode_opts) {
-            if b.len() < bytes.len() {
+            if b.len() < bytes.len() && decoded_surface_key(&b, &limits).as_ref() == Some(&measured)
+            {
                 bytes = b;
                 best_start = start;
             }
@@ -202,6 +210,46 @@ pub(crate) fn smallest_traversal_start(
         ));
     }
     bytes
+}
+
+/// What fixes the surface a file decodes to, whatever the numbering of its vertices and
+/// faces: per group, in order, its patch kind and its faces (each by its corners' positions,
+/// rotated to the smallest, sorted), with the sharp edges and corners by position. `None`
+/// when the file does not decode.
+fn decoded_surface_key(bytes: &[u8], limits: &codec::Limits) -> Option<Vec<String>> {
+    let mesh = codec::decode(bytes, limits).ok()?.mesh;
+    let at = |v: u32| mesh.positions[v as usize].to_array().map(f64::to_bits);
+    let mut faces: Vec<Vec<(u32, Vec<[u64; 3]>)>> = vec![Vec::new(); mesh.groups.len()];
+    for (f, &g) in mesh.face_groups.iter().enumerate() {
+        let corners: Vec<[u64; 3]> = mesh.face(f).iter().map(|&v| at(v)).collect();
+        let first = (0..corners.len()).min_by_key(|&k| corners[k]).unwrap_or(0);
+        let mut rotated = corners.clone();
+        rotated.rotate_left(first);
+        faces.get_mut(g as usize)?.push((g, rotated));
+    }
+    let mut key: Vec<String> = mesh
+        .groups
+        .iter()
+        .zip(&mut faces)
+        .map(|(group, f)| {
+            f.sort_unstable();
+            format!("{:?} {f:?}", group.patch)
+        })
+        .collect();
+    let mut sharp: Vec<[[u64; 3]; 2]> = mesh
+        .sharp_edges
+        .iter()
+        .map(|&(a, b)| {
+            let mut e = [at(a), at(b)];
+            e.sort_unstable();
+            e
+        })
+        .collect();
+    sharp.sort_unstable();
+    let mut corners: Vec<[u64; 3]> = mesh.corners.iter().map(|&v| at(v)).collect();
+    corners.sort_unstable();
+    key.push(format!("{sharp:?} {corners:?}"));
+    Some(key)
 }
 
 #[cfg(feature = "step")]
