@@ -133,15 +133,7 @@ fn fandisk_at_the_seed_coders_operating_point() {
         ..Default::default()
     };
     let (bytes, _) = encode_fitted(&input, &[], &opts).unwrap();
-    let surface = scode::pipeline::decode_surface(
-        &bytes,
-        &Limits::default(),
-        &scode::pipeline::SurfaceOptions {
-            detail: scode::pipeline::Detail::DefaultLevel,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let surface = decode_at_default_level(&bytes);
     let rel = scode::metrics::measure_against_input(&surface.mesh, &input)
         .unwrap()
         .relative();
@@ -165,15 +157,7 @@ fn the_file_decodes_to_the_surface_the_encoder_measured() {
     let Some(dir) = corpus_dir() else { return };
     let (input, _) = scode::io::read_mesh(&dir.join("meshes/fandisk.obj")).unwrap();
     let (bytes, report) = encode_fitted(&input, &[], &ModelEncodeOptions::default()).unwrap();
-    let surface = scode::pipeline::decode_surface(
-        &bytes,
-        &Limits::default(),
-        &scode::pipeline::SurfaceOptions {
-            detail: scode::pipeline::Detail::DefaultLevel,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let surface = decode_at_default_level(&bytes);
     let measured = scode::metrics::measure_against_input(&surface.mesh, &input).unwrap();
     // Both sample the same surfaces, at other points.
     assert!(
@@ -182,6 +166,19 @@ fn the_file_decodes_to_the_surface_the_encoder_measured() {
         measured.max,
         report.error.max
     );
+}
+
+/// A file decoded at its default level, as `scode info --against` measures it.
+fn decode_at_default_level(bytes: &[u8]) -> scode::pipeline::DecodedSurface {
+    scode::pipeline::decode_surface(
+        bytes,
+        &Limits::default(),
+        &scode::pipeline::SurfaceOptions {
+            detail: scode::pipeline::Detail::DefaultLevel,
+            ..Default::default()
+        },
+    )
+    .unwrap()
 }
 
 /// A face-grouped corpus model with its sidecar's surface hints; `None` without the corpus.

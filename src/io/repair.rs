@@ -139,37 +139,18 @@ impl Examples {
 /// quantisation step from coordinate differences squared: finite coordinates near 1e154 or
 /// beyond make them infinite, and the encoded file would hold a grid the decoder refuses.
 fn check_extent(raw: &RawMesh, path: &Path) -> Result<()> {
-    let Some(first) = raw.positions.first() else {
+    let Some((lo, hi)) = crate::mesh::overflowing_extent(&raw.positions) else {
         return Ok(());
     };
-    let (mut lo, mut hi) = ([0usize; 3], [0usize; 3]);
-    let (mut lo_p, mut hi_p) = (*first, *first);
-    for (i, p) in raw.positions.iter().enumerate() {
-        for k in 0..3 {
-            if p[k] < lo_p[k] {
-                (lo_p[k], lo[k]) = (p[k], i);
-            }
-            if p[k] > hi_p[k] {
-                (hi_p[k], hi[k]) = (p[k], i);
-            }
-        }
-    }
-    let size = hi_p - lo_p;
-    if size.length().is_finite() {
-        return Ok(());
-    }
-    let k = (0..3)
-        .max_by(|&a, &b| size[a].total_cmp(&size[b]))
-        .unwrap_or(0);
     Err(Error::input(
         path,
         format!(
             "coordinates too large: {} at {:?} and {} at {:?} span a bounding box whose \
              diagonal overflows f64 (scale the model down)",
-            raw.describe_vertex(lo[k]),
-            raw.positions[lo[k]].to_array(),
-            raw.describe_vertex(hi[k]),
-            raw.positions[hi[k]].to_array()
+            raw.describe_vertex(lo),
+            raw.positions[lo].to_array(),
+            raw.describe_vertex(hi),
+            raw.positions[hi].to_array()
         ),
     ))
 }

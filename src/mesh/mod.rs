@@ -97,6 +97,32 @@ pub fn edge_key(a: u32, b: u32) -> (u32, u32) {
     }
 }
 
+/// When the bounding box of `positions` has no finite diagonal, the vertices at the ends of
+/// its longest side (the ones to name in an error).
+pub(crate) fn overflowing_extent(positions: &[DVec3]) -> Option<(usize, usize)> {
+    let &first = positions.first()?;
+    let (mut lo, mut hi) = ([0usize; 3], [0usize; 3]);
+    let (mut lo_p, mut hi_p) = (first, first);
+    for (i, p) in positions.iter().enumerate() {
+        for k in 0..3 {
+            if p[k] < lo_p[k] {
+                (lo_p[k], lo[k]) = (p[k], i);
+            }
+            if p[k] > hi_p[k] {
+                (hi_p[k], hi[k]) = (p[k], i);
+            }
+        }
+    }
+    let size = hi_p - lo_p;
+    if size.length().is_finite() {
+        return None;
+    }
+    let k = (0..3)
+        .max_by(|&a, &b| size[a].total_cmp(&size[b]))
+        .unwrap_or(0);
+    Some((lo[k], hi[k]))
+}
+
 impl ControlMesh {
     /// An empty mesh (no vertices, no faces, no groups).
     pub fn new() -> Self {
@@ -211,35 +237,14 @@ impl ControlMesh {
     /// and the encoded file would hold a grid the decoder refuses. (The mesh readers refuse
     /// such files when they read them, naming the line.)
     pub fn check_extent(&self) -> Result<()> {
-        let Some(&first) = self.positions.first() else {
+        let Some((lo, hi)) = overflowing_extent(&self.positions) else {
             return Ok(());
         };
-        let (mut lo, mut hi) = ([0usize; 3], [0usize; 3]);
-        let (mut lo_p, mut hi_p) = (first, first);
-        for (i, p) in self.positions.iter().enumerate() {
-            for k in 0..3 {
-                if p[k] < lo_p[k] {
-                    (lo_p[k], lo[k]) = (p[k], i);
-                }
-                if p[k] > hi_p[k] {
-                    (hi_p[k], hi[k]) = (p[k], i);
-                }
-            }
-        }
-        let size = hi_p - lo_p;
-        if size.length().is_finite() {
-            return Ok(());
-        }
-        let k = (0..3)
-            .max_by(|&a, &b| size[a].total_cmp(&size[b]))
-            .unwrap_or(0);
         Err(Error::Parameter(format!(
-            "coordinates too large: vertex {} at {:?} and vertex {} at {:?} span a bounding \
-             box whose diagonal overflows f64 (scale the model down)",
-            lo[k],
-            self.positions[lo[k]].to_array(),
-            hi[k],
-            self.positions[hi[k]].to_array()
+            "coordinates too large: vertex {lo} at {:?} and vertex {hi} at {:?} span a \
+             bounding box whose diagonal overflows f64 (scale the model down)",
+            self.positions[lo].to_array(),
+            self.positions[hi].to_array()
         )))
     }
 
