@@ -2,23 +2,20 @@
 //! tessellation of the same faces), both ways, per CAD face.
 //!
 //! A refinement round changes a few faces and leaves the others' decoded surfaces as they
-//! were, so the measurement is kept per face ([`GroupDecoded`]). A face whose control
-//! support did not change ([`Supports::key`]) keeps its closest-point index, its samples and
-//! their distances to the input without being decoded; a face whose support changed is
-//! decoded from its support alone ([`Supports::surface`]) and keeps its results when its
-//! triangles are the same set as before ([`block_fingerprint`], corners on a grid of 2^-32
-//! of the model's size: across a sharp edge a neighbour's new control points do not reach
-//! them); only the others are indexed, sampled and queried again. When another face gains
-//! control points the control mesh is numbered anew; neither test sees numbers, so the
-//! encoder's decisions stay a function of its inputs alone (the same bytes on every run and
-//! thread count).
-//!
-//! Closest-point queries run in spatial order ([`spatial_order`]), each starting from the
-//! last one's answer: neighbouring samples have neighbouring answers.
+//! were, so the measurement is kept per face ([`GroupDecoded`]): a face whose decoded
+//! triangles did not change keeps its closest-point index, its samples and their distances to
+//! the input, and only changed faces are indexed, sampled and queried again. "Did not change"
+//! compares the triangles as a set, corners on a grid of 2^-32 of the model's size
+//! ([`block_fingerprint`]): when another face gains control points, the control mesh is
+//! numbered anew, and an unchanged face's triangles come out in another order and with
+//! other roundings in the last bits. The kept measurement is then one of a surface within
+//! that grid of the current one, far below any tolerance, and the encoder's decisions stay a
+//! function of its inputs alone (the same bytes on every run and thread count).
 //!
 //! At a fine level the decoded surface has millions of triangles, so nothing holds all of
-//! them at once: a changed face's old index is dropped before its new one is built, and
-//! decoded samples are made as they are measured.
+//! them twice: the surface is handed out face by face ([`UniformSurface`]), a changed face's
+//! old index is dropped before its new one is built, and decoded samples are made as they
+//! are measured.
 
 use std::sync::Mutex;
 
@@ -27,14 +24,13 @@ use glam::DVec3;
 use super::allowance::OwnFaces;
 use super::encoder::FitError;
 use super::map_ordered;
-use super::support::{mix, Supports};
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    closest_points_near, closest_points_near_with, sample_surface, spatial_order, RandomSamples,
-    SampleCount, SurfaceSample, TriangleSurface,
+    closest_points_near, closest_points_near_with, sample_surface, RandomSamples, SampleCount,
+    SurfaceSample, TriangleSurface,
 };
-use crate::subdiv::UniformSurface;
+use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
 /// Error of a decoded surface against the input, measured both ways.
 pub(crate) struct Measurement {
@@ -50,11 +46,9 @@ pub(crate) struct Measurement {
 }
 
 /// One face's decoded triangles and what was measured on them. Everything in it is a
-/// function of the face's control support alone (and of the input, which never changes), so
-/// it is reused while the support is the same.
+/// function of the triangles' corners alone (and of the input, which never changes), so it
+/// is reused while the face decodes to the same triangles (see [`GroupDecoded::same_triangles`]).
 struct GroupDecoded {
-    /// What identifies the face's support ([`Supports::key`]); `None` never matches.
-    support: Option<u64>,
     /// What identifies the face's decoded triangles: the [`block_fingerprint`] of each
     /// control face's, sorted (the order in which control faces come out is not kept).
     blocks: Vec<u64>,
@@ -83,7 +77,7 @@ struct GroupDecoded {
 fn block_fingerprint(positions: &[DVec3], triangles: &[[u32; 3]], grid: f64) -> u64 {
     let inv = 1.0 / grid;
     // Truncation snaps as well as rounding does (grid lines at the integers), in one
-    // instruction: this runs over the decoded triangles of every face measured anew.
+    // instruction: this runs over the decoded triangles of every measurement.
     let snap = |p: DVec3| (p * inv).to_array().map(|x| x as i64);
     let mut sum = mix(triangles.len() as u64);
     for t in triangles {
@@ -100,7 +94,28 @@ fn block_fingerprint(positions: &[DVec3], triangles: &[[u32; 3]], grid: f64) -> 
     sum
 }
 
+/// SplitMix64's finaliser: every input bit moves every output bit.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
 impl GroupDecoded {
+    /// Whether group `g` of `surface` decodes to the same triangles as this face, by the
+    /// fingerprints of its control faces' (stops making them at the first one not kept).
+    fn same_triangles(&self, surface: &UniformSurface, g: usize, grid: f64) -> bool {
+        let mut seen = Vec::with_capacity(self.blocks.len());
+        let all = surface.visit_group_triangles(g, |tris| {
+            let f = block_fingerprint(surface.positions(), tris, grid);
+            seen.push(f);
+            seen.len() <= self.blocks.len() && self.blocks.binary_search(&f).is_ok()
+        });
+        seen.sort_unstable();
+        all && seen == self.blocks
+    }
+
     /// Distance from `p` to the box (0 inside).
     fn box_distance(&self, p: DVec3) -> f64 {
         (self.lo - p).max(p - self.hi).max(DVec3::ZERO).length()
@@ -166,8 +181,6 @@ struct MeasureCache {
 pub(crate) struct ErrorMeter<'a> {
     mesh: &'a ControlMesh,
     input_samples: Vec<SurfaceSample>,
-    /// The input samples in [`spatial_order`], the order they are measured in.
-    input_order: Vec<u32>,
     input_surface: &'a TriangleSurface,
     chord: &'a [f64],
     /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
@@ -297,12 +310,9 @@ impl<'a> ErrorMeter<'a> {
                 }
             })
             .collect();
-        let points: Vec<DVec3> = input_samples.iter().map(|s| s.point).collect();
-        let input_order = spatial_order(&points);
         ErrorMeter {
             mesh,
             input_samples,
-            input_order,
             input_surface,
             chord,
             own_faces,
@@ -336,15 +346,13 @@ impl<'a> ErrorMeter<'a> {
     /// Distance from input sample `p` to the decoded surface, and the group holding the
     /// nearest point, searching the groups of `order` (the sample's input group's
     /// [`search_orders`] entry) while their lower bound is below the best distance so far;
-    /// `best` is a distance already reached (infinite for none). With the nearest point when
-    /// one nearer than `best` was found.
+    /// `best` is a distance already reached (infinite for none).
     fn nearest_decoded(
         p: DVec3,
         groups: &[&GroupDecoded],
         order: &[(f64, u32)],
         mut best: (f64, u32),
-    ) -> ((f64, u32), Option<DVec3>) {
-        let mut point = None;
+    ) -> (f64, u32) {
         for &(bound, g) in order {
             if bound > best.0 {
                 break;
@@ -361,10 +369,9 @@ impl<'a> ErrorMeter<'a> {
             };
             if let Some(h) = hit.filter(|h| h.distance < best.0) {
                 best = (h.distance, g);
-                point = Some(h.point);
             }
         }
-        (best, point)
+        best
     }
 
     /// Like [`ErrorMeter::measure`], but with `over = Some(max_cap)` first measures the
@@ -379,50 +386,31 @@ impl<'a> ErrorMeter<'a> {
         level: u8,
         over: Option<f64>,
     ) -> Result<Option<Measurement>> {
-        let supports = Supports::new(decoded, u32::from(level))?;
-        let n_groups = self.mesh.groups.len().max(supports.group_count());
+        let surface = UniformSurface::new(decoded, u32::from(level), DEFAULT_MAX_FACES)?;
+        let n_groups = self.mesh.groups.len().max(surface.group_count());
         let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
         cache.groups.resize_with(n_groups, || None);
         let groups: Vec<usize> = (0..n_groups).collect();
-        let keys = map_ordered(&groups, |&g| supports.key(g));
-        // A face whose support changed is subdivided anew; it is measured anew only when
-        // its triangles changed too (a neighbour's new control points in the support often
-        // leave them as they were: sharp edges keep the two sides apart).
-        let remade: Vec<usize> = groups
-            .into_iter()
-            .filter(|&g| {
-                keys[g].is_none()
-                    || cache.groups[g]
-                        .as_ref()
-                        .is_none_or(|c| c.support != keys[g])
-            })
-            .collect();
-        // A probe needs only the groups holding last time's worst decoded samples: those are
-        // made first, and the others only once the probe passed.
-        let probed: Vec<u32> = cache.probe_out.iter().map(|x| x.0).collect();
-        let (first, rest): (Vec<usize>, Vec<usize>) = remade
-            .iter()
-            .partition(|&&g| over.is_some() && probed.binary_search(&(g as u32)).is_ok());
-        let mut fresh_locals = Vec::new();
-        self.remake(&supports, &keys, &first, &mut cache, &mut fresh_locals)?;
+        let unchanged = map_ordered(&groups, |&g| {
+            cache.groups[g]
+                .as_ref()
+                .is_some_and(|c| c.same_triangles(&surface, g, self.grid))
+        });
+        let changed: Vec<usize> = groups.into_iter().filter(|&g| !unchanged[g]).collect();
         if let Some(max_cap) = over {
-            let changed: Vec<usize> = fresh_locals.iter().map(|x| x.0).collect();
-            let locals: Vec<&LocalTriangles> = fresh_locals.iter().map(|x| &x.1).collect();
-            if self.decoded_probe_fails(&cache, &changed, &locals, max_cap) {
+            if self.decoded_probe_fails(&cache, &changed, &surface, max_cap) {
                 return Ok(None);
             }
         }
-        self.remake(&supports, &keys, &rest, &mut cache, &mut fresh_locals)?;
-        fresh_locals.sort_unstable_by_key(|x| x.0);
-        let changed: Vec<usize> = fresh_locals.iter().map(|x| x.0).collect();
         // What changed groups kept is of no more use: dropped before their new indexes exist.
         for &g in &changed {
             cache.groups[g] = None;
         }
-        let mut fresh: Vec<GroupDecoded> = fresh_locals
-            .into_iter()
-            .map(|(g, local)| index_group(local, keys[g]))
-            .collect::<Result<_>>()?;
+        let mut fresh: Vec<GroupDecoded> =
+            map_ordered(&changed, |&g| index_group(&surface, g, self.grid))
+                .into_iter()
+                .collect::<Result<_>>()?;
+        drop(surface);
         let Some(in_hits) = self.input_to_decoded(&cache, &changed, &fresh, over) else {
             return Ok(None);
         };
@@ -437,56 +425,23 @@ impl<'a> ErrorMeter<'a> {
         Ok(Some(measurement))
     }
 
-    /// Subdivides the supports of `groups` (ascending; their support keys changed): a group
-    /// whose triangles stayed the same keeps its measurement under its new key, the others
-    /// are pushed to `changed` with their triangles.
-    fn remake(
-        &self,
-        supports: &Supports<'_>,
-        keys: &[Option<u64>],
-        groups: &[usize],
-        cache: &mut MeasureCache,
-        changed: &mut Vec<(usize, LocalTriangles)>,
-    ) -> Result<()> {
-        // Supports overlap (each holds its neighbours' faces next to it): past the size of
-        // the whole model, subdividing it once costs less. Both give the same triangles.
-        let support_faces: usize = groups.iter().map(|&g| supports.support_size(g)).sum();
-        let locals = if support_faces > supports.face_count() {
-            let whole = supports.whole_surface()?;
-            map_ordered(groups, |&g| Ok(localise(&whole, g, self.grid)))
-        } else {
-            map_ordered(groups, |&g| -> Result<LocalTriangles> {
-                let (surface, local) = supports.surface(g)?;
-                Ok(localise(&surface, local, self.grid))
-            })
-        };
-        for (&g, local) in groups.iter().zip(locals) {
-            let local = local?;
-            match cache.groups[g].as_mut() {
-                Some(kept) if kept.blocks == local.blocks => kept.support = keys[g],
-                _ => changed.push((g, local)),
-            }
-        }
-        Ok(())
-    }
-
     /// Whether one of the worst decoded samples of last time is over the tolerance or
     /// `max_cap`: an unchanged group's as measured, a changed group's at the same index
-    /// measured now (on its new triangles `fresh`, in `changed` order, before any index is
-    /// built, so a failing probe leaves what was kept as it was).
+    /// measured now (on `surface`, before any index is built, so a failing probe leaves
+    /// what was kept as it was).
     fn decoded_probe_fails(
         &self,
         cache: &MeasureCache,
         changed: &[usize],
-        fresh: &[&LocalTriangles],
+        surface: &UniformSurface,
         max_cap: f64,
     ) -> bool {
         let mut probe: Vec<(usize, DVec3)> = Vec::new();
         // The probes are in (group, index) order.
         for run in cache.probe_out.chunk_by(|a, b| a.0 == b.0) {
             let g = run[0].0 as usize;
-            if let Ok(k) = changed.binary_search(&g) {
-                let local = fresh[k];
+            if changed.binary_search(&g).is_ok() {
+                let local = localise(surface, g, self.grid);
                 if local.triangles.is_empty() {
                     continue;
                 }
@@ -541,58 +496,32 @@ impl<'a> ErrorMeter<'a> {
         let all: Vec<usize> = (0..groups.len()).collect();
         let order_all = self.search_orders(&groups, &all);
         let order_changed = self.search_orders(&groups, changed);
-        // `near`: a point of the decoded surface near the sample (the last sample's nearest,
-        // in spatial order) and its group: its distance bounds the search.
-        let in_hit = |i: usize, near: Option<(DVec3, u32)>| -> ((f64, u32), Option<DVec3>) {
+        let in_hit = |i: usize| -> (f64, u32) {
             let s = &self.input_samples[i];
             let own = self.mesh.face_groups[s.triangle as usize] as usize;
-            let p = s.point;
             match cache.in_hits.get(i) {
                 Some(&hit) if reuse && changed.binary_search(&(hit.1 as usize)).is_err() => {
-                    Self::nearest_decoded(p, &groups, &order_changed[own], hit)
+                    Self::nearest_decoded(s.point, &groups, &order_changed[own], hit)
                 }
-                _ => {
-                    let none = (f64::INFINITY, u32::MAX);
-                    let bound =
-                        near.map_or(none, |(q, g)| ((p - q).length() * (1.0 + 1e-9) + 1e-300, g));
-                    match Self::nearest_decoded(p, &groups, &order_all[own], bound) {
-                        (hit, Some(q)) => (hit, Some(q)),
-                        // Not reached: the point near it is within the bound.
-                        _ => Self::nearest_decoded(p, &groups, &order_all[own], none),
-                    }
-                }
+                _ => Self::nearest_decoded(
+                    s.point,
+                    &groups,
+                    &order_all[own],
+                    (f64::INFINITY, u32::MAX),
+                ),
             }
         };
         if let Some(max_cap) = over {
             let fails = |i: usize| {
-                let d = in_hit(i, None).0 .0;
+                let d = in_hit(i).0;
                 d - self.chord[self.input_samples[i].triangle as usize] > self.tol || d > max_cap
             };
             if cache.probe_in.iter().any(|&i| fails(i)) {
                 return None;
             }
         }
-        // Runs of samples in spatial order, each measured one after the other so that every
-        // sample starts from the last one's answer (a fixed split: the same answers on any
-        // number of threads).
-        let runs: Vec<&[u32]> = self.input_order.chunks(256).collect();
-        let in_order = map_ordered(&runs, |run| {
-            let mut near = None;
-            run.iter()
-                .map(|&i| {
-                    let (hit, q) = in_hit(i as usize, near);
-                    if let Some(q) = q {
-                        near = Some((q, hit.1));
-                    }
-                    hit
-                })
-                .collect::<Vec<_>>()
-        });
-        let mut hits = vec![(0.0, 0); n_in];
-        for (&i, h) in self.input_order.iter().zip(in_order.into_iter().flatten()) {
-            hits[i as usize] = h;
-        }
-        Some(hits)
+        let indices: Vec<usize> = (0..n_in).collect();
+        Some(map_ordered(&indices, |&i| in_hit(i)))
     }
 
     /// Per input group, the decoded groups among `candidates` (ascending) with a surface,
@@ -639,20 +568,13 @@ impl<'a> ErrorMeter<'a> {
         let Some(samples) = GroupSamples::of(gd.surface.as_ref(), random, g) else {
             return;
         };
-        let points: Vec<DVec3> = (0..samples.len()).map(|i| samples.point(i)).collect();
-        let order = spatial_order(&points);
-        let in_order = closest_points_near_with(
+        let measured = closest_points_near_with(
             samples.len(),
-            |k| points[order[k] as usize],
+            |i| samples.point(i),
             self.input_surface,
             2.0 * self.tol,
             |_, p, h| [self.out_excess(p, g, h.triangle, h.distance), h.distance],
         );
-        drop(points);
-        let mut measured = vec![[0.0; 2]; in_order.len()];
-        for (&i, m) in order.iter().zip(in_order) {
-            measured[i as usize] = m;
-        }
         let (mut worst, mut over_tolerance) = (None, Vec::new());
         for (i, &[e, _]) in measured.iter().enumerate() {
             if worst.is_none_or(|w: (f64, DVec3)| e > w.0) {
@@ -767,9 +689,7 @@ struct LocalTriangles {
     blocks: Vec<u64>,
 }
 
-/// Group `g`'s decoded triangles over its own vertices (`surface`: the whole model's, or a
-/// face's support with g its group there: [`Supports::surface`]), fingerprinted on a grid
-/// of `grid`.
+/// Group `g`'s decoded triangles over its own vertices, fingerprinted on a grid of `grid`.
 fn localise(surface: &UniformSurface, g: usize, grid: f64) -> LocalTriangles {
     let all = surface.positions();
     let mut lo = DVec3::splat(f64::INFINITY);
@@ -804,16 +724,15 @@ fn localise(surface: &UniformSurface, g: usize, grid: f64) -> LocalTriangles {
     }
 }
 
-/// The closest-point index of a face's decoded triangles `local`, whose support is
-/// identified by `support`; no samples yet.
-fn index_group(local: LocalTriangles, support: Option<u64>) -> Result<GroupDecoded> {
+/// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
+fn index_group(surface: &UniformSurface, g: usize, grid: f64) -> Result<GroupDecoded> {
     let LocalTriangles {
         mut positions,
         mut triangles,
         lo,
         hi,
         blocks,
-    } = local;
+    } = localise(surface, g, grid);
     // Kept until the face changes: without the slack of growing by pushes.
     positions.shrink_to_fit();
     triangles.shrink_to_fit();
@@ -827,7 +746,6 @@ fn index_group(local: LocalTriangles, support: Option<u64>) -> Result<GroupDecod
         )?)
     };
     Ok(GroupDecoded {
-        support,
         blocks,
         surface,
         lo,

@@ -24,7 +24,6 @@ mod refine;
 mod rounds;
 pub mod segment;
 mod solve;
-mod support;
 
 #[cfg(test)]
 pub(crate) mod test_support;

@@ -153,47 +153,6 @@ pub fn closest_points_near_with<R: Copy + Default + Send>(
     out
 }
 
-/// The order in which to query `points` so that each is near the one before: along a
-/// Z-order (Morton) curve over their box, 21 bits per axis. Closest-point queries in this
-/// order find their answer near the last one's, which bounds the search
-/// ([`closest_points_near_with`]) and keeps the index's nodes in cache; in random order
-/// neither happens.
-pub fn spatial_order(points: &[DVec3]) -> Vec<u32> {
-    let (lo, hi) = points
-        .iter()
-        .filter(|p| p.is_finite())
-        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), &p| {
-            (l.min(p), h.max(p))
-        });
-    let scale = ((1u64 << 21) - 1) as f64 / (hi - lo).max_element().max(1e-300);
-    // Spreads the low 21 bits of x to every third bit.
-    fn spread(x: u64) -> u64 {
-        let mut x = x & 0x1F_FFFF;
-        x = (x | x << 32) & 0x001F_0000_0000_FFFF;
-        x = (x | x << 16) & 0x001F_0000_FF00_00FF;
-        x = (x | x << 8) & 0x100F_00F0_0F00_F00F;
-        x = (x | x << 4) & 0x10C3_0C30_C30C_30C3;
-        (x | x << 2) & 0x1249_2492_4924_9249
-    }
-    let code = |p: DVec3| {
-        let q = ((p - lo) * scale).to_array().map(|x| {
-            if x.is_finite() {
-                x.clamp(0.0, 2_097_151.0) as u64
-            } else {
-                0
-            }
-        });
-        spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2
-    };
-    let mut keyed: Vec<(u64, u32)> = points
-        .iter()
-        .enumerate()
-        .map(|(i, &p)| (code(p), i as u32))
-        .collect();
-    keyed.sort_unstable();
-    keyed.into_iter().map(|x| x.1).collect()
-}
-
 /// Distances from each of `points` to `surface`, in the order of `points`.
 pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
     closest_points(points, surface)

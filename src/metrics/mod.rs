@@ -12,7 +12,7 @@ mod surface;
 
 pub use distance::{
     closest_points, closest_points_near, closest_points_near_with, hausdorff, one_sided_distances,
-    point_distances, spatial_order, DistanceOptions, DistanceReport, OneSided,
+    point_distances, DistanceOptions, DistanceReport, OneSided,
 };
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
