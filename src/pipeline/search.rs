@@ -14,7 +14,7 @@ use std::str::FromStr;
 use crate::codec::{self, EncodeOptions};
 use crate::error::{Error, Result};
 use crate::fit::encoder::{FitOptions, FitReport, SurfaceHint};
-use crate::mesh::ControlMesh;
+use crate::mesh::{ControlMesh, PatchKind};
 
 use super::{encode_fitted_once, rotate_faces, ModelEncodeOptions};
 
@@ -216,26 +216,20 @@ pub(crate) fn smallest_traversal_start(
 /// faces: per group, in order, its patch kind and its faces (each by its corners' positions,
 /// rotated to the smallest, sorted), with the sharp edges and corners by position. `None`
 /// when the file does not decode.
-fn decoded_surface_key(bytes: &[u8], limits: &codec::Limits) -> Option<Vec<String>> {
+fn decoded_surface_key(bytes: &[u8], limits: &codec::Limits) -> Option<SurfaceKey> {
     let mesh = codec::decode(bytes, limits).ok()?.mesh;
     let at = |v: u32| mesh.positions[v as usize].to_array().map(f64::to_bits);
-    let mut faces: Vec<Vec<(u32, Vec<[u64; 3]>)>> = vec![Vec::new(); mesh.groups.len()];
+    let mut groups: Vec<(PatchKind, Vec<Vec<[u64; 3]>>)> =
+        mesh.groups.iter().map(|g| (g.patch, Vec::new())).collect();
     for (f, &g) in mesh.face_groups.iter().enumerate() {
-        let corners: Vec<[u64; 3]> = mesh.face(f).iter().map(|&v| at(v)).collect();
+        let mut corners: Vec<[u64; 3]> = mesh.face(f).iter().map(|&v| at(v)).collect();
         let first = (0..corners.len()).min_by_key(|&k| corners[k]).unwrap_or(0);
-        let mut rotated = corners.clone();
-        rotated.rotate_left(first);
-        faces.get_mut(g as usize)?.push((g, rotated));
+        corners.rotate_left(first);
+        groups.get_mut(g as usize)?.1.push(corners);
     }
-    let mut key: Vec<String> = mesh
-        .groups
-        .iter()
-        .zip(&mut faces)
-        .map(|(group, f)| {
-            f.sort_unstable();
-            format!("{:?} {f:?}", group.patch)
-        })
-        .collect();
+    for (_, faces) in &mut groups {
+        faces.sort_unstable();
+    }
     let mut sharp: Vec<[[u64; 3]; 2]> = mesh
         .sharp_edges
         .iter()
@@ -248,8 +242,19 @@ fn decoded_surface_key(bytes: &[u8], limits: &codec::Limits) -> Option<Vec<Strin
     sharp.sort_unstable();
     let mut corners: Vec<[u64; 3]> = mesh.corners.iter().map(|&v| at(v)).collect();
     corners.sort_unstable();
-    key.push(format!("{sharp:?} {corners:?}"));
-    Some(key)
+    Some(SurfaceKey {
+        groups,
+        sharp,
+        corners,
+    })
+}
+
+/// See [`decoded_surface_key`].
+#[derive(PartialEq)]
+struct SurfaceKey {
+    groups: Vec<(PatchKind, Vec<Vec<[u64; 3]>>)>,
+    sharp: Vec<[[u64; 3]; 2]>,
+    corners: Vec<[u64; 3]>,
 }
 
 #[cfg(feature = "step")]
