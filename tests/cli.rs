@@ -409,6 +409,60 @@ fn max_seconds_bounds_the_whole_encode() {
     }
 }
 
+/// `encode --max-memory`: an encode whose resident memory passes the budget ends with status
+/// 4 and a message naming the option and what was resident, writes nothing and leaves the
+/// input as it was; a generous budget lets it finish; a budget that is not a positive byte
+/// count is a usage error.
+#[test]
+fn max_memory_bounds_the_whole_encode() {
+    let input = tmp("dense_sphere_memory.obj");
+    std::fs::write(&input, dense_sphere_obj(300)).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let out = tmp("dense_sphere_memory.scode");
+    let _ = std::fs::remove_file(&out);
+    // A 180k-triangle fit holds far more than 16 MiB (the process alone is a few MiB).
+    let (status, text) = scode_status(&[
+        "encode",
+        "--max-memory",
+        "16M",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 4, "{text}");
+    assert!(
+        text.contains("needed more than 16 MiB of memory (--max-memory 16777216")
+            && text.contains("resident")
+            && text.contains("not written"),
+        "{text}"
+    );
+    assert!(
+        !out.exists(),
+        "an encode over its budget wrote {}",
+        out.display()
+    );
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+    let (status, text) = scode_status(&[
+        "encode",
+        "--raw",
+        "--max-memory",
+        "8G",
+        input.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(status, 0, "{text}");
+    assert!(out.exists());
+    for bad in ["0", "-1", "2T", "lots", "1.5G"] {
+        let (status, text) = scode_status(&[
+            "encode",
+            "--max-memory",
+            bad,
+            input.to_str().unwrap(),
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(status, 1, "{bad}: {text}");
+    }
+}
+
 /// An OS error is printed once, after the path it is about.
 #[test]
 fn os_errors_are_printed_once() {

@@ -49,7 +49,7 @@ fn read_scode(path: &Path, limits: &Limits) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// Set when `encode --max-seconds` gives up on the encode; its output is then never written.
+/// Set when `encode --max-seconds` or `--max-memory` gives up on the encode; its output is then never written.
 /// [`write_file`] holds the lock while it writes, so a file is written whole or not at all
 /// and the one that gives up knows which.
 static GAVE_UP: std::sync::Mutex<bool> = std::sync::Mutex::new(false);
@@ -57,17 +57,30 @@ static GAVE_UP: std::sync::Mutex<bool> = std::sync::Mutex::new(false);
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     let gave_up = GAVE_UP.lock().unwrap_or_else(|e| e.into_inner());
     if *gave_up {
-        return Err(CliError::TimeLimit("over the time limit: nothing written".into()).into());
+        return Err(
+            CliError::BudgetExceeded("over the encode's budget: nothing written".into()).into(),
+        );
     }
     std::fs::write(path, bytes).map_err(|e| scode::Error::io(path, e).into())
 }
 
-/// `encode` with a whole-encode time budget (`--max-seconds`): the encode runs in its own
-/// thread; past the budget the output is barred (see [`GAVE_UP`]) and the error returned,
-/// and `main` returning ends the process, which stops every thread of the encode (the
-/// fitting's and the STEP reader's alike) wherever it is, with no cooperation needed.
-pub fn encode_within(args: EncodeArgs, seconds: f64) -> Result<()> {
+/// `encode` with a whole-encode budget of time (`--max-seconds`) and resident memory
+/// (`--max-memory`): the encode runs in its own thread while this one watches the clock and
+/// the process's resident set; past either budget the output is barred (see [`GAVE_UP`])
+/// and the error returned, and `main` returning ends the process, which stops every thread
+/// of the encode (the fitting's and the STEP reader's alike) wherever it is, with no
+/// cooperation needed.
+pub fn encode_within(args: EncodeArgs, seconds: Option<f64>, memory: Option<u64>) -> Result<()> {
     use std::sync::mpsc::RecvTimeoutError;
+    use std::time::{Duration, Instant};
+    if memory.is_some() && resident_bytes().is_none() {
+        return Err(CliError::Usage(
+            "--max-memory needs the process's resident memory, which this system does not \
+             report (/proc/self/status)"
+                .into(),
+        )
+        .into());
+    }
     let input = args.input.clone();
     let output = args
         .output
@@ -80,29 +93,73 @@ pub fn encode_within(args: EncodeArgs, seconds: f64) -> Result<()> {
             let _ = tx.send(encode(&args));
         })
         .context("cannot start the encode thread")?;
-    match rx.recv_timeout(std::time::Duration::from_secs_f64(seconds)) {
-        Ok(result) => return result,
-        Err(RecvTimeoutError::Disconnected) => {
-            return Err(anyhow::anyhow!(
-                "the encode of {} panicked (a bug; please report it)",
-                input.display()
-            ))
+    let start = Instant::now();
+    let deadline = seconds.map(|s| start + Duration::from_secs_f64(s));
+    // Often enough that a budget is passed by what a few milliseconds allocate, rarely
+    // enough that the readings cost nothing next to the encode.
+    let poll = Duration::from_millis(5);
+    let over = loop {
+        let wait = match deadline {
+            Some(d) => d.saturating_duration_since(Instant::now()).min(poll),
+            None => poll,
+        };
+        match rx.recv_timeout(wait) {
+            Ok(result) => return result,
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(anyhow::anyhow!(
+                    "the encode of {} panicked (a bug; please report it)",
+                    input.display()
+                ))
+            }
+            Err(RecvTimeoutError::Timeout) => {}
         }
-        Err(RecvTimeoutError::Timeout) => {}
-    }
+        if let (Some(max), Some(held)) = (memory, memory.and_then(|_| resident_bytes())) {
+            if held > max {
+                break format!(
+                    "the encode needed more than {} of memory (--max-memory {max}; {} resident \
+                     after {:.1} s)",
+                    mib(max),
+                    mib(held),
+                    start.elapsed().as_secs_f64()
+                );
+            }
+        }
+        if let (Some(d), Some(s)) = (deadline, seconds) {
+            if Instant::now() >= d {
+                break format!("the encode did not finish within {s} s (--max-seconds)");
+            }
+        }
+    };
     let mut gave_up = GAVE_UP.lock().unwrap_or_else(|e| e.into_inner());
     // An encode that wrote its file while the lock was being taken is done: report it.
     if let Ok(result) = rx.try_recv() {
         return result;
     }
     *gave_up = true;
-    Err(CliError::TimeLimit(format!(
-        "{}: the encode did not finish within {seconds} s (--max-seconds); stopped, {} not \
-         written",
-        input.display(),
-        output
+    Err(CliError::BudgetExceeded(format!(
+        "{}: {over}; stopped, {output} not written",
+        input.display()
     ))
     .into())
+}
+
+fn mib(bytes: u64) -> String {
+    format!("{:.0} MiB", bytes as f64 / f64::from(1u32 << 20))
+}
+
+/// The process's resident memory in bytes (`VmRSS` of /proc/self/status), where the system
+/// reports it.
+fn resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kib: u64 = line
+        .trim_start_matches("VmRSS:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    kib.checked_mul(1024)
 }
 
 fn is_scode(path: &Path) -> bool {

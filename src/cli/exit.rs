@@ -16,8 +16,8 @@ pub const USAGE: u8 = 1;
 pub const INPUT: u8 = 2;
 /// A `.scode` file is malformed (names the section and field).
 pub const FORMAT: u8 = 3;
-/// A resource limit was exceeded (decoder limits, `encode --max-seconds`, STEP worker
-/// threads that cannot be stopped).
+/// A resource limit was exceeded (decoder limits, `encode --max-seconds` or
+/// `--max-memory`, STEP worker threads that cannot be stopped).
 pub const LIMITS: u8 = 4;
 /// `encode`: the decoded surface misses `--tolerance` or `--mean-tolerance`; the file is
 /// written (the closest the encoder came).
@@ -34,7 +34,8 @@ Exit status:
      input or whose extension does not fit what is written)
   2  input or I/O error (file not readable or writable, malformed or unsupported model)
   3  malformed .scode file
-  4  resource limit exceeded (decode limits, encode --max-seconds: nothing is written)
+  4  resource limit exceeded (decode limits, encode --max-seconds or --max-memory:
+     nothing is written)
   5  encode: tolerance not met (the file is written)
   6  encode: STEP faces skipped without --allow-skipped (nothing is written)";
 
@@ -50,9 +51,9 @@ pub enum CliError {
     /// Faces of the input were left out and the user did not allow it.
     #[error("{0}")]
     FacesSkipped(String),
-    /// The command did not finish within its time budget (`encode --max-seconds`).
+    /// The encode went over its time or memory budget (`--max-seconds`, `--max-memory`).
     #[error("{0}")]
-    TimeLimit(String),
+    BudgetExceeded(String),
 }
 
 /// The exit status for `err`: the first cause in its chain that says what kind of failure
@@ -64,7 +65,7 @@ pub fn status(err: &anyhow::Error) -> u8 {
                 CliError::Usage(_) => USAGE,
                 CliError::ToleranceNotMet(_) => TOLERANCE,
                 CliError::FacesSkipped(_) => SKIPPED,
-                CliError::TimeLimit(_) => LIMITS,
+                CliError::BudgetExceeded(_) => LIMITS,
             };
         }
         if let Some(e) = cause.downcast_ref::<Error>() {

@@ -310,6 +310,14 @@ pub struct EncodeArgs {
     /// status 4. Default: no limit (a STEP file's own reading timeouts still apply).
     #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
     pub max_seconds: Option<f64>,
+    /// Largest resident memory the whole encode may hold, in bytes (suffixes K, M, G for
+    /// KiB, MiB, GiB: `--max-memory 2G`). The process's resident set is read every few
+    /// milliseconds; over the budget scode stops every thread of the encode by exiting,
+    /// writes nothing, and exits with status 4. A burst of allocation between two readings
+    /// can pass the budget by what it allocates in that time. Linux only (it reads
+    /// /proc/self/status). Default: no limit.
+    #[arg(long, value_name = "BYTES", value_parser = parse_memory)]
+    pub max_memory: Option<u64>,
     /// Print what the reader repaired and per-stage timings.
     #[arg(short, long)]
     pub verbose: bool,
@@ -509,15 +517,32 @@ fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
+/// A byte count with an optional binary suffix: `1048576`, `512M`, `2G`.
+fn parse_memory(s: &str) -> std::result::Result<u64, String> {
+    let t = s.trim();
+    let (digits, shift) = match t.char_indices().last() {
+        Some((i, 'K' | 'k')) => (&t[..i], 10),
+        Some((i, 'M' | 'm')) => (&t[..i], 20),
+        Some((i, 'G' | 'g')) => (&t[..i], 30),
+        _ => (t, 0),
+    };
+    digits
+        .parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(1u64 << shift))
+        .filter(|&n| n > 0)
+        .ok_or_else(|| format!("must be a positive byte count (suffix K, M or G allowed), got {s}"))
+}
+
 fn parse_effort(s: &str) -> std::result::Result<Effort, String> {
     s.parse().map_err(|e: scode::Error| e.to_string())
 }
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Encode(a) => match a.max_seconds {
-            Some(seconds) => commands::encode_within(a, seconds),
-            None => commands::encode(&a),
+        Command::Encode(a) => match (a.max_seconds, a.max_memory) {
+            (None, None) => commands::encode(&a),
+            (seconds, memory) => commands::encode_within(a, seconds, memory),
         },
         Command::Decode(a) => commands::decode(&a),
         Command::Info(a) => commands::info(&a),
