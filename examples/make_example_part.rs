@@ -8,7 +8,7 @@
 use std::f64::consts::TAU;
 use std::fmt::Write as _;
 
-const SEGMENTS_PER_SIDE: usize = 6; // plate edge subdivisions
+const SEGMENTS_PER_SIDE: usize = 16; // plate edge subdivisions: the boss circle's sagitta is then 2e-4 of the diagonal
 const CIRCLE_SEGMENTS: usize = 4 * SEGMENTS_PER_SIDE; // boss circle matches the square's count
 const BOSS_ROWS: usize = 3;
 

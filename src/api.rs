@@ -150,6 +150,10 @@ pub use crate::io::MeshFormat;
 #[cfg(feature = "encoder")]
 pub use crate::pipeline::Effort;
 
+/// What a fitted file's error is measured against (re-exported from the fit).
+#[cfg(feature = "encoder")]
+pub use crate::fit::encoder::Reference;
+
 /// What [`encode`] compresses.
 #[cfg(feature = "encoder")]
 #[derive(Clone, Copy, Debug)]
@@ -171,8 +175,14 @@ pub enum Input<'a> {
 #[derive(Clone, Debug, PartialEq)]
 pub struct EncodeOptions {
     /// Largest distance the decoded surface may be from the input (default: 1e-3 of the
-    /// bounding-box diagonal).
+    /// bounding-box diagonal): the plain distance to an input mesh (unless
+    /// `chord_allowance`), the distance to the B-rep for STEP input.
     pub tolerance: Tolerance,
+    /// Hold the tolerance beyond the input mesh's own chord error (each facet's estimated
+    /// distance from the CAD surface it tessellates) instead of to the mesh itself: for
+    /// coarse tessellations of smooth parts, whose facets a smooth surface cannot come nearer
+    /// to than their sagitta. Default false. STEP input is always measured against its B-rep.
+    pub chord_allowance: bool,
     /// Default [`Effort::Default`].
     pub effort: Effort,
     /// Store the group names (default true).
@@ -187,6 +197,7 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions {
             tolerance: Tolerance::DEFAULT,
+            chord_allowance: false,
             effort: Effort::Default,
             store_group_names: true,
             raw_bits: None,
@@ -210,8 +221,9 @@ pub struct Encoded {
     /// Fitted files: the largest distance between the decoded surface (default level, limit
     /// positions) and the input, in model units.
     pub max_error: Option<f64>,
-    /// Whether the fit met the tolerance (beyond the input's own chord error); always true
-    /// for raw mode.
+    /// Fitted files: what `max_error` and the tolerance were measured against.
+    pub reference: Option<Reference>,
+    /// Whether the fit met the tolerance against `reference`; always true for raw mode.
     pub within_tolerance: bool,
     /// STEP input: B-rep faces that could not be read or tessellated, left out of the file.
     pub skipped_faces: usize,
@@ -250,6 +262,7 @@ pub fn encode(input: Input<'_>, opts: &EncodeOptions) -> Result<Encoded> {
         ..Default::default()
     };
     model_opts.fit.tolerance = opts.tolerance;
+    model_opts.fit.chord_allowance = opts.chord_allowance;
     let mut notes = Vec::new();
     let (mesh, fitted, skipped_faces) = match input {
         Input::Mesh(m) => (m.to_control()?, None, 0),
@@ -301,6 +314,7 @@ pub fn encode(input: Input<'_>, opts: &EncodeOptions) -> Result<Encoded> {
         input_groups: mesh.groups.len(),
         tolerance: fit.as_ref().map(|f| f.tolerance),
         max_error: fit.as_ref().map(|f| f.error.max),
+        reference: fit.as_ref().map(|f| f.reference),
         within_tolerance: fit.as_ref().is_none_or(|f| f.within_tolerance),
         skipped_faces,
         notes,

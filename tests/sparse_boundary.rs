@@ -40,6 +40,8 @@ fn fitted_boss_plate_sparse_output_is_watertight() {
         .groups
         .iter()
         .all(|g| matches!(g.patch, scode::mesh::PatchKind::Boundary(_))));
+    // Plane triangles of the sparse output at the level before, by `limit`.
+    let mut before = [0usize; 2];
     for level in 1..=4u32 {
         for limit in [false, true] {
             let opts = SubdivOptions {
@@ -66,14 +68,38 @@ fn fitted_boss_plate_sparse_output_is_watertight() {
             .unwrap();
             assert_closed(tris(&dense), &format!("dense level {level}"));
             assert_eq!(dense.face_count(), mesh_triangles(&mesh) << (2 * level));
-            // boundary patches grow about 2x per level instead of 4x
-            let factor = if level >= 3 { 4 } else { 1 };
+            // Plane patches grow about 2x per level (along their outlines) where their dense
+            // grids grow 4x.
+            let in_planes = |m: &scode::ControlMesh| {
+                m.face_groups
+                    .iter()
+                    .filter(|&&g| {
+                        matches!(
+                            mesh.groups[g as usize].patch,
+                            scode::mesh::PatchKind::Boundary(scode::mesh::BoundarySurface::Plane)
+                        )
+                    })
+                    .count()
+            };
             assert!(
-                sparse.face_count() * factor < dense.face_count(),
+                sparse.face_count() < dense.face_count(),
                 "level {level}: sparse {} dense {}",
                 sparse.face_count(),
                 dense.face_count()
             );
+            let was = &mut before[usize::from(limit)];
+            assert!(
+                level == 1 || 2 * in_planes(&sparse) <= 5 * *was,
+                "level {level}: {} plane triangles after {was}",
+                in_planes(&sparse)
+            );
+            assert!(
+                level < 3 || 4 * in_planes(&sparse) < in_planes(&dense),
+                "level {level}: plane triangles sparse {} dense {}",
+                in_planes(&sparse),
+                in_planes(&dense)
+            );
+            *was = in_planes(&sparse);
         }
     }
     let r = Refinement::new(&mesh, 4).unwrap();

@@ -48,7 +48,8 @@ fn step_path_no_larger_than_mesh_path() {
     let Some(corpus) = corpus_dir() else { return };
     // At the highest effort: the STEP path's tessellations and fits are searched, as the
     // mesh path's are. The corpus tessellation's sphere facets sag up to 0.45 tol and the
-    // mesh path is not charged for its input's chord error, so the STEP path measures its
+    // mesh path (with the chord allowance, as the STEP path has) is not charged for them,
+    // so the STEP path measures its
     // analytic faces against their exact surfaces and tessellates them more coarsely. trj4
     // is not here: its mesh path is held to the corpus facets, which are over 1.4 mm off
     // the exact surfaces in places, and the STEP path, held to the exact surfaces, is larger.

@@ -86,6 +86,8 @@ class Encoded:
     max_error: Optional[float]
     within_tolerance: bool
     skipped_faces: int
+    # What max_error and the tolerance were measured against (fitted files).
+    reference: Optional[str] = None
     notes: List[str] = field(default_factory=list)
 
 
@@ -123,6 +125,7 @@ def encode(
     effort: str = "default",
     raw_bits: Optional[int] = None,
     store_names: bool = True,
+    chord_allowance: bool = False,
 ) -> bytes:
     """Encodes a triangle mesh to ``.scode`` bytes.
 
@@ -133,6 +136,9 @@ def encode(
     (default 1e-3) or model units. ``sharp_edges``: (k, 2) vertex pairs that are creases
     besides the group boundaries. ``effort``: "fast", "default" or "max". ``raw_bits``:
     store the mesh itself (no fit), positions quantised to that many bits.
+    ``chord_allowance``: hold the tolerance beyond the input's own chord error (each facet's
+    estimated distance from the CAD surface it tessellates) instead of to the mesh itself,
+    for coarse tessellations of smooth parts; ``Encoded.reference`` says which was measured.
     """
     return encode_mesh(
         vertices,
@@ -145,6 +151,7 @@ def encode(
         effort=effort,
         raw_bits=raw_bits,
         store_names=store_names,
+        chord_allowance=chord_allowance,
     ).data
 
 
@@ -160,6 +167,7 @@ def encode_mesh(
     effort: str = "default",
     raw_bits: Optional[int] = None,
     store_names: bool = True,
+    chord_allowance: bool = False,
 ) -> Encoded:
     """:func:`encode` returning the encoder's report (:class:`Encoded`) with the bytes."""
     v = _array(vertices, np.float64, 3, "vertices")
@@ -178,6 +186,7 @@ def encode_mesh(
             effort,
             raw_bits,
             bool(store_names),
+            bool(chord_allowance),
         )
     )
 
@@ -191,6 +200,7 @@ def encode_file(
     effort: str = "default",
     raw_bits: Optional[int] = None,
     store_names: bool = True,
+    chord_allowance: bool = False,
 ) -> Encoded:
     """Encodes a model file held in memory.
 
@@ -208,6 +218,7 @@ def encode_file(
             effort,
             raw_bits,
             bool(store_names),
+            bool(chord_allowance),
         )
     )
 

@@ -21,6 +21,7 @@ def encode_mesh(
     effort: str,
     raw_bits: Optional[int],
     store_names: bool,
+    chord_allowance: bool = False,
 ) -> Dict[str, Any]: ...
 def encode_file(
     data: bytes,
@@ -30,6 +31,7 @@ def encode_file(
     effort: str,
     raw_bits: Optional[int],
     store_names: bool,
+    chord_allowance: bool = False,
 ) -> Dict[str, Any]: ...
 def decode(
     data: bytes,

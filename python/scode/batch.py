@@ -218,8 +218,8 @@ def worker(input_path: str, output_path: str, options_json: str) -> int:
         skipped_faces=enc.skipped_faces,
         error=None
         if enc.within_tolerance
-        else f"the fit missed the tolerance {enc.tolerance:.4g} beyond the input's own chord "
-        f"error (max distance to the input {enc.max_error:.4g})",
+        else f"the fit missed the tolerance {enc.tolerance:.4g} against {enc.reference} "
+        f"(max distance {enc.max_error:.4g})",
     )
     print(json.dumps(out))
     return 0

@@ -108,12 +108,15 @@ fn encode_options(
     effort_name: &str,
     raw_bits: Option<u8>,
     store_names: bool,
+    chord_allowance: bool,
 ) -> PyResult<scode::EncodeOptions> {
     Ok(scode::EncodeOptions {
         tolerance: scode::Tolerance::new(tolerance, relative),
+        chord_allowance,
         effort: effort(effort_name)?,
         store_group_names: store_names,
         raw_bits,
+        ..Default::default()
     })
 }
 
@@ -126,6 +129,7 @@ fn encoded<'py>(py: Python<'py>, e: scode::Encoded) -> PyResult<Bound<'py, PyDic
     d.set_item("input_groups", e.input_groups)?;
     d.set_item("tolerance", e.tolerance)?;
     d.set_item("max_error", e.max_error)?;
+    d.set_item("reference", e.reference.map(|r| r.describe()))?;
     d.set_item("within_tolerance", e.within_tolerance)?;
     d.set_item("skipped_faces", e.skipped_faces)?;
     d.set_item("notes", PyList::new(py, e.notes)?)?;
@@ -134,7 +138,7 @@ fn encoded<'py>(py: Python<'py>, e: scode::Encoded) -> PyResult<Bound<'py, PyDic
 
 /// Encodes a triangle mesh given as native-endian arrays (see `scode.encode`).
 #[pyfunction]
-#[pyo3(signature = (positions, triangles, groups, names, sharp_edges, tolerance, relative, effort, raw_bits, store_names))]
+#[pyo3(signature = (positions, triangles, groups, names, sharp_edges, tolerance, relative, effort, raw_bits, store_names, chord_allowance=false))]
 #[allow(clippy::too_many_arguments)]
 fn encode_mesh<'py>(
     py: Python<'py>,
@@ -148,6 +152,7 @@ fn encode_mesh<'py>(
     effort: &str,
     raw_bits: Option<u8>,
     store_names: bool,
+    chord_allowance: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mesh = scode::Mesh {
         positions: f64x3(positions, "vertices")?,
@@ -162,7 +167,14 @@ fn encode_mesh<'py>(
             None => Vec::new(),
         },
     };
-    let opts = encode_options(tolerance, relative, effort, raw_bits, store_names)?;
+    let opts = encode_options(
+        tolerance,
+        relative,
+        effort,
+        raw_bits,
+        store_names,
+        chord_allowance,
+    )?;
     let e = py
         .detach(|| scode::encode(scode::Input::Mesh(&mesh), &opts))
         .map_err(to_py)?;
@@ -172,7 +184,7 @@ fn encode_mesh<'py>(
 /// Encodes a file in memory: `format` is "step" (or "stp") or a mesh format ("obj", "ply",
 /// "stl", "off", "glb").
 #[pyfunction]
-#[pyo3(signature = (data, format, tolerance, relative, effort, raw_bits, store_names))]
+#[pyo3(signature = (data, format, tolerance, relative, effort, raw_bits, store_names, chord_allowance=false))]
 #[allow(clippy::too_many_arguments)]
 fn encode_file<'py>(
     py: Python<'py>,
@@ -183,8 +195,16 @@ fn encode_file<'py>(
     effort: &str,
     raw_bits: Option<u8>,
     store_names: bool,
+    chord_allowance: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let opts = encode_options(tolerance, relative, effort, raw_bits, store_names)?;
+    let opts = encode_options(
+        tolerance,
+        relative,
+        effort,
+        raw_bits,
+        store_names,
+        chord_allowance,
+    )?;
     let format = format.to_ascii_lowercase();
     let input = if format == "step" || format == "stp" {
         scode::Input::Step(data)

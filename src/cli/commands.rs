@@ -12,7 +12,7 @@ use scode::{ControlMesh, Tolerance};
 
 use super::exit::CliError;
 use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, SubdivideArgs, Writes};
-use scode::fit::encoder::SurfaceHint;
+use scode::fit::encoder::{Reference, SurfaceHint};
 use scode::io::step;
 use scode::pipeline::{
     decode_surface, encode_fitted, encode_step, sidecar_hints, Detail, ModelEncodeOptions,
@@ -292,6 +292,14 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         )
         .into());
     }
+    if args.raw && args.chord_allowance {
+        return Err(CliError::Usage(
+            "--chord-allowance applies to fitting (it changes what the tolerance is measured \
+             against); --raw stores the input as it is"
+                .into(),
+        )
+        .into());
+    }
     let t0 = Instant::now();
     let mut model_opts = ModelEncodeOptions {
         quantization_bits: args.bits,
@@ -301,6 +309,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     };
     model_opts.fit.tolerance = args.tolerance();
     model_opts.fit.mean_tolerance = args.mean_tolerance();
+    model_opts.fit.chord_allowance = args.chord_allowance;
     let is_step = step::is_step_path(&args.input);
     // A STEP file is read and fitted in one call (at `--effort max`, several tessellations).
     let (mesh, step_fit) = if is_step && !args.raw {
@@ -368,24 +377,33 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         );
         let d = fit.diagonal.max(f64::MIN_POSITIVE);
         println!(
-            "decoded surface at level {} vs input: max {:.4e} ({:.2e} of the diagonal), rms {:.4e}, mean {:.4e}; \
+            "decoded surface at level {} vs {}: max {:.4e} ({:.2e} of the diagonal), rms {:.4e}, mean {:.4e}; \
              tolerance {:.4e} {}",
             fit.default_level,
+            fit.reference.describe(),
             fit.error.max,
             fit.error.max / d,
             fit.error.rms,
             fit.error.mean,
             fit.tolerance,
-            if fit.error.max_beyond_chord <= fit.tolerance {
-                "met (beyond the input's own chord error)".to_string()
+            if fit.error.max_excess <= fit.tolerance {
+                "met".to_string()
             } else {
                 missed.push(format!(
-                    "the max distance is {:.2}x the tolerance",
-                    fit.error.max_beyond_chord / fit.tolerance
+                    "the max distance to {} is {:.2}x the tolerance{}",
+                    fit.reference.describe(),
+                    fit.error.max_excess / fit.tolerance,
+                    if fit.reference == Reference::InputMesh {
+                        " (a smooth surface cannot come nearer to coarse facets than their \
+                         sagitta: --chord-allowance holds the tolerance beyond the input's \
+                         chord error)"
+                    } else {
+                        ""
+                    }
                 ));
                 format!(
-                    "NOT met: {:.2}x the tolerance beyond the input's chord error after {} rounds",
-                    fit.error.max_beyond_chord / fit.tolerance,
+                    "NOT met: {:.2}x the tolerance after {} rounds",
+                    fit.error.max_excess / fit.tolerance,
                     fit.rounds
                 )
             }

@@ -285,6 +285,16 @@ pub struct EncodeArgs {
     /// Read --tolerance and --mean-tolerance as fractions of the bounding-box diagonal.
     #[arg(long)]
     pub relative: bool,
+    /// Hold the tolerance beyond the input's own chord error instead of to the input mesh
+    /// itself: each facet's estimated distance from the CAD surface it tessellates (from its
+    /// vertex normals, and from the surface of cylinder and cone faces) is allowed on top.
+    /// Without it the tolerance bounds the plain distance between the decoded surface and the
+    /// input mesh, which `scode info --against` and any mesh tool measure. Use it for coarse
+    /// tessellations of smooth parts: a smooth surface cannot come nearer to a facet than its
+    /// sagitta. A STEP file is always measured against its B-rep (exact surfaces, and the
+    /// tessellation less its chord error for the other faces).
+    #[arg(long)]
+    pub chord_allowance: bool,
     /// How hard to search for a smaller file. `default` fits once, with choices decided
     /// from the model; `fast` also skips the relaxation round and quarter-bit quantisation
     /// steps and keeps the fit's own face order (for converting many files); `max` fits the

@@ -108,6 +108,14 @@ pub struct FitOptions {
     /// not only of its facets (see [`ExactSurface`]), and a closed patch is fitted onto it
     /// (as are creases whose faces all have one).
     pub exact_surfaces: Vec<Option<ExactSurface>>,
+    /// Measure beyond the input's own chord error: each input facet's estimated distance
+    /// from the CAD surface it tessellates (from its vertex normals, and from the analytic
+    /// surface of cylinder and cone faces) is allowed on top of the tolerance. Off by default,
+    /// so that the tolerance bounds the plain distance to the input, as any mesh tool
+    /// measures it; on for a coarse tessellation of a smooth part, whose facets no smooth
+    /// surface comes nearer to than their sagitta, and for STEP input, whose tessellation
+    /// stands in for the B-rep it approximates to within its chord error.
+    pub chord_allowance: bool,
     /// A finer tessellation of the same faces (the same groups, by name, in the same order)
     /// to measure the decoded surface against instead of the input; the fit still starts
     /// from and fits to the input's triangles. `None`: measured against the input.
@@ -129,6 +137,7 @@ impl Default for FitOptions {
             keep_planes_on_faces: true,
             relax: true,
             exact_surfaces: Vec::new(),
+            chord_allowance: false,
             reference: None,
         }
     }
@@ -140,15 +149,47 @@ pub struct FitError {
     pub max: f64,
     pub rms: f64,
     pub mean: f64,
-    /// Largest distance beyond the input's own chord error (how far its facets may be from
-    /// the CAD surface they tessellate): the quantity the tolerance bounds.
-    pub max_beyond_chord: f64,
+    /// The quantity the tolerance bounds: the largest distance to the reference as
+    /// [`FitReport::reference`] says (the plain distance to the input, or the distance
+    /// beyond its facets' own chord error).
+    pub max_excess: f64,
+}
+
+/// What a fit's error is measured against: the reference the tolerance is a promise about.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Reference {
+    /// The input mesh as given: the plain distance, what `scode info --against` and any
+    /// mesh tool measure.
+    #[default]
+    InputMesh,
+    /// The input mesh, less each facet's chord error (its estimated distance from the CAD
+    /// surface it tessellates): for coarse tessellations, whose facets a smooth surface
+    /// cannot come nearer to than their sagitta ([`FitOptions::chord_allowance`]).
+    InputBeyondChord,
+    /// A B-rep: faces on analytic surfaces against those surfaces, the others against a
+    /// tessellation of the B-rep less its chord error (STEP input).
+    Brep,
+}
+
+impl Reference {
+    /// What the error was measured against, for messages ("vs ...").
+    pub fn describe(self) -> &'static str {
+        match self {
+            Reference::InputMesh => "the input mesh",
+            Reference::InputBeyondChord => "the input mesh beyond its facets' chord error",
+            Reference::Brep => {
+                "the B-rep (exact surfaces; other faces beyond their tessellation's chord error)"
+            }
+        }
+    }
 }
 
 /// What the encoder did, for `--verbose` and the report.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FitReport {
     pub tolerance: f64,
+    /// What the error was measured against.
+    pub reference: Reference,
     /// [`FitOptions::mean_tolerance`], model units.
     pub mean_tolerance: Option<f64>,
     pub diagonal: f64,
@@ -207,6 +248,11 @@ pub fn fit_model(
     let diag = mesh.diagonal();
     let (tol, mean_tol) = checked_tolerances(opts, diag)?;
     report.tolerance = tol;
+    report.reference = match (opts.chord_allowance, opts.exact_surfaces.is_empty()) {
+        (false, _) => Reference::InputMesh,
+        (true, true) => Reference::InputBeyondChord,
+        (true, false) => Reference::Brep,
+    };
     report.mean_tolerance = mean_tol;
     report.diagonal = diag;
     let mut t = Instant::now();
@@ -234,7 +280,7 @@ pub fn fit_model(
         Some(r) => (r, None),
         None => (&input, Some(&chains.net)),
     };
-    let allowances = Allowances::new(measured, net, &kinds)?;
+    let allowances = Allowances::new(measured, net, &kinds, opts.chord_allowance)?;
     report.timings.push(("curves", t.elapsed().as_secs_f64()));
     // A segmented input's groups are not the input's: no exact surfaces then.
     let exact: &[Option<ExactSurface>] = if faces.segmented {
@@ -330,15 +376,16 @@ fn finish_report(report: &mut FitReport, chosen: &Quantised, tol: f64, mean_tol:
     if chosen.coarser_quarter_bits > 0 {
         report.notes.push(format!(
             "quantisation: {} bits coarser than the default still meets the tolerance \
-             (max error {:.3e}, {:.2} tol beyond the input's chord error)",
+             (max error {:.3e}, {:.2} tol vs {})",
             f64::from(chosen.coarser_quarter_bits) / 4.0,
             err.max,
-            err.max_beyond_chord / tol
+            err.max_excess / tol,
+            report.reference.describe()
         ));
     }
     let mean_ok = mean_tol.is_none_or(|mt| err.mean <= mt);
     report.error = err;
-    report.within_tolerance = err.max_beyond_chord <= tol && mean_ok;
+    report.within_tolerance = err.max_excess <= tol && mean_ok;
     if !mean_ok {
         report.notes.push(format!(
             "mean error {:.3e} is over the mean tolerance {:.3e}: lower the tolerance",

@@ -612,7 +612,8 @@ impl<'a> ErrorMeter<'a> {
         let (max_in, rms_in, mean_in) = stats(&mut in_hits.iter().map(|h| h.0));
         let (max_out, rms_out, mean_out) =
             stats(&mut groups.iter().flat_map(|g| g.samples.iter().map(|s| s[1])));
-        // Excess over the tolerance, after allowing for the input's own chord error, and
+        // Excess over the tolerance, beyond the input's chord allowance (zero unless the
+        // fit allows for it), and
         // where it is.
         let n_groups = self.mesh.groups.len();
         let mut group_excess = vec![(0.0f64, DVec3::ZERO, "in"); n_groups];
@@ -669,7 +670,7 @@ impl<'a> ErrorMeter<'a> {
                 max: max_in.max(max_out),
                 rms: rms_in.max(rms_out),
                 mean: mean_in.max(mean_out),
-                max_beyond_chord: worst,
+                max_excess: worst,
             },
             group_excess,
             bad_points,

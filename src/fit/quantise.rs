@@ -104,7 +104,7 @@ fn coarsest_step(
         mut bytes,
     } = *candidate;
     let mut coarser_bits = 0;
-    if err.max_beyond_chord > tol {
+    if err.max_excess > tol {
         return Ok((err, coarser_bits, bytes));
     }
     let mean_ok = |e: &FitError| mean_tol.is_none_or(|mt| e.mean <= mt);
@@ -137,7 +137,7 @@ fn coarsest_step(
             .map_err(|e| with_faces_involved(e, &decoded))?;
         let whole = coarser % 4 == 0;
         let within = m.filter(|m| {
-            m.error.max_beyond_chord <= tol
+            m.error.max_excess <= tol
                 && m.error.max <= max_cap
                 && mean_ok(&m.error)
                 && (whole || (coarser_bytes < bytes && m.error.rms <= 0.25 * tol))

@@ -2,9 +2,7 @@
 //! tessellation of the same faces the caller gave, prepared for closest-point queries as a
 //! whole and face by face, with each triangle's chord allowance.
 
-use super::allowance::{
-    add_analytic_surface_allowance, add_curved_edge_allowance, chord_allowance, OwnFaces,
-};
+use super::allowance::{add_analytic_surface_allowance, add_curved_edge_allowance, OwnFaces};
 use super::curves::CurveNetwork;
 use super::encoder::FitReport;
 use super::exact::ExactSurface;
@@ -49,19 +47,31 @@ pub(super) struct Allowances {
 impl Allowances {
     /// The allowances of `facets` for faces of the patch kinds `kinds`; with the curve
     /// network of the same mesh, triangles along curved chains get their edges' sagitta too.
-    pub fn new(facets: &Facets, net: Option<&CurveNetwork>, kinds: &[PatchKind]) -> Result<Self> {
+    /// Without `chord_allowance` every allowance is zero: the plain distance is measured
+    /// ([`super::encoder::FitOptions::chord_allowance`]).
+    pub fn new(
+        facets: &Facets,
+        net: Option<&CurveNetwork>,
+        kinds: &[PatchKind],
+        chord_allowance: bool,
+    ) -> Result<Self> {
         let surface = TriangleSurface::new(facets.mesh.positions.clone(), facets.tris.clone())?;
-        let mut chord = chord_allowance(&facets.mesh, &facets.tris);
-        if let Some(net) = net {
-            add_curved_edge_allowance(&facets.mesh, &facets.tris, net, &mut chord);
-        }
-        add_analytic_surface_allowance(
-            &facets.mesh.positions,
-            &facets.tris,
-            &facets.mesh.face_groups,
-            kinds,
-            &mut chord,
-        );
+        let chord = if chord_allowance {
+            let mut chord = super::allowance::chord_allowance(&facets.mesh, &facets.tris);
+            if let Some(net) = net {
+                add_curved_edge_allowance(&facets.mesh, &facets.tris, net, &mut chord);
+            }
+            add_analytic_surface_allowance(
+                &facets.mesh.positions,
+                &facets.tris,
+                &facets.mesh.face_groups,
+                kinds,
+                &mut chord,
+            );
+            chord
+        } else {
+            vec![0.0; facets.tris.len()]
+        };
         let group_max_chord = facets
             .group_tris
             .iter()

@@ -25,6 +25,13 @@ use crate::mesh::{ControlMesh, PatchKind};
 /// triangles to measure.
 const STALL_RATIO: f64 = 0.85;
 
+/// Rounds in a row whose worst excess is no better than [`NO_GAIN_RATIO`] of the best so far
+/// after which the fit stops refining: a face refined down to the input's own vertices, or
+/// facets no smooth surface comes nearer to, fail the same way round after round, and each
+/// round costs a measurement.
+const NO_GAIN_ROUNDS: usize = 3;
+const NO_GAIN_RATIO: f64 = 0.98;
+
 /// A fitted model within reach of the output: its error, control mesh, decode level and
 /// file size at the default quantisation.
 pub(super) struct Candidate {
@@ -87,6 +94,9 @@ impl Rounds<'_> {
         // Set once the model is within tolerance and refined patches are being coarsened again.
         let mut relaxing: Option<Relaxation> = None;
         let mut decimator = FaceDecimator::default();
+        // The smallest worst excess of a failing round so far, and how many failing rounds
+        // since came no nearer.
+        let (mut nearest, mut no_gain) = (f64::INFINITY, 0);
         for round in 0..opts.max_rounds.max(1) {
             report.rounds = round + 1;
             let level = levels_tried.unwrap_or(4);
@@ -97,12 +107,12 @@ impl Rounds<'_> {
                 bytes,
             } = self.round(plan, level, &mut decimator, reconstruct, report)?;
             let err = measured.error;
-            let worst = err.max_beyond_chord;
+            let worst = err.max_excess;
             let ok = worst <= tol;
             let better = best.as_ref().is_none_or(|b| {
                 let e = &b.err;
-                let e_ok = e.max_beyond_chord <= tol;
-                (ok && !e_ok) || (ok == e_ok && worst < e.max_beyond_chord)
+                let e_ok = e.max_excess <= tol;
+                (ok && !e_ok) || (ok == e_ok && worst < e.max_excess)
             });
             let candidate = || Candidate {
                 err,
@@ -114,6 +124,21 @@ impl Rounds<'_> {
                 best = Some(candidate());
             } else if relaxing.is_some() && ok {
                 relaxed_best = Some(candidate());
+            }
+            if !ok && relaxing.is_none() {
+                no_gain = if worst > NO_GAIN_RATIO * nearest {
+                    no_gain + 1
+                } else {
+                    0
+                };
+                nearest = nearest.min(worst);
+                if no_gain >= NO_GAIN_ROUNDS {
+                    report.notes.push(format!(
+                        "  stopped: {NO_GAIN_ROUNDS} rounds came no nearer than {:.2} tol",
+                        nearest / tol
+                    ));
+                    break;
+                }
             }
             let last = round + 1 >= opts.max_rounds;
             match self.after_measurement(ok, last, &mut relaxing, &measured, plan, report) {
@@ -214,7 +239,7 @@ impl Rounds<'_> {
         report.timings.push(("fit", t_fit));
         report.timings.push(("measure", t.elapsed().as_secs_f64()));
         report.notes.push(format!(
-            "round {}: {} control vertices ({} of {} faces decimated anew{}), level {level}, max error {:.3e} ({:.2} tol; {:.2} tol beyond the input's chord error), rms {:.3e}; {} of {} faces measured anew",
+            "round {}: {} control vertices ({} of {} faces decimated anew{}), level {level}, max error {:.3e} ({:.2} tol; {:.2} tol vs {}), rms {:.3e}; {} of {} faces measured anew",
             report.rounds,
             built.control.vertex_count(),
             built.decimation.faces_redone,
@@ -222,7 +247,8 @@ impl Rounds<'_> {
             if built.decimation.whole_mesh { ", then the whole mesh as one" } else { "" },
             err.max,
             err.max / tol,
-            err.max_beyond_chord / tol,
+            err.max_excess / tol,
+            report.reference.describe(),
             err.rms,
             measured.changed_groups,
             self.faces.mesh.groups.len()

@@ -61,11 +61,11 @@ pub fn check_model(path: &Path, min_ratio: f64) {
         },
     )
     .unwrap();
-    // The tolerance bounds the distance to the CAD surface; the input's facets are
-    // themselves up to their chord error away from it, which the encoder allows for. On
-    // these fine tessellations that allowance is well under half the tolerance.
+    // The tolerance bounds the plain distance to the input mesh, which this measures again
+    // with random samples of its own (the vertices of both are sampled by both): a few
+    // percent of slack for what other samples find between the encoder's.
     assert!(
-        dist.max <= 1.5 * tol,
+        dist.max <= 1.03 * tol,
         "{name}: max {:.3e} vs tolerance {tol:.3e}",
         dist.max
     );
