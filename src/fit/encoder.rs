@@ -113,8 +113,9 @@ pub struct FitOptions {
     /// surface of cylinder and cone faces) is allowed on top of the tolerance. Off by default,
     /// so that the tolerance bounds the plain distance to the input, as any mesh tool
     /// measures it; on for a coarse tessellation of a smooth part, whose facets no smooth
-    /// surface comes nearer to than their sagitta, and for STEP input, whose tessellation
-    /// stands in for the B-rep it approximates to within its chord error.
+    /// surface comes nearer to than their sagitta. Implied by `exact_surfaces` (STEP input):
+    /// the tessellation then stands in for the B-rep it approximates to within its chord
+    /// error.
     pub chord_allowance: bool,
     /// A finer tessellation of the same faces (the same groups, by name, in the same order)
     /// to measure the decoded surface against instead of the input; the fit still starts
@@ -249,9 +250,9 @@ pub fn fit_model(
     let (tol, mean_tol) = checked_tolerances(opts, diag)?;
     report.tolerance = tol;
     report.reference = match (opts.chord_allowance, opts.exact_surfaces.is_empty()) {
-        (false, _) => Reference::InputMesh,
+        (_, false) => Reference::Brep,
         (true, true) => Reference::InputBeyondChord,
-        (true, false) => Reference::Brep,
+        (false, true) => Reference::InputMesh,
     };
     report.mean_tolerance = mean_tol;
     report.diagonal = diag;
@@ -280,7 +281,10 @@ pub fn fit_model(
         Some(r) => (r, None),
         None => (&input, Some(&chains.net)),
     };
-    let allowances = Allowances::new(measured, net, &kinds, opts.chord_allowance)?;
+    // With exact surfaces the input is a tessellation of a B-rep, which stands in for it
+    // less its chord error.
+    let chord_allowance = report.reference != Reference::InputMesh;
+    let allowances = Allowances::new(measured, net, &kinds, chord_allowance)?;
     report.timings.push(("curves", t.elapsed().as_secs_f64()));
     // A segmented input's groups are not the input's: no exact surfaces then.
     let exact: &[Option<ExactSurface>] = if faces.segmented {

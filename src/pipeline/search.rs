@@ -404,9 +404,6 @@ mod step {
             };
             let mut opts = opts.clone();
             opts.fit.exact_surfaces = step_exact_surfaces(&model);
-            // The reference is the B-rep: the tessellation stands in for it where a face has
-            // no exact surface, less the chord error it was made with.
-            opts.fit.chord_allowance = true;
             opts.fit.reference = reference;
             let fitted = encode_fitted(&model.mesh, &step_hints(&model), &opts);
             if fine.is_none() {
