@@ -1,6 +1,6 @@
-//! `scode report` end to end on two small corpus models, quick mode, without Draco (a
-//! `--draco-dir` that holds no Draco takes the "missing Draco" path, so the test does not
-//! depend on Draco being installed).
+//! `scode report` end to end on two small corpus models, quick mode, without the baselines
+//! (a `--draco-dir` and a `--gltfpack-dir` that hold neither take the "missing baseline"
+//! paths, so the test does not depend on them being installed).
 
 mod common;
 
@@ -27,6 +27,8 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
         .arg(corpus.join("step/screw.step"))
         .args(["--quick", "--jobs", "2", "--draco-dir"])
         .arg(&no_draco)
+        .arg("--gltfpack-dir")
+        .arg(&no_draco)
         .arg("-o")
         .arg(&out)
         .output()
@@ -35,11 +37,13 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
         String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{text}");
     assert!(text.contains("Draco not found"), "{text}");
+    assert!(text.contains("gltfpack not found"), "{text}");
 
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     let first_table = md.lines().find(|l| l.starts_with('|')).unwrap();
     assert!(first_table.contains("scode setting"), "{first_table}");
     assert!(md.contains("Draco not found"), "{md}");
+    assert!(md.contains("gltfpack not found"), "{md}");
     assert!(md.contains("STEP not supported yet"), "{md}");
     assert!(
         md.contains("![tess_screw_coarse_obj") || md.contains("plots/"),
@@ -70,8 +74,10 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
         assert!(bytes > 0 && bpv > 0.0 && ratio > 1.0, "{r:?}");
         assert!(max > 0.0 && max < 0.05 && rms > 0.0 && rms <= max, "{r:?}");
         assert!(enc > 0.0 && dec > 0.0, "{r:?}");
-        // No Draco: no equal-error pairing.
+        // No baseline: no equal-error pairing.
+        assert_eq!(r[col("best_over_scode")], "");
         assert_eq!(r[col("draco_over_scode")], "");
+        assert_eq!(r[col("gltfpack_over_scode")], "");
     }
     // Raw 10 bit: the quantisation error bound sqrt(3)/2 / 1023 of the largest extent.
     for r in measured.iter().filter(|r| r[col("setting")] == "10 bit") {
