@@ -9,6 +9,7 @@
 //! command, [`StepRunner::Subprocess`]) that is killed at the step time limit; a panic,
 //! crash, overrun or error becomes an error row, never the end of the report.
 
+mod brep;
 mod discover;
 mod plot;
 mod run;
@@ -17,6 +18,7 @@ mod table;
 
 use std::path::{Path, PathBuf};
 
+pub use brep::{BrepReference, FaceRuler};
 pub use discover::{classify, discover_models, ModelInput, ModelSource};
 pub use plot::{corpus_chart, model_chart, render, Chart, Series};
 pub use run::{
