@@ -813,6 +813,10 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     opts.model_timeout = std::time::Duration::from_secs(args.model_timeout_secs);
     opts.checkpoint = Some(args.output.clone());
     opts.resume = args.resume;
+    opts.reference = args.reference.map(|r| match r {
+        super::ReferenceArg::Brep => report::Reference::Brep,
+        super::ReferenceArg::Input => report::Reference::Input,
+    });
     opts.runner = StepRunner::Subprocess {
         program: std::env::current_exe().context("cannot find the scode executable")?,
         args: vec!["report-step".into()],

@@ -11,6 +11,7 @@
 
 mod brep;
 mod discover;
+mod model;
 mod plot;
 mod run;
 mod steps;
@@ -19,11 +20,12 @@ mod table;
 use std::path::{Path, PathBuf};
 
 pub use brep::{BrepReference, FaceRuler};
+pub use model::REFERENCE_CHORD_DIVISOR;
 pub use discover::{classify, discover_models, ModelInput, ModelSource};
 pub use plot::{corpus_chart, model_chart, render, Chart, Series};
 pub use run::{
     equal_error, run_report, BaselineMatch, DracoStatus, EqualError, Measured, ModelReport,
-    PointResult, Progress, Report, ReportOptions, DEFAULT_MODEL_TIMEOUT_SECS,
+    PointResult, Progress, Reference, Report, ReportOptions, DEFAULT_MODEL_TIMEOUT_SECS,
 };
 pub use steps::{
     find_draco, find_gltfpack, median, run_scode_job, run_scode_job_json, Baseline, DracoTools,

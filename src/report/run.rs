@@ -7,7 +7,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use super::discover::{discover_models, slug, ModelInput, ModelSource};
+use super::brep::BrepReference;
+use super::discover::{discover_models, slug, ModelInput};
+use super::model::run_model;
 use super::steps::{
     draco_ms, find_draco, find_gltfpack, median, run_scode, run_with_timeout, Baseline, DracoTools,
     ScodeJob, Setting, StepRunner,
@@ -16,7 +18,7 @@ use crate::codec::Limits;
 use crate::error::{Error, Result};
 use crate::io;
 use crate::mesh::ControlMesh;
-use crate::metrics::{measure_against_input, raw_binary_bytes, RateDistortion};
+use crate::metrics::{measure_against_input, RateDistortion};
 use crate::pipeline::{decode_surface, Detail, SurfaceOptions};
 use serde::{Deserialize, Serialize};
 
@@ -60,6 +62,22 @@ pub struct ReportOptions {
     /// Reuse the models a previous run with the same options wrote to `checkpoint`
     /// instead of measuring them again.
     pub resume: bool,
+    /// What errors are measured against; `None`: the B-rep for STEP files, the input for
+    /// mesh files.
+    pub reference: Option<Reference>,
+    /// Chordal tolerances (fractions of the diagonal) of the tessellations of a STEP part
+    /// the baselines are given, each quantised at the bits that suit it.
+    pub tessellation_chords: Vec<f64>,
+}
+
+/// What a report measures decoded surfaces against.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reference {
+    /// The input mesh (for a STEP file: its tessellation at scode's default chordal
+    /// tolerance).
+    Input,
+    /// The exact B-rep surfaces of a STEP file ([`BrepReference`]).
+    Brep,
 }
 
 impl ReportOptions {
@@ -83,6 +101,8 @@ impl ReportOptions {
             runner: StepRunner::InProcess,
             checkpoint: None,
             resume: false,
+            reference: None,
+            tessellation_chords: vec![2e-3, 1e-3, 5e-4, 2.5e-4, 1e-4, 5e-5, 2.5e-5],
         }
     }
 
@@ -94,6 +114,7 @@ impl ReportOptions {
             draco_qp: vec![8, 10, 12, 14],
             draco_cl: vec![10],
             gltfpack_vp: vec![8, 10, 12, 14],
+            tessellation_chords: vec![1e-3, 2.5e-4],
             runs: 1,
             ..ReportOptions::full()
         }
@@ -149,10 +170,22 @@ pub struct Measured {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PointResult {
     pub setting: Setting,
+    /// For a baseline on a STEP part: the chordal tolerance (fraction of the diagonal) of
+    /// the tessellation it was given.
+    #[serde(default)]
+    pub tessellation: Option<f64>,
     pub outcome: std::result::Result<Measured, String>,
 }
 
 impl PointResult {
+    /// The setting's label, with the tessellation's chordal tolerance when there is one.
+    pub fn label(&self) -> String {
+        match self.tessellation {
+            Some(c) => format!("chord {c:.1e} {}", self.setting.label()),
+            None => self.setting.label(),
+        }
+    }
+
     pub fn measured(&self) -> Option<&Measured> {
         self.outcome.as_ref().ok()
     }
@@ -201,6 +234,13 @@ pub struct ModelReport {
     pub raw_bytes: u64,
     /// Why the model was not measured at all (unreadable, unsupported format).
     pub error: Option<String>,
+    /// What the errors are measured against (the input mesh, or the B-rep and how).
+    #[serde(default)]
+    pub reference: String,
+    /// With the B-rep as reference: each face and how it is measured (`face_3 (cylinder):
+    /// exact surface`).
+    #[serde(default)]
+    pub faces: Vec<String>,
     pub points: Vec<PointResult>,
     pub equal_error: Vec<EqualError>,
     pub seconds: f64,
@@ -449,7 +489,7 @@ impl Checkpoint {
     }
 }
 
-fn empty_model(m: &ModelInput) -> ModelReport {
+pub(super) fn empty_model(m: &ModelInput) -> ModelReport {
     ModelReport {
         name: m.name.clone(),
         path: m.path.clone(),
@@ -457,6 +497,8 @@ fn empty_model(m: &ModelInput) -> ModelReport {
         triangles: 0,
         raw_bytes: 0,
         error: None,
+        reference: String::new(),
+        faces: Vec::new(),
         points: Vec::new(),
         equal_error: Vec::new(),
         seconds: 0.0,
@@ -465,124 +507,40 @@ fn empty_model(m: &ModelInput) -> ModelReport {
 
 /// The baselines' tools that were found.
 #[derive(Clone, Copy)]
-struct Baselines<'a> {
-    draco: Option<&'a DracoTools>,
-    gltfpack: Option<&'a Path>,
+pub(super) struct Baselines<'a> {
+    pub draco: Option<&'a DracoTools>,
+    pub gltfpack: Option<&'a Path>,
 }
 
-/// Runs every setting on one model. Never panics out: a panic while reading or measuring
-/// becomes the model's error.
-fn run_model(
-    index: usize,
-    model: &ModelInput,
-    dir: &Path,
-    settings: &[Setting],
-    baselines: &Baselines,
-    opts: &ReportOptions,
-    progress: &(dyn Fn(Progress) + Sync),
-) -> ModelReport {
-    let t0 = Instant::now();
-    let mut report = empty_model(model);
-    if let ModelSource::Unsupported(reason) = &model.source {
-        report.error = Some(reason.clone());
-        return report;
-    }
-    let read = std::panic::catch_unwind(|| io::read_mesh(&model.path));
-    let input = match read {
-        Ok(Ok((mesh, _))) => mesh,
-        Ok(Err(e)) => {
-            report.error = Some(format!("cannot read: {e}"));
-            return report;
-        }
-        Err(_) => {
-            report.error = Some("reader panicked".into());
-            return report;
-        }
-    };
-    report.vertices = input.vertex_count();
-    report.triangles = input
-        .faces()
-        .map(|f| f.len().saturating_sub(2))
-        .sum::<usize>();
-    report.raw_bytes = raw_binary_bytes(&input);
-    if let Err(e) = std::fs::create_dir_all(dir) {
-        report.error = Some(format!("cannot create {}: {e}", dir.display()));
-        return report;
-    }
-    let draco = baselines.draco;
-    let draco_input = dir.join("input_f32.ply");
-    let draco_input_ok = match draco {
-        Some(_) => write_draco_input(&draco_input, &input).map_err(|e| e.to_string()),
-        None => Ok(()),
-    };
-    let gltfpack_input = dir.join("input.glb");
-    let gltfpack_input_ok = match baselines.gltfpack {
-        Some(_) => write_gltfpack_input(&gltfpack_input, &input).map_err(|e| e.to_string()),
-        None => Ok(()),
-    };
-    for setting in settings {
-        let elapsed = t0.elapsed();
-        let outcome = if elapsed >= opts.model_timeout {
-            Err(format!(
-                "skipped: the model's time budget ({} s) is used up",
-                opts.model_timeout.as_secs()
-            ))
-        } else {
-            let timeout = opts.step_timeout.min(opts.model_timeout - elapsed);
-            let output = dir.join(setting.file_name());
-            let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match setting {
-                Setting::Draco { qp, cl } => match (&draco_input_ok, draco) {
-                    (Ok(()), Some(tools)) => run_draco(
-                        tools,
-                        &draco_input,
-                        &output,
-                        *qp,
-                        *cl,
-                        &input,
-                        opts.runs,
-                        timeout,
-                    ),
-                    (Err(e), _) => Err(format!("cannot write Draco input: {e}")),
-                    (_, None) => Err("Draco not found".into()),
-                },
-                Setting::Gltfpack { vp, cc } => match (&gltfpack_input_ok, baselines.gltfpack) {
-                    (Ok(()), Some(tool)) => run_gltfpack(
-                        tool,
-                        &gltfpack_input,
-                        &output,
-                        (*vp, *cc),
-                        &input,
-                        opts.runs,
-                        timeout,
-                    ),
-                    (Err(e), _) => Err(format!("cannot write gltfpack input: {e}")),
-                    (_, None) => Err("gltfpack not found".into()),
-                },
-                _ => run_scode_point(model, &output, *setting, &input, opts, timeout),
-            }));
-            run.unwrap_or_else(|_| Err("measurement panicked".into()))
+/// What decoded surfaces are measured against.
+pub(super) enum Ruler<'a> {
+    /// The input mesh itself.
+    Input(&'a ControlMesh),
+    /// The exact B-rep; `nominal` is the mesh whose vertex count and raw size the rates
+    /// are per (the part's default tessellation).
+    Brep {
+        reference: &'a BrepReference,
+        nominal: &'a ControlMesh,
+    },
+}
+
+impl Ruler<'_> {
+    /// Size and distance of a decoded surface of `bytes` bytes.
+    pub fn rate(&self, bytes: u64, decoded: &ControlMesh) -> std::result::Result<RateDistortion, String> {
+        let (distance, nominal) = match self {
+            Ruler::Input(input) => (measure_against_input(decoded, input), *input),
+            Ruler::Brep { reference, nominal } => (reference.measure(decoded), *nominal),
         };
-        progress(Progress::StepFinished {
-            model: index,
-            name: model.name.clone(),
-            step: setting.label(),
-            ok: outcome.is_ok(),
-        });
-        report.points.push(PointResult {
-            setting: *setting,
-            outcome,
-        });
+        let distance = distance.map_err(|e| format!("cannot measure: {e}"))?;
+        Ok(RateDistortion::new(bytes, nominal, &distance))
     }
-    report.equal_error = equal_error(&report.points);
-    report.seconds = t0.elapsed().as_secs_f64();
-    report
 }
 
-fn run_scode_point(
+pub(super) fn run_scode_point(
     model: &ModelInput,
     output: &Path,
     setting: Setting,
-    input: &ControlMesh,
+    ruler: &Ruler,
     opts: &ReportOptions,
     timeout: Duration,
 ) -> std::result::Result<Measured, String> {
@@ -620,10 +578,8 @@ fn run_scode_point(
         surface = Some(s);
     }
     let surface = surface.ok_or("no decode run")?;
-    let distance =
-        measure_against_input(&surface.mesh, input).map_err(|e| format!("cannot measure: {e}"))?;
     Ok(Measured {
-        rd: RateDistortion::new(bytes.len() as u64, input, &distance),
+        rd: ruler.rate(bytes.len() as u64, &surface.mesh)?,
         encode_ms: median(&encoded.encode_seconds) * 1e3,
         decode_ms: median(&decode_seconds) * 1e3,
         note: encoded.note,
@@ -631,13 +587,13 @@ fn run_scode_point(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn run_draco(
+pub(super) fn run_draco(
     tools: &DracoTools,
     draco_input: &Path,
     output: &Path,
     qp: u8,
     cl: u8,
-    input: &ControlMesh,
+    ruler: &Ruler,
     runs: usize,
     timeout: Duration,
 ) -> std::result::Result<Measured, String> {
@@ -680,10 +636,8 @@ fn run_draco(
     }
     let (decoded, _) =
         io::read_mesh(&decoded_path).map_err(|e| format!("cannot read Draco output: {e}"))?;
-    let distance =
-        measure_against_input(&decoded, input).map_err(|e| format!("cannot measure: {e}"))?;
     Ok(Measured {
-        rd: RateDistortion::new(bytes, input, &distance),
+        rd: ruler.rate(bytes, &decoded)?,
         encode_ms: median(&encode_ms),
         decode_ms: median(&decode_ms),
         note: None,
@@ -695,12 +649,12 @@ fn run_draco(
 /// dequantisation into float positions, no simplification) and read back by scode's glTF
 /// reader, so the geometry measured is what a viewer of the file shows; the decode time is
 /// that repack's wall time, an upper bound of a viewer's decode.
-fn run_gltfpack(
+pub(super) fn run_gltfpack(
     tool: &Path,
     glb_input: &Path,
     output: &Path,
     (vp, cc): (u8, bool),
-    input: &ControlMesh,
+    ruler: &Ruler,
     runs: usize,
     timeout: Duration,
 ) -> std::result::Result<Measured, String> {
@@ -748,10 +702,8 @@ fn run_gltfpack(
         .collect::<std::result::Result<Vec<f64>, String>>()?;
     let (decoded, _) =
         io::read_mesh(&decoded_path).map_err(|e| format!("cannot read gltfpack output: {e}"))?;
-    let distance =
-        measure_against_input(&decoded, input).map_err(|e| format!("cannot measure: {e}"))?;
     Ok(Measured {
-        rd: RateDistortion::new(bytes, input, &distance),
+        rd: ruler.rate(bytes, &decoded)?,
         encode_ms: median(&encode_ms),
         decode_ms: median(&decode_ms),
         note: None,
@@ -762,7 +714,7 @@ fn run_gltfpack(
 /// u32 indices, nothing else (scode's own glb writer adds a feature-id attribute, face
 /// metadata and a LINES primitive of the sharp edges, which gltfpack would keep and pay for;
 /// a mesh delivered through gltfpack has none of them).
-fn write_gltfpack_input(path: &Path, mesh: &ControlMesh) -> Result<()> {
+pub(super) fn write_gltfpack_input(path: &Path, mesh: &ControlMesh) -> Result<()> {
     let tris = triangles(mesh);
     let (lo, hi) = mesh.bounding_box().unwrap_or_default();
     let mut bin = Vec::with_capacity(12 * mesh.vertex_count() + 12 * tris.len());
@@ -829,7 +781,7 @@ fn triangles(mesh: &ControlMesh) -> Vec<[u32; 3]> {
 
 /// The input as Draco reads it: binary PLY, float32 positions, triangles only (polygons fan
 /// triangulated), no groups (Draco has none).
-fn write_draco_input(path: &Path, mesh: &ControlMesh) -> Result<()> {
+pub(super) fn write_draco_input(path: &Path, mesh: &ControlMesh) -> Result<()> {
     use std::io::Write;
     let tris = triangles(mesh);
     let mut buf = Vec::new();
@@ -928,6 +880,7 @@ mod tests {
     fn point(setting: Setting, bytes: u64, max: f64, rms: f64) -> PointResult {
         PointResult {
             setting,
+            tessellation: None,
             outcome: Ok(Measured {
                 rd: RateDistortion {
                     bytes,
@@ -956,6 +909,7 @@ mod tests {
             point(d(12), 8000, 2e-4, 5e-5), // fits both
             PointResult {
                 setting: d(14),
+                tessellation: None,
                 outcome: Err("failed".into()),
             },
             point(Setting::Fitted { tolerance: 1e-5 }, 900, 1e-6, 1e-7), // nothing that good

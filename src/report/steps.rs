@@ -122,6 +122,9 @@ pub const SLOW_ENCODE_SECONDS: f64 = 2.0;
 /// Runs `job` in this process: encodes `runs` times (fewer for slow encodes) and writes the
 /// output file. This is what the child process of [`StepRunner::Subprocess`] executes.
 pub fn run_scode_job(job: &ScodeJob) -> Result<ScodeJobResult> {
+    if io::step::is_step_path(&job.input) {
+        return run_step_job(job);
+    }
     let (mesh, _) = io::read_mesh(&job.input)?;
     let mut result = ScodeJobResult::default();
     let mut bytes = Vec::new();
@@ -160,6 +163,42 @@ pub fn run_scode_job(job: &ScodeJob) -> Result<ScodeJobResult> {
                 )))
             }
         };
+        let secs = t0.elapsed().as_secs_f64();
+        result.encode_seconds.push(secs);
+        if secs > SLOW_ENCODE_SECONDS {
+            break;
+        }
+    }
+    std::fs::write(&job.output, &bytes).map_err(|e| Error::io(&job.output, e))?;
+    result.bytes = bytes.len() as u64;
+    Ok(result)
+}
+
+/// [`run_scode_job`] on a STEP file: the fitted encoder on the B-rep itself
+/// (`pipeline::encode_step`, what `scode encode part.step` does).
+fn run_step_job(job: &ScodeJob) -> Result<ScodeJobResult> {
+    let Setting::Fitted { tolerance } = job.setting else {
+        return Err(Error::Parameter(format!(
+            "{} {} takes a mesh, not a STEP file",
+            job.setting.codec(),
+            job.setting.label()
+        )));
+    };
+    let mut opts = ModelEncodeOptions::default();
+    opts.fit.tolerance = Tolerance::Relative(tolerance);
+    let mut result = ScodeJobResult::default();
+    let mut bytes = Vec::new();
+    for run in 0..job.runs.max(1) {
+        let t0 = Instant::now();
+        let (_, b, fit) = crate::pipeline::encode_step(&job.input, &opts)?;
+        if run == 0 && !fit.within_tolerance {
+            result.note = Some(format!(
+                "fit missed its tolerance by {:.2}x after {} rounds",
+                fit.error.max_beyond_chord / fit.tolerance.max(f64::MIN_POSITIVE),
+                fit.rounds
+            ));
+        }
+        bytes = b;
         let secs = t0.elapsed().as_secs_f64();
         result.encode_seconds.push(secs);
         if secs > SLOW_ENCODE_SECONDS {

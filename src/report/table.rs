@@ -284,9 +284,29 @@ fn model_section(s: &mut String, m: &ModelReport, plot: Option<&str>) {
     }
     let _ = writeln!(
         s,
-        "{} vertices, {} triangles, raw binary {} bytes; {:.1} s.\n",
-        m.vertices, m.triangles, m.raw_bytes, m.seconds
+        "{} vertices, {} triangles, raw binary {} bytes; {:.1} s. Errors are measured \
+         against {}.\n",
+        m.vertices,
+        m.triangles,
+        m.raw_bytes,
+        m.seconds,
+        if m.reference.is_empty() {
+            "the input mesh"
+        } else {
+            &m.reference
+        }
     );
+    if !m.faces.is_empty() {
+        let _ = writeln!(
+            s,
+            "<details><summary>How each face is measured</summary>\n\n{}\n\n</details>\n",
+            m.faces
+                .iter()
+                .map(|f| format!("- {}", md_cell(f)))
+                .collect::<Vec<_>>()
+                .join("\n")
+        );
+    }
     if let Some(p) = plot {
         let _ = writeln!(s, "![{} rate-distortion]({p})\n", m.name);
     }
@@ -302,7 +322,7 @@ fn model_section(s: &mut String, m: &ModelReport, plot: Option<&str>) {
                     s,
                     "| {} | {} | {} | {:.2} | {:.1} | {} | {} | {:.1} | {:.1} | {} |",
                     p.setting.codec(),
-                    p.setting.label(),
+                    p.label(),
                     me.rd.bytes,
                     me.rd.bits_per_vertex,
                     me.rd.ratio_to_raw,
@@ -318,7 +338,7 @@ fn model_section(s: &mut String, m: &ModelReport, plot: Option<&str>) {
                     s,
                     "| {} | {} | | | | | | | | error: {} |",
                     p.setting.codec(),
-                    p.setting.label(),
+                    p.label(),
                     md_cell(e)
                 );
             }
@@ -356,7 +376,7 @@ fn equal_error_table(s: &mut String, m: &ModelReport) {
             .and_then(|p| p.measured().map(|d| (p, d)));
         let (dl, db, de) = match best {
             Some((p, d)) => (
-                format!("{} {}", p.setting.codec(), p.setting.label()),
+                format!("{} {}", p.setting.codec(), p.label()),
                 d.rd.bytes.to_string(),
                 format!("{} / {}", sci(d.rd.max_error), sci(d.rd.rms_error)),
             ),
@@ -434,7 +454,7 @@ pub fn csv_rows(m: &ModelReport) -> String {
                     "{},{},{},{},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.3},{:.3},{},{},{},{},",
                     csv_field(&m.name),
                     p.setting.codec(),
-                    p.setting.label(),
+                    p.label(),
                     me.rd.bytes,
                     me.rd.bits_per_vertex,
                     me.rd.ratio_to_raw,
@@ -455,7 +475,7 @@ pub fn csv_rows(m: &ModelReport) -> String {
                     "{},{},{},,,,,,,,,,,,,,{}",
                     csv_field(&m.name),
                     p.setting.codec(),
-                    p.setting.label(),
+                    p.label(),
                     csv_field(e)
                 );
             }

@@ -1,0 +1,389 @@
+//! One model of the report: what its decoded surfaces are measured against, which mesh each
+//! baseline is given, and the loop over its settings.
+//!
+//! A mesh file is its own reference and every codec encodes it. A STEP part is measured
+//! against its B-rep ([`BrepReference`]) by default: scode encodes the STEP file itself,
+//! and each baseline gets the part tessellated by scode's STEP reader at a series of
+//! chordal tolerances, each quantised at the bits that suit that tolerance, so the
+//! equal-error pairing finds the smallest file of each baseline at each accuracy whatever
+//! tessellation it came from.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use super::brep::{BrepReference, FaceRuler};
+use super::discover::{ModelInput, ModelSource};
+use super::run::{
+    empty_model, equal_error, run_draco, run_gltfpack, run_scode_point, write_draco_input,
+    write_gltfpack_input, Baselines, ModelReport, PointResult, Progress, Reference,
+    ReportOptions, Ruler,
+};
+use super::steps::Setting;
+use crate::io;
+use crate::io::step::{read_step_tessellations, surface_name, StepOptions};
+use crate::mesh::{ControlMesh, Tolerance};
+use crate::metrics::raw_binary_bytes;
+use crate::pipeline::{bits_for_tolerance, step_options_for};
+
+/// How finely the B-rep reference tessellates the faces it measures through facets: its
+/// chordal tolerance is the tightest accuracy of the report divided by this.
+pub const REFERENCE_CHORD_DIVISOR: f64 = 20.0;
+
+/// A model read and ready to measure.
+struct Prepared {
+    /// The mesh rates are per (vertex count, raw size): the input, or a STEP part's
+    /// tessellation at scode's default chordal tolerance.
+    nominal: ControlMesh,
+    brep: Option<BrepReference>,
+    /// What the baselines encode: the input (no chordal tolerance), or a STEP part's
+    /// tessellations with their chordal tolerance (fraction of the diagonal).
+    inputs: Vec<(Option<f64>, ControlMesh)>,
+    step: bool,
+    reference: String,
+    faces: Vec<String>,
+}
+
+impl Prepared {
+    fn ruler(&self) -> Ruler<'_> {
+        match &self.brep {
+            Some(reference) => Ruler::Brep {
+                reference,
+                nominal: &self.nominal,
+            },
+            None => Ruler::Input(&self.nominal),
+        }
+    }
+
+    /// The points to run: every setting on a mesh file; on a STEP part, the fitted
+    /// settings on the file and, per tessellation, the baselines' settings at the three
+    /// bit counts around the one whose quantisation error is the chordal tolerance.
+    fn jobs(&self, settings: &[Setting], opts: &ReportOptions) -> Vec<(Setting, Option<usize>)> {
+        if !self.step {
+            return settings
+                .iter()
+                .map(|s| (*s, s.baseline().map(|_| 0)))
+                .collect();
+        }
+        let draco = settings.iter().any(|s| matches!(s, Setting::Draco { .. }));
+        let gltfpack = settings
+            .iter()
+            .any(|s| matches!(s, Setting::Gltfpack { .. }));
+        let extent = self
+            .nominal
+            .bounding_box()
+            .map_or(1.0, |(lo, hi)| (hi - lo).max_element());
+        let diagonal = self.nominal.diagonal();
+        let mut jobs = Vec::new();
+        for (i, (chord, _)) in self.inputs.iter().enumerate() {
+            let chord = chord.unwrap_or(1e-3);
+            let b0 = bits_for_tolerance(extent, chord * diagonal, 1.0);
+            let bits = [b0.saturating_sub(1), b0, b0 + 1];
+            if draco {
+                for &cl in &opts.draco_cl {
+                    for qp in bits.iter().map(|&b| b.clamp(1, 30)) {
+                        jobs.push((Setting::Draco { qp, cl }, Some(i)));
+                    }
+                }
+            }
+            if gltfpack {
+                for &cc in &opts.gltfpack_cc {
+                    let mut vps: Vec<u8> = bits.iter().map(|&b| b.clamp(1, 16)).collect();
+                    vps.dedup();
+                    for vp in vps {
+                        jobs.push((Setting::Gltfpack { vp, cc }, Some(i)));
+                    }
+                }
+            }
+        }
+        jobs.extend(
+            settings
+                .iter()
+                .filter(|s| matches!(s, Setting::Fitted { .. }))
+                .map(|s| (*s, None)),
+        );
+        jobs
+    }
+}
+
+/// Reads a model and builds its reference (see the module documentation).
+fn prepare(model: &ModelInput, opts: &ReportOptions) -> Result<Prepared, String> {
+    match &model.source {
+        ModelSource::Unsupported(reason) => Err(reason.clone()),
+        ModelSource::Mesh => {
+            if opts.reference == Some(Reference::Brep) {
+                return Err(
+                    "--reference brep needs a STEP file: a mesh file has no B-rep".to_string()
+                );
+            }
+            let (mesh, _) =
+                io::read_mesh(&model.path).map_err(|e| format!("cannot read: {e}"))?;
+            Ok(Prepared {
+                inputs: vec![(None, mesh.clone())],
+                nominal: mesh,
+                brep: None,
+                step: false,
+                reference: "the input mesh".into(),
+                faces: Vec::new(),
+            })
+        }
+        ModelSource::Step => prepare_step(&model.path, opts),
+    }
+}
+
+/// A STEP part: its default tessellation, the B-rep reference (unless the input is the
+/// reference) and the baselines' tessellations, parsed once.
+fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
+    let brep = opts.reference.unwrap_or(Reference::Brep) == Reference::Brep;
+    let tightest = opts.tolerances.iter().copied().fold(f64::INFINITY, f64::min);
+    let reference_chord = if tightest.is_finite() {
+        tightest / REFERENCE_CHORD_DIVISOR
+    } else {
+        5e-5
+    };
+    let at = |chord: f64| StepOptions {
+        chordal_tolerance: Tolerance::Relative(chord),
+        ..StepOptions::default()
+    };
+    let mut wanted = vec![step_options_for(Tolerance::DEFAULT)];
+    if brep {
+        wanted.push(at(reference_chord));
+    }
+    wanted.extend(opts.tessellation_chords.iter().map(|&c| at(c)));
+    let mut models = read_step_tessellations(path, &wanted)
+        .map_err(|e| format!("cannot read: {e}"))?
+        .into_iter();
+    let nominal = models.next().ok_or("the STEP reader returned nothing")?;
+    let mut skipped: Vec<String> = nominal.skipped.iter().map(|f| f.to_string()).collect();
+    let (reference, faces, description) = if brep {
+        let r = models.next().ok_or("the STEP reader returned no reference")?;
+        skipped.extend(r.skipped.iter().map(|f| f.to_string()));
+        let exact: Vec<_> = r.faces.iter().map(|f| f.exact).collect();
+        let reference = BrepReference::new(r.mesh.clone(), &exact, r.chordal_tolerance)
+            .map_err(|e| format!("cannot build the B-rep reference: {e}"))?;
+        let rulers = reference.rulers();
+        let faces: Vec<String> = r
+            .faces
+            .iter()
+            .zip(&r.mesh.groups)
+            .zip(&rulers)
+            .map(|((f, g), ruler)| {
+                format!(
+                    "{} ({}, #{}): {}",
+                    g.name,
+                    surface_name(&f.surface),
+                    f.face_id,
+                    match ruler {
+                        FaceRuler::Exact => "exact surface".to_string(),
+                        FaceRuler::Facets => format!("facets at chord {reference_chord:.1e}"),
+                    }
+                )
+            })
+            .collect();
+        let exact_count = rulers.iter().filter(|r| **r == FaceRuler::Exact).count();
+        let description = format!(
+            "the B-rep: {exact_count} of {} faces measured to their exact surface, the \
+             others to a tessellation at chordal tolerance {reference_chord:.1e} of the \
+             diagonal",
+            rulers.len()
+        );
+        (Some(reference), faces, description)
+    } else {
+        let d = format!(
+            "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
+            crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION
+        );
+        (None, Vec::new(), d)
+    };
+    let inputs: Vec<(Option<f64>, ControlMesh)> = opts
+        .tessellation_chords
+        .iter()
+        .zip(models)
+        .map(|(&c, m)| {
+            skipped.extend(m.skipped.iter().map(|f| f.to_string()));
+            (Some(c), m.mesh)
+        })
+        .collect();
+    skipped.sort();
+    skipped.dedup();
+    let mut description = description;
+    if !skipped.is_empty() {
+        description.push_str(&format!(
+            "; faces the reader skipped (missing from every mesh and the reference): {}",
+            skipped.join("; ")
+        ));
+    }
+    Ok(Prepared {
+        nominal: nominal.mesh,
+        brep: reference,
+        inputs,
+        step: true,
+        reference: description,
+        faces,
+    })
+}
+
+/// Where one job writes its files: the model's folder, or a tessellation's subfolder.
+fn job_dir(dir: &Path, chord: Option<f64>) -> PathBuf {
+    match chord {
+        Some(c) => dir.join(format!("chord_{c:.1e}")),
+        None => dir.to_path_buf(),
+    }
+}
+
+/// The baselines' input files of one input mesh, written when first needed.
+struct BaselineInputs {
+    draco: PathBuf,
+    draco_ok: Result<(), String>,
+    glb: PathBuf,
+    glb_ok: Result<(), String>,
+}
+
+fn write_inputs(dir: &Path, mesh: &ControlMesh, baselines: &Baselines) -> BaselineInputs {
+    let draco = dir.join("input_f32.ply");
+    let glb = dir.join("input.glb");
+    let made = std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()));
+    let draco_ok = match (&made, baselines.draco) {
+        (Err(e), _) => Err(e.clone()),
+        (Ok(()), Some(_)) => write_draco_input(&draco, mesh).map_err(|e| e.to_string()),
+        (Ok(()), None) => Ok(()),
+    };
+    let glb_ok = match (&made, baselines.gltfpack) {
+        (Err(e), _) => Err(e.clone()),
+        (Ok(()), Some(_)) => write_gltfpack_input(&glb, mesh).map_err(|e| e.to_string()),
+        (Ok(()), None) => Ok(()),
+    };
+    BaselineInputs {
+        draco,
+        draco_ok,
+        glb,
+        glb_ok,
+    }
+}
+
+/// Runs every setting on one model. Never panics out: a panic while reading or measuring
+/// becomes the model's error.
+pub(super) fn run_model(
+    index: usize,
+    model: &ModelInput,
+    dir: &Path,
+    settings: &[Setting],
+    baselines: &Baselines,
+    opts: &ReportOptions,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> ModelReport {
+    let t0 = Instant::now();
+    let mut report = empty_model(model);
+    let prepared = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| prepare(model, opts)));
+    let prepared = match prepared {
+        Ok(Ok(p)) => p,
+        Ok(Err(e)) => {
+            report.error = Some(e);
+            return report;
+        }
+        Err(_) => {
+            report.error = Some("reader panicked".into());
+            return report;
+        }
+    };
+    report.vertices = prepared.nominal.vertex_count();
+    report.triangles = prepared
+        .nominal
+        .faces()
+        .map(|f| f.len().saturating_sub(2))
+        .sum::<usize>();
+    report.raw_bytes = raw_binary_bytes(&prepared.nominal);
+    report.reference = prepared.reference.clone();
+    report.faces = prepared.faces.clone();
+    if let Err(e) = std::fs::create_dir_all(dir) {
+        report.error = Some(format!("cannot create {}: {e}", dir.display()));
+        return report;
+    }
+    let ruler = prepared.ruler();
+    let mut inputs: BTreeMap<usize, BaselineInputs> = BTreeMap::new();
+    for (setting, input) in prepared.jobs(settings, opts) {
+        let chord = input.and_then(|i| prepared.inputs.get(i)).and_then(|m| m.0);
+        let elapsed = t0.elapsed();
+        let outcome = if elapsed >= opts.model_timeout {
+            Err(format!(
+                "skipped: the model's time budget ({} s) is used up",
+                opts.model_timeout.as_secs()
+            ))
+        } else {
+            let timeout = opts.step_timeout.min(opts.model_timeout - elapsed);
+            let out_dir = job_dir(dir, chord);
+            let base = input.map(|i| {
+                inputs
+                    .entry(i)
+                    .or_insert_with(|| write_inputs(&out_dir, &prepared.inputs[i].1, baselines))
+                    as &BaselineInputs
+            });
+            let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                run_point(
+                    model,
+                    setting,
+                    base,
+                    &out_dir.join(setting.file_name()),
+                    (baselines, &ruler, opts, timeout),
+                )
+            }));
+            run.unwrap_or_else(|_| Err("measurement panicked".into()))
+        };
+        let point = PointResult {
+            setting,
+            tessellation: chord,
+            outcome,
+        };
+        progress(Progress::StepFinished {
+            model: index,
+            name: model.name.clone(),
+            step: point.label(),
+            ok: point.outcome.is_ok(),
+        });
+        report.points.push(point);
+    }
+    report.equal_error = equal_error(&report.points);
+    report.seconds = t0.elapsed().as_secs_f64();
+    report
+}
+
+/// Runs one setting: a baseline on its input files, or scode on the model's file.
+fn run_point(
+    model: &ModelInput,
+    setting: Setting,
+    inputs: Option<&BaselineInputs>,
+    output: &Path,
+    (baselines, ruler, opts, timeout): (&Baselines, &Ruler, &ReportOptions, Duration),
+) -> Result<super::run::Measured, String> {
+    match (setting, inputs) {
+        (Setting::Draco { qp, cl }, Some(files)) => match (&files.draco_ok, baselines.draco) {
+            (Ok(()), Some(tools)) => run_draco(
+                tools,
+                &files.draco,
+                output,
+                qp,
+                cl,
+                ruler,
+                opts.runs,
+                timeout,
+            ),
+            (Err(e), _) => Err(format!("cannot write Draco input: {e}")),
+            (_, None) => Err("Draco not found".into()),
+        },
+        (Setting::Gltfpack { vp, cc }, Some(files)) => match (&files.glb_ok, baselines.gltfpack) {
+            (Ok(()), Some(tool)) => run_gltfpack(
+                tool,
+                &files.glb,
+                output,
+                (vp, cc),
+                ruler,
+                opts.runs,
+                timeout,
+            ),
+            (Err(e), _) => Err(format!("cannot write gltfpack input: {e}")),
+            (_, None) => Err("gltfpack not found".into()),
+        },
+        (s, None) if s.is_scode() => run_scode_point(model, output, s, ruler, opts, timeout),
+        (s, _) => Err(format!("{} {}: no input to run it on", s.codec(), s.label())),
+    }
+}
