@@ -40,15 +40,16 @@ pub struct BrepReference {
     /// Group of each triangle of `surface`.
     triangle_group: Vec<u32>,
     exact: Vec<Option<ExactSurface>>,
-    /// Chordal tolerance of the reference tessellation (model units): how far its facets
-    /// may be from the exact surfaces.
+    /// Chordal tolerance of the exactly measured faces' facets (model units): how far a
+    /// projection may land from them and still be on the face.
     chord: f64,
 }
 
 impl BrepReference {
     /// `mesh`: a tessellation of the part with one group per B-rep face (a STEP model's
     /// mesh); `exact`: the exact surface of each group, `None` where there is none to
-    /// evaluate; `chord`: the tessellation's chordal tolerance in model units.
+    /// evaluate; `chord`: the chordal tolerance of the faces with an exact surface in
+    /// model units.
     pub fn new(mesh: ControlMesh, exact: &[Option<AnalyticSurface>], chord: f64) -> Result<Self> {
         if exact.len() != mesh.groups.len() {
             return Err(Error::Parameter(format!(

@@ -20,8 +20,8 @@ mod table;
 use std::path::{Path, PathBuf};
 
 pub use brep::{BrepReference, FaceRuler};
-pub use model::REFERENCE_CHORD_DIVISOR;
 pub use discover::{classify, discover_models, ModelInput, ModelSource};
+pub use model::REFERENCE_CHORD_DIVISOR;
 pub use plot::{corpus_chart, model_chart, render, Chart, Series};
 pub use run::{
     equal_error, run_report, BaselineMatch, DracoStatus, EqualError, Measured, ModelReport,

@@ -16,12 +16,12 @@ use super::brep::{BrepReference, FaceRuler};
 use super::discover::{ModelInput, ModelSource};
 use super::run::{
     empty_model, equal_error, run_draco, run_gltfpack, run_scode_point, write_draco_input,
-    write_gltfpack_input, Baselines, ModelReport, PointResult, Progress, Reference,
-    ReportOptions, Ruler,
+    write_gltfpack_input, Baselines, ModelReport, PointResult, Progress, Reference, ReportOptions,
+    Ruler,
 };
 use super::steps::Setting;
 use crate::io;
-use crate::io::step::{read_step_tessellations, surface_name, StepOptions};
+use crate::io::step::{read_step_tessellations, surface_name, StepModel, StepOptions};
 use crate::mesh::{ControlMesh, Tolerance};
 use crate::metrics::raw_binary_bytes;
 use crate::pipeline::{bits_for_tolerance, step_options_for};
@@ -29,6 +29,14 @@ use crate::pipeline::{bits_for_tolerance, step_options_for};
 /// How finely the B-rep reference tessellates the faces it measures through facets: its
 /// chordal tolerance is the tightest accuracy of the report divided by this.
 pub const REFERENCE_CHORD_DIVISOR: f64 = 20.0;
+
+/// The reference tessellates faces it measures exactly this much coarser: their facets
+/// only say which face a point is nearest to (a point charged to a neighbouring face is
+/// measured to a point of that face, never closer than the part), so they need not be as
+/// fine as the facets that are the ruler themselves, and tessellating every analytic face
+/// 20x finer than the tightest accuracy takes longer than the STEP reader's time limits on
+/// tori and cones.
+const REFERENCE_ANALYTIC_FACTOR: f64 = 5.0;
 
 /// A model read and ready to measure.
 struct Prepared {
@@ -113,11 +121,10 @@ fn prepare(model: &ModelInput, opts: &ReportOptions) -> Result<Prepared, String>
         ModelSource::Mesh => {
             if opts.reference == Some(Reference::Brep) {
                 return Err(
-                    "--reference brep needs a STEP file: a mesh file has no B-rep".to_string()
+                    "--reference brep needs a STEP file: a mesh file has no B-rep".to_string(),
                 );
             }
-            let (mesh, _) =
-                io::read_mesh(&model.path).map_err(|e| format!("cannot read: {e}"))?;
+            let (mesh, _) = io::read_mesh(&model.path).map_err(|e| format!("cannot read: {e}"))?;
             Ok(Prepared {
                 inputs: vec![(None, mesh.clone())],
                 nominal: mesh,
@@ -132,84 +139,80 @@ fn prepare(model: &ModelInput, opts: &ReportOptions) -> Result<Prepared, String>
 }
 
 /// A STEP part: its default tessellation, the B-rep reference (unless the input is the
-/// reference) and the baselines' tessellations, parsed once.
+/// reference) and the baselines' tessellations.
+///
+/// Each tessellation is read on its own with the time left of the model's budget, so one
+/// that is too fine for the time (B-spline faces at a tiny chordal tolerance) costs only
+/// itself: the reference falls back to a coarser chordal tolerance and says so, and the
+/// baselines' series stops at the finest tessellation that could be made.
 fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
-    let brep = opts.reference.unwrap_or(Reference::Brep) == Reference::Brep;
-    let tightest = opts.tolerances.iter().copied().fold(f64::INFINITY, f64::min);
-    let reference_chord = if tightest.is_finite() {
-        tightest / REFERENCE_CHORD_DIVISOR
-    } else {
-        5e-5
+    let t0 = Instant::now();
+    let left = || opts.model_timeout.saturating_sub(t0.elapsed());
+    let read = |o: StepOptions| -> Result<StepModel, String> {
+        let budget = left();
+        if budget.is_zero() {
+            return Err("the model's time budget is used up".into());
+        }
+        let o = StepOptions {
+            total_timeout: o.total_timeout.min(budget),
+            face_timeout: o.face_timeout.min(budget),
+            ..o
+        };
+        let mut m =
+            read_step_tessellations(path, std::slice::from_ref(&o)).map_err(|e| e.to_string())?;
+        m.pop()
+            .ok_or_else(|| "the STEP reader returned nothing".to_string())
     };
     let at = |chord: f64| StepOptions {
         chordal_tolerance: Tolerance::Relative(chord),
         ..StepOptions::default()
     };
-    let mut wanted = vec![step_options_for(Tolerance::DEFAULT)];
-    if brep {
-        wanted.push(at(reference_chord));
-    }
-    wanted.extend(opts.tessellation_chords.iter().map(|&c| at(c)));
-    let mut models = read_step_tessellations(path, &wanted)
-        .map_err(|e| format!("cannot read: {e}"))?
-        .into_iter();
-    let nominal = models.next().ok_or("the STEP reader returned nothing")?;
+    let nominal =
+        read(step_options_for(Tolerance::DEFAULT)).map_err(|e| format!("cannot read: {e}"))?;
     let mut skipped: Vec<String> = nominal.skipped.iter().map(|f| f.to_string()).collect();
-    let (reference, faces, description) = if brep {
-        let r = models.next().ok_or("the STEP reader returned no reference")?;
-        skipped.extend(r.skipped.iter().map(|f| f.to_string()));
-        let exact: Vec<_> = r.faces.iter().map(|f| f.exact).collect();
-        let reference = BrepReference::new(r.mesh.clone(), &exact, r.chordal_tolerance)
-            .map_err(|e| format!("cannot build the B-rep reference: {e}"))?;
-        let rulers = reference.rulers();
-        let faces: Vec<String> = r
-            .faces
-            .iter()
-            .zip(&r.mesh.groups)
-            .zip(&rulers)
-            .map(|((f, g), ruler)| {
-                format!(
-                    "{} ({}, #{}): {}",
-                    g.name,
-                    surface_name(&f.surface),
-                    f.face_id,
-                    match ruler {
-                        FaceRuler::Exact => "exact surface".to_string(),
-                        FaceRuler::Facets => format!("facets at chord {reference_chord:.1e}"),
-                    }
-                )
-            })
-            .collect();
-        let exact_count = rulers.iter().filter(|r| **r == FaceRuler::Exact).count();
-        let description = format!(
-            "the B-rep: {exact_count} of {} faces measured to their exact surface, the \
-             others to a tessellation at chordal tolerance {reference_chord:.1e} of the \
-             diagonal",
-            rulers.len()
-        );
-        (Some(reference), faces, description)
-    } else {
-        let d = format!(
-            "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
-            crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION
-        );
-        (None, Vec::new(), d)
-    };
-    let inputs: Vec<(Option<f64>, ControlMesh)> = opts
-        .tessellation_chords
-        .iter()
-        .zip(models)
-        .map(|(&c, m)| {
-            skipped.extend(m.skipped.iter().map(|f| f.to_string()));
-            (Some(c), m.mesh)
-        })
-        .collect();
+    let (reference, faces, description) =
+        if opts.reference.unwrap_or(Reference::Brep) == Reference::Brep {
+            let (r, chord, failures) = read_reference(opts, &read)?;
+            skipped.extend(r.skipped.iter().map(|f| f.to_string()));
+            let (reference, faces, mut description) = brep_reference(&r, chord)?;
+            if !failures.is_empty() {
+                description.push_str(&format!(
+                    " (finer reference tessellations failed: {})",
+                    failures.join("; ")
+                ));
+            }
+            (Some(reference), faces, description)
+        } else {
+            let d = format!(
+                "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
+                crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION
+            );
+            (None, Vec::new(), d)
+        };
+    let mut chords = opts.tessellation_chords.clone();
+    chords.sort_by(|a, b| b.total_cmp(a));
+    let mut inputs: Vec<(Option<f64>, ControlMesh)> = Vec::new();
+    let mut description = description;
+    for c in chords {
+        match read(at(c)) {
+            Ok(m) => {
+                skipped.extend(m.skipped.iter().map(|f| f.to_string()));
+                inputs.push((Some(c), m.mesh));
+            }
+            Err(e) => {
+                // A finer tessellation takes longer still: the series ends here.
+                description.push_str(&format!(
+                    "; the baselines' tessellations stop above chordal tolerance {c:.1e} ({e})"
+                ));
+                break;
+            }
+        }
+    }
     skipped.sort();
     skipped.dedup();
-    let mut description = description;
     if !skipped.is_empty() {
         description.push_str(&format!(
-            "; faces the reader skipped (missing from every mesh and the reference): {}",
+            "; faces the reader skipped (missing from the meshes and the reference): {}",
             skipped.join("; ")
         ));
     }
@@ -221,6 +224,80 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
         reference: description,
         faces,
     })
+}
+
+/// The reference tessellation: at the tightest accuracy / [`REFERENCE_CHORD_DIVISOR`],
+/// else (out of time) at successively coarser chordal tolerances, each given a share of the
+/// budget. Returns the model, its chordal tolerance (fraction of the diagonal) and why the
+/// finer ones failed.
+fn read_reference(
+    opts: &ReportOptions,
+    read: &dyn Fn(StepOptions) -> Result<StepModel, String>,
+) -> Result<(StepModel, f64, Vec<String>), String> {
+    let tightest = opts
+        .tolerances
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let tightest = if tightest.is_finite() { tightest } else { 1e-3 };
+    let mut failures = Vec::new();
+    for (k, divisor) in [REFERENCE_CHORD_DIVISOR, 5.0, 2.0].into_iter().enumerate() {
+        let chord = tightest / divisor;
+        let share = opts.model_timeout.div_f64(if k == 0 { 3.0 } else { 4.0 });
+        let o = StepOptions {
+            chordal_tolerance: Tolerance::Relative(chord),
+            analytic_chordal_factor: REFERENCE_ANALYTIC_FACTOR,
+            face_timeout: share.min(Duration::from_secs(60)),
+            total_timeout: share,
+            ..StepOptions::default()
+        };
+        match read(o) {
+            Ok(m) => return Ok((m, chord, failures)),
+            Err(e) => failures.push(format!("chordal tolerance {chord:.1e}: {e}")),
+        }
+    }
+    Err(format!(
+        "cannot tessellate the B-rep reference: {}",
+        failures.join("; ")
+    ))
+}
+
+/// The B-rep reference of a STEP model tessellated at `chord` (fraction of the diagonal),
+/// with one line per face saying how it is measured and a summary.
+fn brep_reference(
+    r: &StepModel,
+    chord: f64,
+) -> Result<(BrepReference, Vec<String>, String), String> {
+    let exact: Vec<_> = r.faces.iter().map(|f| f.exact).collect();
+    let analytic_chord = r.chordal_tolerance * REFERENCE_ANALYTIC_FACTOR;
+    let reference = BrepReference::new(r.mesh.clone(), &exact, analytic_chord)
+        .map_err(|e| format!("cannot build the B-rep reference: {e}"))?;
+    let rulers = reference.rulers();
+    let faces: Vec<String> = r
+        .faces
+        .iter()
+        .zip(&r.mesh.groups)
+        .zip(&rulers)
+        .map(|((f, g), ruler)| {
+            format!(
+                "{} ({}, #{}): {}",
+                g.name,
+                surface_name(&f.surface),
+                f.face_id,
+                match ruler {
+                    FaceRuler::Exact => "exact surface".to_string(),
+                    FaceRuler::Facets => format!("facets at chordal tolerance {chord:.1e}"),
+                }
+            )
+        })
+        .collect();
+    let exact_count = rulers.iter().filter(|r| **r == FaceRuler::Exact).count();
+    let description = format!(
+        "the B-rep: {exact_count} of {} faces measured to their exact surface, the others to \
+         a tessellation at chordal tolerance {chord:.1e} of the diagonal",
+        rulers.len()
+    );
+    Ok((reference, faces, description))
 }
 
 /// Where one job writes its files: the model's folder, or a tessellation's subfolder.
@@ -384,6 +461,40 @@ fn run_point(
             (_, None) => Err("gltfpack not found".into()),
         },
         (s, None) if s.is_scode() => run_scode_point(model, output, s, ruler, opts, timeout),
-        (s, _) => Err(format!("{} {}: no input to run it on", s.codec(), s.label())),
+        (s, _) => Err(format!(
+            "{} {}: no input to run it on",
+            s.codec(),
+            s.label()
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn brep_reference_needs_a_step_file() {
+        let dir = std::env::temp_dir().join(format!("scode-report-model-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.obj");
+        std::fs::write(&path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        let model = ModelInput {
+            path: path.clone(),
+            name: "t.obj".into(),
+            source: ModelSource::Mesh,
+        };
+        let mut opts = ReportOptions::quick();
+        opts.reference = Some(Reference::Brep);
+        let e = prepare(&model, &opts).err().unwrap();
+        assert!(e.contains("needs a STEP file"), "{e}");
+        opts.reference = None;
+        let p = prepare(&model, &opts).unwrap();
+        assert!(!p.step && p.brep.is_none() && p.inputs.len() == 1);
+        // A mesh runs every setting, baselines on its one input.
+        let jobs = p.jobs(&opts.settings(true, true), &opts);
+        assert_eq!(jobs.len(), opts.settings(true, true).len());
+        assert!(jobs.iter().all(|(s, i)| s.is_scode() == i.is_none()));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

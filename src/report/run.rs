@@ -526,7 +526,11 @@ pub(super) enum Ruler<'a> {
 
 impl Ruler<'_> {
     /// Size and distance of a decoded surface of `bytes` bytes.
-    pub fn rate(&self, bytes: u64, decoded: &ControlMesh) -> std::result::Result<RateDistortion, String> {
+    pub fn rate(
+        &self,
+        bytes: u64,
+        decoded: &ControlMesh,
+    ) -> std::result::Result<RateDistortion, String> {
         let (distance, nominal) = match self {
             Ruler::Input(input) => (measure_against_input(decoded, input), *input),
             Ruler::Brep { reference, nominal } => (reference.measure(decoded), *nominal),

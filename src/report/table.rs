@@ -102,8 +102,10 @@ pub fn markdown(
         s,
         "## Summary: best baseline bytes / scode bytes at equal error\n\n\
          For each scode point, the smallest file of each baseline whose max **and** RMS error \
-         (both measured against the input, as fractions of the bounding-box diagonal) are no \
-         larger; the ratio is the smaller of the baselines' files / scode bytes (above 1: \
+         (both as fractions of the bounding-box diagonal, measured against the model's \
+         reference: the exact B-rep for STEP parts, the input for mesh files) are no \
+         larger; on a STEP part the baselines' files come from tessellations at several \
+         chordal tolerances, so the smallest at each accuracy counts; the ratio is the smaller of the baselines' files / scode bytes (above 1: \
          scode is smaller), median over the models; the per-baseline medians follow. \
          {n_measured} of {n_models} models measured.\n"
     );
@@ -219,15 +221,21 @@ pub fn markdown(
         "- Every output is decoded (scode: `pipeline::decode_surface`, the default level and \
          limit projection a viewer shows; Draco: `draco_decoder` to PLY; gltfpack: its own \
          repack with `-noq` to float glb, read by scode's glTF reader) and compared with \
-         the input by `metrics::measure_against_input`: sampled symmetric Hausdorff (max) and \
-         RMS distance, 100,000 area-weighted samples per side plus every vertex, as fractions \
-         of the joint bounding-box diagonal — the same numbers as `scode info --against`.\n\
+         the reference: a mesh file by `metrics::measure_against_input` (sampled symmetric \
+         Hausdorff (max) and RMS distance, 100,000 area-weighted samples per side plus every \
+         vertex, as fractions of the joint bounding-box diagonal — the same numbers as \
+         `scode info --against`); a STEP part by the same sampling against its B-rep: the \
+         distance to the exact plane, cylinder, cone, sphere or torus of the face nearest \
+         to a point (where its projection lands on the face), to a tessellation 20x finer \
+         than the tightest tolerance elsewhere, each model's section says which face is \
+         which.\n\
          - Raw size: float32 positions + three u32 indices per triangle. Bits/vertex: per \
          input vertex.\n\
          - Times: median of up to {} runs (encodes slower than 2 s are timed once); Draco \
          times are the tools' own reports, gltfpack times the wall time of its process (its \
          decode: the repack above, an upper bound). scode decode includes subdivision and \
          limit projection.\n\
+         - gltfpack's bytes include its glTF JSON (about 1 KB).\n\
          - Draco reads the input as float32 PLY, gltfpack as float32 glb, both without \
          groups; scode keeps CAD-face groups and names. Draco: {}. gltfpack: {}.\n\
          - Tolerances {:?} of the diagonal; per-step time limit {} s, per-model {} s. \
