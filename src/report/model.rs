@@ -88,7 +88,9 @@ impl Prepared {
             let b0 = bits_for_tolerance(extent, chord * diagonal, 1.0);
             let bits = [b0.saturating_sub(1), b0, b0 + 1];
             if draco {
-                for &cl in &opts.draco_cl {
+                // The first -cl only: every point on a part is measured against its B-rep,
+                // and the other levels give the same geometry in more bytes.
+                for &cl in opts.draco_cl.iter().take(1) {
                     for qp in bits.iter().map(|&b| b.clamp(1, 30)) {
                         jobs.push((Setting::Draco { qp, cl }, Some(i)));
                     }
@@ -110,6 +112,18 @@ impl Prepared {
                 .filter(|s| matches!(s, Setting::Fitted { .. }))
                 .map(|s| (*s, None)),
         );
+        // From the loosest accuracy to the tightest, each baseline tessellation (whose
+        // files reach about twice its chordal tolerance) before the scode point it pairs
+        // with, so the model's time budget cuts the tightest points of every codec alike.
+        let accuracy = |(s, i): &(Setting, Option<usize>)| match (s, i) {
+            (Setting::Fitted { tolerance }, _) => (*tolerance, 1),
+            (_, Some(i)) => (2.0 * self.inputs[*i].0.unwrap_or(1e-3), 0),
+            _ => (0.0, 1),
+        };
+        jobs.sort_by(|a, b| {
+            let (ka, kb) = (accuracy(a), accuracy(b));
+            kb.0.total_cmp(&ka.0).then(ka.1.cmp(&kb.1))
+        });
         jobs
     }
 }
@@ -170,25 +184,35 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
     let nominal =
         read(step_options_for(Tolerance::DEFAULT)).map_err(|e| format!("cannot read: {e}"))?;
     let mut skipped: Vec<String> = nominal.skipped.iter().map(|f| f.to_string()).collect();
-    let (reference, faces, description) =
-        if opts.reference.unwrap_or(Reference::Brep) == Reference::Brep {
-            let (r, chord, failures) = read_reference(opts, &read)?;
-            skipped.extend(r.skipped.iter().map(|f| f.to_string()));
-            let (reference, faces, mut description) = brep_reference(&r, chord)?;
-            if !failures.is_empty() {
-                description.push_str(&format!(
-                    " (finer reference tessellations failed: {})",
-                    failures.join("; ")
-                ));
-            }
-            (Some(reference), faces, description)
-        } else {
-            let d = format!(
-                "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
-                crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION
-            );
-            (None, Vec::new(), d)
+    let (reference, faces, description) = if opts.reference.unwrap_or(Reference::Brep)
+        == Reference::Brep
+    {
+        let (r, chord, failures) = match read_reference(opts, &read) {
+            Ok(found) => found,
+            // The default tessellation is the last resort: its chordal tolerance is in
+            // the description, so accuracies near it are read for what they are.
+            Err(failures) => (
+                nominal.clone(),
+                crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION,
+                failures,
+            ),
         };
+        skipped.extend(r.skipped.iter().map(|f| f.to_string()));
+        let (reference, faces, mut description) = brep_reference(&r, chord)?;
+        if !failures.is_empty() {
+            description.push_str(&format!(
+                " (finer reference tessellations failed: {})",
+                failures.join("; ")
+            ));
+        }
+        (Some(reference), faces, description)
+    } else {
+        let d = format!(
+            "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
+            crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION
+        );
+        (None, Vec::new(), d)
+    };
     let mut chords = opts.tessellation_chords.clone();
     chords.sort_by(|a, b| b.total_cmp(a));
     let mut inputs: Vec<(Option<f64>, ControlMesh)> = Vec::new();
@@ -227,13 +251,12 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
 }
 
 /// The reference tessellation: at the tightest accuracy / [`REFERENCE_CHORD_DIVISOR`],
-/// else (out of time) at successively coarser chordal tolerances, each given a share of the
-/// budget. Returns the model, its chordal tolerance (fraction of the diagonal) and why the
-/// finer ones failed.
+/// else (out of time) at a fifth of it, each given a share of the budget. Returns the model, its chordal tolerance (fraction of the diagonal) and why the
+/// finer ones failed; or, when none could be made, why.
 fn read_reference(
     opts: &ReportOptions,
     read: &dyn Fn(StepOptions) -> Result<StepModel, String>,
-) -> Result<(StepModel, f64, Vec<String>), String> {
+) -> Result<(StepModel, f64, Vec<String>), Vec<String>> {
     let tightest = opts
         .tolerances
         .iter()
@@ -241,9 +264,11 @@ fn read_reference(
         .fold(f64::INFINITY, f64::min);
     let tightest = if tightest.is_finite() { tightest } else { 1e-3 };
     let mut failures = Vec::new();
-    for (k, divisor) in [REFERENCE_CHORD_DIVISOR, 5.0, 2.0].into_iter().enumerate() {
+    // A fifth and a sixth of the budget: the rest is the baselines' tessellations and
+    // every encode and measurement.
+    for (divisor, share) in [(REFERENCE_CHORD_DIVISOR, 5.0), (5.0, 6.0)] {
         let chord = tightest / divisor;
-        let share = opts.model_timeout.div_f64(if k == 0 { 3.0 } else { 4.0 });
+        let share = opts.model_timeout.div_f64(share);
         let o = StepOptions {
             chordal_tolerance: Tolerance::Relative(chord),
             analytic_chordal_factor: REFERENCE_ANALYTIC_FACTOR,
@@ -256,10 +281,7 @@ fn read_reference(
             Err(e) => failures.push(format!("chordal tolerance {chord:.1e}: {e}")),
         }
     }
-    Err(format!(
-        "cannot tessellate the B-rep reference: {}",
-        failures.join("; ")
-    ))
+    Err(failures)
 }
 
 /// The B-rep reference of a STEP model tessellated at `chord` (fraction of the diagonal),
