@@ -180,9 +180,26 @@ fn points_of(
     pts
 }
 
+/// The points of `pts` (sorted by error) that no other point beats in both error and size:
+/// the smallest file at each accuracy. A baseline on a STEP part has files from several
+/// tessellations at several bit counts, and a line through all of them would zig-zag
+/// between tessellations.
+fn lower_envelope(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for p in pts {
+        // Walking from the smallest error up, a point is on the envelope when it is
+        // smaller than every more accurate point (the last one kept is the smallest).
+        if out.last().is_none_or(|q| p.1 < q.1) {
+            out.push(p);
+        }
+    }
+    out
+}
+
 /// The curves of one model, one colour per codec: scode fitted (line), scode raw (points),
-/// Draco (one line per `-cl`), gltfpack (one line with and one without `-cc`). Labels are
-/// the codec names; the caller drops repeated ones.
+/// Draco (one line per `-cl`), gltfpack (one line with and one without `-cc`); the
+/// baselines' lines follow their smallest file at each accuracy. Labels are the codec
+/// names; the caller drops repeated ones.
 fn model_series(
     m: &ModelReport,
     draco_levels: &[u8],
@@ -206,11 +223,11 @@ fn model_series(
         series.push(Series {
             label: Some("Draco".into()),
             color: RED_,
-            points: points_of(
+            points: lower_envelope(points_of(
                 m,
                 |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
                 y,
-            ),
+            )),
             line: true,
         });
     }
@@ -218,11 +235,11 @@ fn model_series(
         series.push(Series {
             label: Some("gltfpack".into()),
             color: PURPLE_,
-            points: points_of(
+            points: lower_envelope(points_of(
                 m,
                 |s| matches!(s, Setting::Gltfpack { cc: c, .. } if *c == cc),
                 y,
-            ),
+            )),
             line: true,
         });
     }
@@ -278,6 +295,18 @@ pub fn corpus_chart(report: &Report) -> Chart {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lower_envelope_keeps_the_smallest_file_at_each_accuracy() {
+        // (error, bytes) sorted by error: 700 at 3e-4 is beaten by 500 at 2e-4 (more
+        // accurate and smaller); 900 at 1e-4 stays (nothing is as accurate).
+        let pts = vec![(1e-4, 900.0), (2e-4, 500.0), (3e-4, 700.0), (4e-4, 300.0)];
+        assert_eq!(
+            lower_envelope(pts),
+            [(1e-4, 900.0), (2e-4, 500.0), (4e-4, 300.0)]
+        );
+        assert!(lower_envelope(Vec::new()).is_empty());
+    }
 
     #[test]
     fn renders_png_and_svg_with_text() {
