@@ -125,7 +125,14 @@ pub fn markdown(
         s.push_str("---:|");
     }
     let _ = writeln!(s, "---:|---:|");
-    for sum in summarise(report) {
+    // A setting no model ran (raw mode on a report of STEP parts) has no row.
+    let ran = |st: &Setting| {
+        report
+            .models
+            .iter()
+            .any(|m| m.points.iter().any(|p| &p.setting == st))
+    };
+    for sum in summarise(report).into_iter().filter(|s| ran(&s.setting)) {
         let (min, max) = sum
             .ratios
             .iter()
