@@ -1,6 +1,6 @@
-//! `scode report` end to end on two small corpus models, quick mode, without Draco (a
-//! `--draco-dir` that holds no Draco takes the "missing Draco" path, so the test does not
-//! depend on Draco being installed).
+//! `scode report` end to end on two small corpus models, quick mode, without the baselines
+//! (a `--draco-dir` and a `--gltfpack-dir` that hold neither take the "missing baseline"
+//! paths, so the test does not depend on them being installed).
 
 mod common;
 
@@ -23,9 +23,11 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
     let run = Command::new(env!("CARGO_BIN_EXE_scode"))
         .arg("report")
         .args(&models)
-        // A STEP file: listed as not supported, never a crash.
+        // A STEP file: measured against its B-rep.
         .arg(corpus.join("step/screw.step"))
         .args(["--quick", "--jobs", "2", "--draco-dir"])
+        .arg(&no_draco)
+        .arg("--gltfpack-dir")
         .arg(&no_draco)
         .arg("-o")
         .arg(&out)
@@ -35,12 +37,20 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
         String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{text}");
     assert!(text.contains("Draco not found"), "{text}");
+    assert!(text.contains("gltfpack not found"), "{text}");
 
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     let first_table = md.lines().find(|l| l.starts_with('|')).unwrap();
     assert!(first_table.contains("scode setting"), "{first_table}");
     assert!(md.contains("Draco not found"), "{md}");
-    assert!(md.contains("STEP not supported yet"), "{md}");
+    assert!(md.contains("gltfpack not found"), "{md}");
+    assert!(
+        md.contains(
+            "Errors are measured against the B-rep: 10 of 10 faces measured to their exact surface"
+        ),
+        "{md}"
+    );
+    assert!(md.contains("exact surface"), "{md}");
     assert!(
         md.contains("![tess_screw_coarse_obj") || md.contains("plots/"),
         "{md}"
@@ -57,8 +67,8 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
         .iter()
         .filter(|r| !r[col("bytes")].is_empty())
         .collect();
-    // Two models x (raw 10 bit + one tolerance).
-    assert_eq!(measured.len(), 4, "{csv}");
+    // Two meshes x (raw 10 bit + one tolerance), and the STEP part at that tolerance.
+    assert_eq!(measured.len(), 5, "{csv}");
     for r in &measured {
         let bytes: u64 = r[col("bytes")].parse().unwrap();
         let bpv: f64 = r[col("bits_per_vertex")].parse().unwrap();
@@ -70,16 +80,52 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
         assert!(bytes > 0 && bpv > 0.0 && ratio > 1.0, "{r:?}");
         assert!(max > 0.0 && max < 0.05 && rms > 0.0 && rms <= max, "{r:?}");
         assert!(enc > 0.0 && dec > 0.0, "{r:?}");
-        // No Draco: no equal-error pairing.
+        // No baseline: no equal-error pairing.
+        assert_eq!(r[col("best_over_scode")], "");
         assert_eq!(r[col("draco_over_scode")], "");
+        assert_eq!(r[col("gltfpack_over_scode")], "");
     }
     // Raw 10 bit: the quantisation error bound sqrt(3)/2 / 1023 of the largest extent.
     for r in measured.iter().filter(|r| r[col("setting")] == "10 bit") {
         let max: f64 = r[col("max_error")].parse().unwrap();
         assert!(max < 1e-3, "{r:?}");
     }
-    let step_row = rows.iter().find(|r| r[0] == "screw.step").unwrap();
-    assert!(step_row.last().unwrap().contains("STEP"), "{step_row:?}");
+    let step_rows: Vec<&Vec<&str>> = rows.iter().filter(|r| r[0] == "screw.step").collect();
+    assert_eq!(step_rows.len(), 1, "{csv}");
+    assert_eq!(step_rows[0][col("setting")], "tol 2e-3", "{csv}");
+    // The fit holds its tolerance against the exact surfaces, which the B-rep ruler
+    // measures (sampling sees slightly less than the fit's own bound).
+    let step_max: f64 = step_rows[0][col("max_error")].parse().unwrap();
+    assert!(step_max > 1e-4 && step_max <= 2e-3, "{csv}");
+
+    // A rerun with --resume keeps the models already written (their timings are the first
+    // run's) and measures the one whose file is gone.
+    let first_rows = |csv: &str, model: &str| -> Vec<String> {
+        csv.lines()
+            .filter(|l| l.starts_with(model))
+            .map(str::to_string)
+            .collect()
+    };
+    std::fs::remove_file(out.join("models/four_cone_coarse_obj.json")).unwrap();
+    let rerun = Command::new(env!("CARGO_BIN_EXE_scode"))
+        .arg("report")
+        .args(&models)
+        .arg(corpus.join("step/screw.step"))
+        .args(["--quick", "--resume", "--draco-dir"])
+        .arg(&no_draco)
+        .arg("--gltfpack-dir")
+        .arg(&no_draco)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(rerun.status.success(), "{rerun:?}");
+    let csv2 = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    for kept in ["screw_coarse.obj", "screw.step"] {
+        assert_eq!(first_rows(&csv, kept), first_rows(&csv2, kept), "{csv2}");
+    }
+    assert_eq!(first_rows(&csv2, "four_cone_coarse.obj").len(), 2, "{csv2}");
+    assert!(out.join("models/four_cone_coarse_obj.json").is_file());
 
     for plot in ["corpus", "screw_coarse_obj", "four_cone_coarse_obj"] {
         for ext in ["png", "svg"] {

@@ -883,13 +883,23 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     }
     opts.jobs = args.jobs.max(1);
     opts.draco_dir = args.draco_dir.clone();
+    opts.gltfpack_dir = args.gltfpack_dir.clone();
     opts.step_timeout = std::time::Duration::from_secs(args.timeout_secs);
     opts.model_timeout = std::time::Duration::from_secs(args.model_timeout_secs);
+    opts.checkpoint = Some(args.output.clone());
+    opts.resume = args.resume;
+    opts.reference = args.reference.map(|r| match r {
+        super::ReferenceArg::Brep => report::Reference::Brep,
+        super::ReferenceArg::Input => report::Reference::Input,
+    });
     opts.runner = StepRunner::Subprocess {
         program: std::env::current_exe().context("cannot find the scode executable")?,
         args: vec!["report-step".into()],
     };
     if let Err(msg) = report::find_draco(opts.draco_dir.as_deref()) {
+        eprintln!("warning: {msg}");
+    }
+    if let Err(msg) = report::find_gltfpack(opts.gltfpack_dir.as_deref()) {
         eprintln!("warning: {msg}");
     }
     std::fs::create_dir_all(&args.output).map_err(|e| scode::Error::io(&args.output, e))?;
@@ -907,7 +917,7 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     for s in report::summarise(&rep) {
         let median = (!s.ratios.is_empty()).then(|| report::median(&s.ratios));
         println!(
-            "{:<10} {:<12} median Draco/scode bytes at equal error: {} ({} of {} models matched)",
+            "{:<10} {:<12} median best-baseline/scode bytes at equal error: {} ({} of {} models matched)",
             s.setting.codec(),
             s.setting.label(),
             median.map_or("-".into(), |m| format!("{m:.2}")),
@@ -987,6 +997,12 @@ impl ReportBars {
                 self.steps.set_length((*models * *steps_per_model) as u64);
             }
             Progress::ModelStarted { name, .. } => self.models.set_message(name.clone()),
+            Progress::CheckpointFailed { message } => {
+                let _ = self.multi.println(format!("warning: {message}"));
+                if self.multi.is_hidden() {
+                    eprintln!("warning: {message}");
+                }
+            }
             Progress::StepFinished { name, step, ok, .. } => {
                 self.steps.inc(1);
                 self.steps.set_message(format!(

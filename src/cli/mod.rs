@@ -140,22 +140,29 @@ pub enum Command {
     /// Example: scode view part.scode --port 8765
     #[command(verbatim_doc_comment)]
     View(ViewArgs),
-    /// Compare scode with Draco at equal error on a set of models: tables and plots.
+    /// Compare scode with Draco and gltfpack at equal error on a set of models: tables and plots.
     ///
-    /// For every model (OBJ/PLY/STL/glTF/OFF files; STEP files are listed as unsupported)
-    /// runs scode fitted at several tolerances, scode raw at 10 bits and Draco
-    /// (draco_encoder/draco_decoder, -qp 6..14 at -cl 10 and 7), decodes every output and
-    /// measures bytes, bits per vertex, max (Hausdorff) and RMS error against the input, and
-    /// encode/decode times. For each scode point, the smallest Draco file with no larger max
-    /// and RMS error gives the headline ratio Draco bytes / scode bytes.
+    /// For every model (OBJ/PLY/STL/glTF/OFF and STEP files) runs scode fitted at
+    /// tolerances 4e-3 down to 5e-5 of the diagonal, scode raw at 10 bits (mesh files),
+    /// Draco (draco_encoder/draco_decoder, -qp 6..16 at -cl 10 and 7) and gltfpack
+    /// (meshoptimizer, -vp 8..16 with -cc), decodes every output and measures bytes, bits
+    /// per vertex, max (Hausdorff) and RMS error, and encode/decode times. A mesh file is
+    /// measured against itself. A STEP file is measured against its exact B-rep surfaces
+    /// (--reference): scode encodes the STEP file, the baselines get the part tessellated
+    /// at chordal tolerances 2e-3 down to 2.5e-5 of the diagonal, each at the three
+    /// quantisation bit counts around that tolerance.
+    /// For each scode point and each baseline, the smallest file with no larger max and RMS
+    /// error gives the ratio baseline bytes / scode bytes; the headline is the best
+    /// baseline's.
     ///
     /// Writes OUT/report.md (summary table first), OUT/results.csv, OUT/plots/*.png|svg and
     /// the encoded files under OUT/files/. Each scode encode runs in a child process killed
-    /// after --timeout-secs; failures become error rows. Without Draco the report says so
-    /// and continues.
+    /// after --timeout-secs; failures become error rows. A baseline that is not installed
+    /// is named as missing in the report, which continues without it.
     ///
     /// Examples: scode report ../shared/corpus -o report/
     ///           scode report --quick a.obj b.obj -o /tmp/r --jobs 2
+    ///           scode report ../shared/corpus/step -o rep/ --jobs 2 --resume
     #[command(verbatim_doc_comment)]
     Report(ReportArgs),
     /// Internal: one encode of `scode report` in a child process (argument: job JSON).
@@ -452,6 +459,13 @@ pub struct SegmentArgs {
     pub sharp_angle: f64,
 }
 
+/// `scode report --reference`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReferenceArg {
+    Brep,
+    Input,
+}
+
 #[derive(Args, Debug)]
 pub struct ReportArgs {
     /// Model files and/or directories (searched recursively).
@@ -468,21 +482,38 @@ pub struct ReportArgs {
     /// one timing run.
     #[arg(long)]
     pub quick: bool,
-    /// Models measured in parallel.
+    /// Models measured in parallel (each scode encode also uses threads of its own).
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub jobs: usize,
     /// Directory holding draco_encoder and draco_decoder (default: search PATH).
     #[arg(long, value_name = "DIR")]
     pub draco_dir: Option<PathBuf>,
+    /// Directory holding gltfpack (default: search PATH; npm package `gltfpack`).
+    #[arg(long, value_name = "DIR")]
+    pub gltfpack_dir: Option<PathBuf>,
     /// Timing repeats per step; the median is reported (default 3, 1 with --quick).
     #[arg(long, value_name = "N")]
     pub runs: Option<usize>,
     /// Time limit of one encode (seconds); an overrun is an error row.
     #[arg(long, default_value_t = 600, value_name = "SECS")]
     pub timeout_secs: u64,
-    /// Time limit of all steps of one model (seconds); later steps become error rows.
-    #[arg(long, default_value_t = 1800, value_name = "SECS")]
+    /// Time limit of all steps of one model (seconds): the step running at the limit is
+    /// stopped and later steps become error rows. Steps run from the loosest tolerance to
+    /// the tightest, so the limit cuts the slowest points; raise it for the full curve of
+    /// large models.
+    #[arg(long, default_value_t = scode::report::DEFAULT_MODEL_TIMEOUT_SECS, value_name = "SECS")]
     pub model_timeout_secs: u64,
+    /// What errors are measured against: `brep` (the exact B-rep surfaces of a STEP file;
+    /// the baselines then get the part tessellated at several chordal tolerances) or
+    /// `input` (the input mesh; for a STEP file its tessellation at scode's default chordal
+    /// tolerance). Default: brep for STEP files, input for mesh files.
+    #[arg(long, value_enum, value_name = "REF")]
+    pub reference: Option<ReferenceArg>,
+    /// Continue a run that was stopped: models already written to OUT/models/ by a run with
+    /// the same options are kept, the others are measured. Every finished model is written
+    /// there (and its rows appended to OUT/results.csv) as soon as it is done.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 #[derive(Args, Debug)]

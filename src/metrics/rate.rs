@@ -22,7 +22,7 @@ pub fn measure_against_input(decoded: &ControlMesh, input: &ControlMesh) -> Resu
 }
 
 /// One point of a rate-distortion curve.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RateDistortion {
     /// Compressed size.
     pub bytes: u64,

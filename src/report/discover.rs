@@ -1,5 +1,4 @@
-//! Which files the report measures: every mesh file `io::read_mesh` reads, plus STEP files,
-//! which get a row saying they cannot be read yet.
+//! Which files the report measures: every mesh file `io::read_mesh` reads, and STEP files.
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +10,8 @@ use crate::io::MeshFormat;
 pub enum ModelSource {
     /// A mesh file `io::read_mesh` reads.
     Mesh,
+    /// A STEP file (B-rep).
+    Step,
     /// A file the report lists but cannot measure, with the reason (e.g. STEP today).
     Unsupported(String),
 }
@@ -26,19 +27,12 @@ pub struct ModelInput {
 }
 
 /// How the report treats `path`: `Some` for models, `None` for files it ignores (sidecars,
-/// YAML, notes). The one place to teach the report a new input kind (STEP: once
-/// `MeshFormat::from_path` accepts `.step`, the first arm takes it).
+/// YAML, notes). The one place to teach the report a new input kind.
 pub fn classify(path: &Path) -> Option<ModelSource> {
     if MeshFormat::from_path(path).is_ok() {
         return Some(ModelSource::Mesh);
     }
-    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-    match ext.as_str() {
-        "step" | "stp" => Some(ModelSource::Unsupported(
-            "STEP not supported yet (no STEP reader in io::read_mesh)".into(),
-        )),
-        _ => None,
-    }
+    crate::io::step::is_step_path(path).then_some(ModelSource::Step)
 }
 
 /// Expands files and directories (recursively, in sorted order) into the models of the
@@ -133,10 +127,8 @@ mod tests {
     fn classifies_by_extension() {
         assert_eq!(classify(Path::new("a/b.obj")), Some(ModelSource::Mesh));
         assert_eq!(classify(Path::new("a/b.OFF")), Some(ModelSource::Mesh));
-        assert!(matches!(
-            classify(Path::new("x.STP")),
-            Some(ModelSource::Unsupported(m)) if m.contains("STEP")
-        ));
+        assert_eq!(classify(Path::new("x.STP")), Some(ModelSource::Step));
+        assert_eq!(classify(Path::new("a/x.step")), Some(ModelSource::Step));
         assert_eq!(classify(Path::new("x.faces.json")), None);
         assert_eq!(classify(Path::new("x.yml")), None);
         assert_eq!(classify(Path::new("README")), None);
@@ -159,7 +151,7 @@ mod tests {
         let models = discover_models(std::slice::from_ref(&dir)).unwrap();
         let names: Vec<&str> = models.iter().map(|m| m.name.as_str()).collect();
         assert_eq!(names, ["a.stl", "b.obj", "sub/c.step"]);
-        assert!(matches!(models[2].source, ModelSource::Unsupported(_)));
+        assert_eq!(models[2].source, ModelSource::Step);
         assert!(discover_models(&[dir.join("notes.md")]).is_err());
         assert!(discover_models(&[dir.join("missing.obj")]).is_err());
         let twice = discover_models(&[dir.join("b.obj"), dir.join("b.obj")]).unwrap();

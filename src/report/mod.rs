@@ -1,14 +1,17 @@
 //! `scode report`: the rate-distortion comparison people choose a codec by. Every model is
-//! encoded by scode (fitted at several tolerances, raw mode) and by Draco (several `-qp`,
-//! `-cl`), every output is decoded and measured against the input by `metrics`, and each
-//! scode point is paired with the smallest Draco file of no larger max and RMS error.
+//! encoded by scode (fitted at several tolerances, raw mode) and by the baselines, Draco
+//! (several `-qp`, `-cl`) and gltfpack (several `-vp`, `-cc`); every output is decoded and
+//! measured against the input by `metrics`, and each scode point is paired, per baseline,
+//! with the smallest file of no larger max and RMS error.
 //! Results go to `report.md`, `results.csv` and PNG/SVG plots.
 //!
 //! Robustness: scode encodes run in a child process (the binary's hidden `report-step`
 //! command, [`StepRunner::Subprocess`]) that is killed at the step time limit; a panic,
 //! crash, overrun or error becomes an error row, never the end of the report.
 
+mod brep;
 mod discover;
+mod model;
 mod plot;
 mod run;
 mod steps;
@@ -16,17 +19,21 @@ mod table;
 
 use std::path::{Path, PathBuf};
 
+pub use brep::{BrepReference, FaceRuler};
 pub use discover::{classify, discover_models, ModelInput, ModelSource};
+pub use model::REFERENCE_CHORD_DIVISOR;
 pub use plot::{corpus_chart, model_chart, render, Chart, Series};
 pub use run::{
-    equal_error, run_report, DracoStatus, EqualError, Measured, ModelReport, PointResult, Progress,
-    Report, ReportOptions,
+    equal_error, run_report, BaselineMatch, DracoStatus, EqualError, Measured, ModelReport,
+    PointResult, Progress, Reference, Report, ReportOptions, DEFAULT_MODEL_TIMEOUT_SECS,
 };
 pub use steps::{
-    find_draco, median, run_scode_job, run_scode_job_json, DracoTools, ScodeJob, ScodeJobResult,
-    Setting, StepRunner, RESULT_MARKER,
+    find_draco, find_gltfpack, median, run_scode_job, run_scode_job_json, Baseline, DracoTools,
+    ScodeJob, ScodeJobResult, Setting, StepRunner, RESULT_MARKER,
 };
-pub use table::{csv, markdown, summarise, SettingSummary, CSV_HEADER};
+pub use table::{
+    csv, csv_rows, markdown, missing_baselines, summarise, SettingSummary, CSV_HEADER,
+};
 
 use crate::error::{Error, Result};
 

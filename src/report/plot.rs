@@ -38,7 +38,7 @@ pub struct Chart {
 const BLUE_: (u8, u8, u8) = (31, 100, 200);
 const GREEN_: (u8, u8, u8) = (30, 150, 60);
 const RED_: (u8, u8, u8) = (210, 40, 40);
-const ORANGE_: (u8, u8, u8) = (240, 150, 30);
+const PURPLE_: (u8, u8, u8) = (130, 60, 170);
 
 fn register_font() -> Result<()> {
     static ONCE: Once = Once::new();
@@ -163,8 +163,8 @@ pub fn render(chart: &Chart, stem: &Path) -> Result<()> {
     std::fs::write(&svg_path, svg).map_err(|e| Error::io(&svg_path, e))
 }
 
-/// (max error, y) of a model's measured points with settings matching `keep`, in setting
-/// order.
+/// (max error, y) of a model's measured points with settings matching `keep`, sorted by max
+/// error (ties by y), so a line through them runs in error order.
 fn points_of(
     m: &ModelReport,
     keep: impl Fn(&Setting) -> bool,
@@ -176,40 +176,94 @@ fn points_of(
         .filter(|p| keep(&p.setting))
         .filter_map(|p| p.measured().map(|me| (me.rd.max_error, y(me))))
         .collect();
-    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
     pts
 }
 
-/// Bytes against max error for one model: scode fitted, scode raw, Draco per `-cl`.
-pub fn model_chart(m: &ModelReport, draco_levels: &[u8]) -> Chart {
-    let bytes = |me: &super::run::Measured| me.rd.bytes as f64;
+/// The points of `pts` (sorted by error) that no other point beats in both error and size:
+/// the smallest file at each accuracy. A baseline on a STEP part has files from several
+/// tessellations at several bit counts, and a line through all of them would zig-zag
+/// between tessellations.
+fn lower_envelope(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for p in pts {
+        // Walking from the smallest error up, a point is on the envelope when it is
+        // smaller than every more accurate point (the last one kept is the smallest).
+        if out.last().is_none_or(|q| p.1 < q.1) {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The curves of one model, one colour per codec: scode fitted (line), scode raw (points),
+/// Draco (one line per `-cl`), gltfpack (one line with and one without `-cc`); the
+/// baselines' lines follow their smallest file at each accuracy. Labels are the codec
+/// names; the caller drops repeated ones.
+fn model_series(
+    m: &ModelReport,
+    draco_levels: &[u8],
+    y: impl Fn(&super::run::Measured) -> f64 + Copy,
+) -> Vec<Series> {
     let mut series = vec![
         Series {
             label: Some("scode (fitted)".into()),
             color: BLUE_,
-            points: points_of(m, |s| matches!(s, Setting::Fitted { .. }), bytes),
+            points: points_of(m, |s| matches!(s, Setting::Fitted { .. }), y),
             line: true,
         },
         Series {
             label: Some("scode raw".into()),
             color: GREEN_,
-            points: points_of(m, |s| matches!(s, Setting::Raw { .. }), bytes),
+            points: points_of(m, |s| matches!(s, Setting::Raw { .. }), y),
             line: false,
         },
     ];
-    for (k, &cl) in draco_levels.iter().enumerate() {
+    for &cl in draco_levels {
         series.push(Series {
-            label: Some(format!("Draco -cl {cl}")),
-            color: if k == 0 { RED_ } else { ORANGE_ },
-            points: points_of(
+            label: Some("Draco".into()),
+            color: RED_,
+            points: lower_envelope(points_of(
                 m,
                 |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
-                bytes,
-            ),
+                y,
+            )),
+            line: true,
+        });
+    }
+    for cc in [true, false] {
+        series.push(Series {
+            label: Some("gltfpack".into()),
+            color: PURPLE_,
+            points: lower_envelope(points_of(
+                m,
+                |s| matches!(s, Setting::Gltfpack { cc: c, .. } if *c == cc),
+                y,
+            )),
             line: true,
         });
     }
     series.retain(|s| !s.points.is_empty());
+    series
+}
+
+/// Keeps the first series of each label labelled (one legend entry per codec).
+fn label_once(series: &mut [Series]) {
+    let mut seen = std::collections::BTreeSet::new();
+    for s in series {
+        if let Some(l) = &s.label {
+            if !seen.insert(l.clone()) {
+                s.label = None;
+            }
+        }
+    }
+}
+
+/// Bytes against max error for one model: scode fitted, scode raw, Draco (every `-cl`),
+/// gltfpack.
+pub fn model_chart(m: &ModelReport, draco_levels: &[u8]) -> Chart {
+    let mut series = model_series(m, draco_levels, |me| me.rd.bytes as f64);
+    label_once(&mut series);
     Chart {
         title: format!("{}: bytes vs max error", m.name),
         x_label: "max error (fraction of bbox diagonal)".into(),
@@ -220,54 +274,16 @@ pub fn model_chart(m: &ModelReport, draco_levels: &[u8]) -> Chart {
 
 /// Bits per input vertex against max error for every model (sizes differ by orders of
 /// magnitude between models; bits per vertex puts them on one scale): scode fitted, scode
-/// raw, Draco at the first `-cl`.
+/// raw, Draco at the first `-cl`, gltfpack.
 pub fn corpus_chart(report: &Report) -> Chart {
-    let bpv = |me: &super::run::Measured| me.rd.bits_per_vertex;
-    let cl = report.options.draco_cl.first().copied();
-    let mut series = Vec::new();
-    let mut labelled = [false; 3];
-    for m in report.models.iter().filter(|m| m.error.is_none()) {
-        let mut push = |k: usize, label: String, color, points: Vec<(f64, f64)>, line| {
-            if points.is_empty() {
-                return;
-            }
-            let label = (!labelled[k]).then_some(label);
-            labelled[k] = true;
-            series.push(Series {
-                label,
-                color,
-                points,
-                line,
-            });
-        };
-        push(
-            0,
-            "scode (fitted)".into(),
-            BLUE_,
-            points_of(m, |s| matches!(s, Setting::Fitted { .. }), bpv),
-            true,
-        );
-        push(
-            1,
-            "scode raw".into(),
-            GREEN_,
-            points_of(m, |s| matches!(s, Setting::Raw { .. }), bpv),
-            false,
-        );
-        if let Some(cl) = cl {
-            push(
-                2,
-                format!("Draco -cl {cl}"),
-                RED_,
-                points_of(
-                    m,
-                    |s| matches!(s, Setting::Draco { cl: c, .. } if *c == cl),
-                    bpv,
-                ),
-                true,
-            );
-        }
-    }
+    let levels: Vec<u8> = report.options.draco_cl.iter().copied().take(1).collect();
+    let mut series: Vec<Series> = report
+        .models
+        .iter()
+        .filter(|m| m.error.is_none())
+        .flat_map(|m| model_series(m, &levels, |me| me.rd.bits_per_vertex))
+        .collect();
+    label_once(&mut series);
     Chart {
         title: "All models: bits per vertex vs max error".into(),
         x_label: "max error (fraction of bbox diagonal)".into(),
@@ -279,6 +295,18 @@ pub fn corpus_chart(report: &Report) -> Chart {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lower_envelope_keeps_the_smallest_file_at_each_accuracy() {
+        // (error, bytes) sorted by error: 700 at 3e-4 is beaten by 500 at 2e-4 (more
+        // accurate and smaller); 900 at 1e-4 stays (nothing is as accurate).
+        let pts = vec![(1e-4, 900.0), (2e-4, 500.0), (3e-4, 700.0), (4e-4, 300.0)];
+        assert_eq!(
+            lower_envelope(pts),
+            [(1e-4, 900.0), (2e-4, 500.0), (4e-4, 300.0)]
+        );
+        assert!(lower_envelope(Vec::new()).is_empty());
+    }
 
     #[test]
     fn renders_png_and_svg_with_text() {

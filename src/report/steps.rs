@@ -23,6 +23,8 @@ pub enum Setting {
     Raw { bits: u8 },
     /// `draco_encoder -qp qp -cl cl`.
     Draco { qp: u8, cl: u8 },
+    /// `gltfpack -vp vp` (with `-cc` when `cc`) on the input written as glb.
+    Gltfpack { vp: u8, cc: bool },
 }
 
 impl Setting {
@@ -31,6 +33,7 @@ impl Setting {
             Setting::Fitted { .. } => "scode",
             Setting::Raw { .. } => "scode raw",
             Setting::Draco { .. } => "draco",
+            Setting::Gltfpack { .. } => "gltfpack",
         }
     }
 
@@ -40,11 +43,22 @@ impl Setting {
             Setting::Fitted { tolerance } => format!("tol {tolerance:.0e}"),
             Setting::Raw { bits } => format!("{bits} bit"),
             Setting::Draco { qp, cl } => format!("qp {qp} cl {cl}"),
+            Setting::Gltfpack { vp, cc: true } => format!("vp {vp} cc"),
+            Setting::Gltfpack { vp, cc: false } => format!("vp {vp}"),
         }
     }
 
     pub fn is_scode(&self) -> bool {
-        !matches!(self, Setting::Draco { .. })
+        self.baseline().is_none()
+    }
+
+    /// The other codec this setting runs, `None` for scode's own settings.
+    pub fn baseline(&self) -> Option<Baseline> {
+        match self {
+            Setting::Draco { .. } => Some(Baseline::Draco),
+            Setting::Gltfpack { .. } => Some(Baseline::Gltfpack),
+            Setting::Fitted { .. } | Setting::Raw { .. } => None,
+        }
     }
 
     /// File name of this setting's output inside the model's work directory.
@@ -53,6 +67,30 @@ impl Setting {
             Setting::Fitted { tolerance } => format!("fitted_{tolerance:.0e}.scode"),
             Setting::Raw { bits } => format!("raw_{bits}.scode"),
             Setting::Draco { qp, cl } => format!("draco_qp{qp}_cl{cl}.drc"),
+            Setting::Gltfpack { vp, cc } => {
+                format!("gltfpack_vp{vp}{}.glb", if *cc { "_cc" } else { "" })
+            }
+        }
+    }
+}
+
+/// A codec the report compares scode with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub enum Baseline {
+    /// Google's Draco (`draco_encoder`/`draco_decoder`).
+    Draco,
+    /// meshoptimizer's `gltfpack`.
+    Gltfpack,
+}
+
+impl Baseline {
+    /// Every baseline, in the order tables list them.
+    pub const ALL: [Baseline; 2] = [Baseline::Draco, Baseline::Gltfpack];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Baseline::Draco => "Draco",
+            Baseline::Gltfpack => "gltfpack",
         }
     }
 }
@@ -84,6 +122,9 @@ pub const SLOW_ENCODE_SECONDS: f64 = 2.0;
 /// Runs `job` in this process: encodes `runs` times (fewer for slow encodes) and writes the
 /// output file. This is what the child process of [`StepRunner::Subprocess`] executes.
 pub fn run_scode_job(job: &ScodeJob) -> Result<ScodeJobResult> {
+    if io::step::is_step_path(&job.input) {
+        return run_step_job(job);
+    }
     let (mesh, _) = io::read_mesh(&job.input)?;
     let mut result = ScodeJobResult::default();
     let mut bytes = Vec::new();
@@ -115,12 +156,49 @@ pub fn run_scode_job(job: &ScodeJob) -> Result<ScodeJobResult> {
                 }
                 bytes
             }
-            Setting::Draco { .. } => {
-                return Err(Error::Parameter(
-                    "a Draco setting is not an scode job".into(),
-                ))
+            Setting::Draco { .. } | Setting::Gltfpack { .. } => {
+                return Err(Error::Parameter(format!(
+                    "a {} setting is not an scode job",
+                    job.setting.codec()
+                )))
             }
         };
+        let secs = t0.elapsed().as_secs_f64();
+        result.encode_seconds.push(secs);
+        if secs > SLOW_ENCODE_SECONDS {
+            break;
+        }
+    }
+    std::fs::write(&job.output, &bytes).map_err(|e| Error::io(&job.output, e))?;
+    result.bytes = bytes.len() as u64;
+    Ok(result)
+}
+
+/// [`run_scode_job`] on a STEP file: the fitted encoder on the B-rep itself
+/// (`pipeline::encode_step`, what `scode encode part.step` does).
+fn run_step_job(job: &ScodeJob) -> Result<ScodeJobResult> {
+    let Setting::Fitted { tolerance } = job.setting else {
+        return Err(Error::Parameter(format!(
+            "{} {} takes a mesh, not a STEP file",
+            job.setting.codec(),
+            job.setting.label()
+        )));
+    };
+    let mut opts = ModelEncodeOptions::default();
+    opts.fit.tolerance = Tolerance::Relative(tolerance);
+    let mut result = ScodeJobResult::default();
+    let mut bytes = Vec::new();
+    for run in 0..job.runs.max(1) {
+        let t0 = Instant::now();
+        let (_, b, fit) = crate::pipeline::encode_step(&job.input, &opts)?;
+        if run == 0 && !fit.within_tolerance {
+            result.note = Some(format!(
+                "fit missed its tolerance by {:.2}x after {} rounds",
+                fit.error.max_beyond_chord / fit.tolerance.max(f64::MIN_POSITIVE),
+                fit.rounds
+            ));
+        }
+        bytes = b;
         let secs = t0.elapsed().as_secs_f64();
         result.encode_seconds.push(secs);
         if secs > SLOW_ENCODE_SECONDS {
@@ -306,6 +384,31 @@ pub fn find_draco(dir: Option<&Path>) -> std::result::Result<DracoTools, String>
     }
 }
 
+/// Finds the `gltfpack` executable (meshoptimizer) in `dir`, or else on `PATH` when `dir`
+/// is `None`. The error says where it looked and how to install it.
+pub fn find_gltfpack(dir: Option<&Path>) -> std::result::Result<PathBuf, String> {
+    let dirs: Vec<PathBuf> = match dir {
+        Some(d) => vec![d.to_path_buf()],
+        None => std::env::var_os("PATH")
+            .map(|p| std::env::split_paths(&p).collect())
+            .unwrap_or_default(),
+    };
+    dirs.iter()
+        .map(|d| d.join("gltfpack"))
+        .find(|p| p.is_file())
+        .ok_or_else(|| {
+            format!(
+                "gltfpack not found: no gltfpack in {} (install the npm package `gltfpack`, \
+                 e.g. `npm install -g gltfpack`, or pass --gltfpack-dir); the report continues \
+                 without gltfpack",
+                match dir {
+                    Some(d) => d.display().to_string(),
+                    None => "PATH".into(),
+                }
+            )
+        })
+}
+
 /// Parses Draco's "(12 ms to encode)" / "(3 ms to decode)" timing.
 pub(crate) fn draco_ms(stdout: &str, verb: &str) -> Option<f64> {
     let key = format!(" ms to {verb})");
@@ -364,6 +467,25 @@ mod tests {
             e.contains("Draco not found") && e.contains("/nonexistent-draco-dir"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn missing_gltfpack_is_a_message() {
+        let e = find_gltfpack(Some(Path::new("/nonexistent-gltfpack-dir"))).unwrap_err();
+        assert!(
+            e.contains("gltfpack not found") && e.contains("/nonexistent-gltfpack-dir"),
+            "{e}"
+        );
+        assert_eq!(Setting::Gltfpack { vp: 12, cc: true }.label(), "vp 12 cc");
+        assert_eq!(
+            Setting::Gltfpack { vp: 9, cc: false }.file_name(),
+            "gltfpack_vp9.glb"
+        );
+        assert_eq!(
+            Setting::Gltfpack { vp: 9, cc: true }.baseline(),
+            Some(Baseline::Gltfpack)
+        );
+        assert!(Setting::Raw { bits: 10 }.baseline().is_none());
     }
 
     #[test]

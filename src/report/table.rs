@@ -3,7 +3,7 @@
 use std::fmt::Write;
 
 use super::run::{DracoStatus, Measured, ModelReport, Report};
-use super::steps::{median, Setting};
+use super::steps::{median, Baseline, Setting};
 
 fn sci(x: f64) -> String {
     if x == 0.0 {
@@ -25,8 +25,11 @@ fn md_cell(s: &str) -> String {
 /// Summary statistics of one scode setting across models.
 pub struct SettingSummary {
     pub setting: Setting,
-    /// Equal-error ratios of the models where a Draco point matched, in model order.
+    /// Equal-error ratios (best baseline / scode) of the models where some baseline point
+    /// matched, in model order.
     pub ratios: Vec<f64>,
+    /// The same per baseline (every baseline in [`Baseline::ALL`] order).
+    pub per_baseline: Vec<(Baseline, Vec<f64>)>,
     /// Models where the scode point was measured.
     pub measured: usize,
     pub median_bits_per_vertex: f64,
@@ -54,9 +57,21 @@ pub fn summarise(report: &Report) -> Vec<SettingSummary> {
                 .iter()
                 .filter_map(|m| m.ratio_for(setting))
                 .collect();
+            let per_baseline = Baseline::ALL
+                .iter()
+                .map(|&b| {
+                    let r = report
+                        .models
+                        .iter()
+                        .filter_map(|m| m.equal_error_for(setting)?.for_baseline(b)?.ratio)
+                        .collect();
+                    (b, r)
+                })
+                .collect();
             SettingSummary {
                 setting: *setting,
                 ratios,
+                per_baseline,
                 measured: measured.len(),
                 median_bits_per_vertex: median(
                     &measured
@@ -82,24 +97,42 @@ pub fn markdown(
     let mut s = String::new();
     let n_models = report.models.len();
     let n_measured = report.models.iter().filter(|m| m.error.is_none()).count();
-    let _ = writeln!(s, "# scode vs Draco: rate-distortion report\n");
+    let _ = writeln!(s, "# scode vs Draco and gltfpack: rate-distortion report\n");
     let _ = writeln!(
         s,
-        "## Summary: Draco bytes / scode bytes at equal error\n\n\
-         For each scode point, the smallest Draco file whose max **and** RMS error (both \
-         measured against the input, as fractions of the bounding-box diagonal) are no larger; \
-         the ratio is Draco bytes / scode bytes (above 1: scode is smaller). {n_measured} of \
-         {n_models} models measured.\n"
+        "## Summary: best baseline bytes / scode bytes at equal error\n\n\
+         For each scode point, the smallest file of each baseline whose max **and** RMS error \
+         (both as fractions of the bounding-box diagonal, measured against the model's \
+         reference: the exact B-rep for STEP parts, the input for mesh files) are no \
+         larger; on a STEP part the baselines' files come from tessellations at several \
+         chordal tolerances, so the smallest at each accuracy counts; the ratio is the smaller of the baselines' files / scode bytes (above 1: \
+         scode is smaller), median over the models; the per-baseline medians follow. \
+         {n_measured} of {n_models} models measured.\n"
     );
-    if let DracoStatus::Missing(msg) = &report.draco {
-        let _ = writeln!(s, "**{msg}.** No equal-error ratios.\n");
+    for line in missing_baselines(report) {
+        let _ = writeln!(s, "**{line}.** Its columns are empty.\n");
     }
-    let _ = writeln!(
+    let _ = write!(
         s,
-        "| scode setting | models measured | models matched | median ratio | min | max | median bits/vertex | median max error |"
+        "| scode setting | models measured | models matched | median best ratio | min | max |"
     );
-    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|");
-    for sum in summarise(report) {
+    for b in Baseline::ALL {
+        let _ = write!(s, " median {} / scode |", b.name());
+    }
+    let _ = writeln!(s, " median bits/vertex | median max error |");
+    let _ = write!(s, "|---|---:|---:|---:|---:|---:|");
+    for _ in Baseline::ALL {
+        s.push_str("---:|");
+    }
+    let _ = writeln!(s, "---:|---:|");
+    // A setting no model ran (raw mode on a report of STEP parts) has no row.
+    let ran = |st: &Setting| {
+        report
+            .models
+            .iter()
+            .any(|m| m.points.iter().any(|p| &p.setting == st))
+    };
+    for sum in summarise(report).into_iter().filter(|s| ran(&s.setting)) {
         let (min, max) = sum
             .ratios
             .iter()
@@ -107,9 +140,9 @@ pub fn markdown(
                 (a.min(r), b.max(r))
             });
         let has = !sum.ratios.is_empty();
-        let _ = writeln!(
+        let _ = write!(
             s,
-            "| {} {} | {} | {} | **{}** | {} | {} | {:.2} | {} |",
+            "| {} {} | {} | {} | **{}** | {} | {} |",
             sum.setting.codec(),
             sum.setting.label(),
             sum.measured,
@@ -117,21 +150,34 @@ pub fn markdown(
             ratio(has.then(|| median(&sum.ratios))),
             ratio(has.then_some(min)),
             ratio(has.then_some(max)),
+        );
+        for (_, r) in &sum.per_baseline {
+            let _ = write!(
+                s,
+                " {} ({}) |",
+                ratio((!r.is_empty()).then(|| median(r))),
+                r.len()
+            );
+        }
+        let _ = writeln!(
+            s,
+            " {:.2} | {} |",
             sum.median_bits_per_vertex,
             sci(sum.median_max_error)
         );
     }
     let _ = writeln!(
         s,
-        "\n\"models matched\": models where some Draco point was at least as accurate (scode \
-         points more accurate than every Draco point have no ratio).\n"
+        "\n\"models matched\": models where some baseline point was at least as accurate \
+         (scode points more accurate than every baseline point have no ratio); per baseline, \
+         the number of models it matched is in parentheses.\n"
     );
     if let Some(p) = corpus_plot {
         let _ = writeln!(
             s,
             "![bits per input vertex vs max error, all models]({p})\n\n\
-             All models: bits per input vertex against max error (log scales); scode fitted \
-             (blue), scode raw (green), Draco -cl 10 (red).\n"
+             All models: bits per input vertex against max error (log scales), one colour per \
+             codec; each model's points joined in error order.\n"
         );
     }
     // Per-model ratio table.
@@ -180,17 +226,25 @@ pub fn markdown(
     let _ = writeln!(
         s,
         "- Every output is decoded (scode: `pipeline::decode_surface`, the default level and \
-         limit projection a viewer shows; Draco: `draco_decoder` to PLY) and compared with \
-         the input by `metrics::measure_against_input`: sampled symmetric Hausdorff (max) and \
-         RMS distance, 100,000 area-weighted samples per side plus every vertex, as fractions \
-         of the joint bounding-box diagonal — the same numbers as `scode info --against`.\n\
+         limit projection a viewer shows; Draco: `draco_decoder` to PLY; gltfpack: its own \
+         repack with `-noq` to float glb, read by scode's glTF reader) and compared with \
+         the reference: a mesh file by `metrics::measure_against_input` (sampled symmetric \
+         Hausdorff (max) and RMS distance, 100,000 area-weighted samples per side plus every \
+         vertex, as fractions of the joint bounding-box diagonal — the same numbers as \
+         `scode info --against`); a STEP part by the same sampling against its B-rep: the \
+         distance to the exact plane, cylinder, cone, sphere or torus of the face nearest \
+         to a point (where its projection lands on the face), to a tessellation 20x finer \
+         than the tightest tolerance elsewhere, each model's section says which face is \
+         which.\n\
          - Raw size: float32 positions + three u32 indices per triangle. Bits/vertex: per \
          input vertex.\n\
          - Times: median of up to {} runs (encodes slower than 2 s are timed once); Draco \
-         times are the tools' own reports. scode decode includes subdivision and limit \
-         projection.\n\
-         - Draco reads the input as float32 PLY without groups; scode keeps CAD-face groups \
-         and names. Draco: {}.\n\
+         times are the tools' own reports, gltfpack times the wall time of its process (its \
+         decode: the repack above, an upper bound). scode decode includes subdivision and \
+         limit projection.\n\
+         - gltfpack's bytes include its glTF JSON (about 1 KB).\n\
+         - Draco reads the input as float32 PLY, gltfpack as float32 glb, both without \
+         groups; scode keeps CAD-face groups and names. Draco: {}. gltfpack: {}.\n\
          - Tolerances {:?} of the diagonal; per-step time limit {} s, per-model {} s. \
          Total wall time {:.0} s.\n",
         o.runs,
@@ -198,12 +252,28 @@ pub fn markdown(
             DracoStatus::Found(t) => format!("`{}`", t.encoder.display()),
             DracoStatus::Missing(m) => m.clone(),
         },
+        match &report.gltfpack {
+            Ok(p) => format!("`{}`", p.display()),
+            Err(m) => m.clone(),
+        },
         o.tolerances,
         o.step_timeout.as_secs(),
         o.model_timeout.as_secs(),
         report.seconds
     );
     s
+}
+
+/// One sentence per baseline that did not run (not installed), saying how to install it.
+pub fn missing_baselines(report: &Report) -> Vec<String> {
+    let mut out = Vec::new();
+    if let DracoStatus::Missing(msg) = &report.draco {
+        out.push(msg.clone());
+    }
+    if let Err(msg) = &report.gltfpack {
+        out.push(msg.clone());
+    }
+    out
 }
 
 /// GitHub-style heading anchor of a model section.
@@ -229,9 +299,29 @@ fn model_section(s: &mut String, m: &ModelReport, plot: Option<&str>) {
     }
     let _ = writeln!(
         s,
-        "{} vertices, {} triangles, raw binary {} bytes; {:.1} s.\n",
-        m.vertices, m.triangles, m.raw_bytes, m.seconds
+        "{} vertices, {} triangles, raw binary {} bytes; {:.1} s. Errors are measured \
+         against {}.\n",
+        m.vertices,
+        m.triangles,
+        m.raw_bytes,
+        m.seconds,
+        if m.reference.is_empty() {
+            "the input mesh"
+        } else {
+            &m.reference
+        }
     );
+    if !m.faces.is_empty() {
+        let _ = writeln!(
+            s,
+            "<details><summary>How each face is measured</summary>\n\n{}\n\n</details>\n",
+            m.faces
+                .iter()
+                .map(|f| format!("- {}", md_cell(f)))
+                .collect::<Vec<_>>()
+                .join("\n")
+        );
+    }
     if let Some(p) = plot {
         let _ = writeln!(s, "![{} rate-distortion]({p})\n", m.name);
     }
@@ -247,7 +337,7 @@ fn model_section(s: &mut String, m: &ModelReport, plot: Option<&str>) {
                     s,
                     "| {} | {} | {} | {:.2} | {:.1} | {} | {} | {:.1} | {:.1} | {} |",
                     p.setting.codec(),
-                    p.setting.label(),
+                    p.label(),
                     me.rd.bytes,
                     me.rd.bits_per_vertex,
                     me.rd.ratio_to_raw,
@@ -263,45 +353,68 @@ fn model_section(s: &mut String, m: &ModelReport, plot: Option<&str>) {
                     s,
                     "| {} | {} | | | | | | | | error: {} |",
                     p.setting.codec(),
-                    p.setting.label(),
+                    p.label(),
                     md_cell(e)
                 );
             }
         }
     }
     if !m.equal_error.is_empty() {
-        let _ = writeln!(
-            s,
-            "\n| scode point | scode bytes | max / RMS error | smallest Draco as accurate | Draco bytes | max / RMS error | Draco / scode |"
-        );
-        let _ = writeln!(s, "|---|---:|---|---|---:|---|---:|");
-        for e in &m.equal_error {
-            let sp = &m.points[e.scode];
-            let Some(sm) = sp.measured() else { continue };
-            let (dl, db, de) = match e.draco.and_then(|j| m.points[j].measured().map(|d| (j, d))) {
-                Some((j, d)) => (
-                    m.points[j].setting.label(),
-                    d.rd.bytes.to_string(),
-                    format!("{} / {}", sci(d.rd.max_error), sci(d.rd.rms_error)),
-                ),
-                None => ("none".into(), String::new(), String::new()),
-            };
-            let _ = writeln!(
-                s,
-                "| {} {} | {} | {} / {} | {} | {} | {} | **{}** |",
-                sp.setting.codec(),
-                sp.setting.label(),
-                sm.rd.bytes,
-                sci(sm.rd.max_error),
-                sci(sm.rd.rms_error),
-                dl,
-                db,
-                de,
-                ratio(e.ratio)
-            );
-        }
+        equal_error_table(s, m);
     }
     s.push('\n');
+}
+
+/// The model's equal-error pairs: each scode point, the best baseline file at least as
+/// accurate and the ratio of every baseline.
+fn equal_error_table(s: &mut String, m: &ModelReport) {
+    let _ = write!(
+        s,
+        "\n| scode point | scode bytes | max / RMS error | smallest baseline as accurate | its bytes | max / RMS error | best / scode |"
+    );
+    for b in Baseline::ALL {
+        let _ = write!(s, " {} / scode |", b.name());
+    }
+    let _ = write!(s, "\n|---|---:|---|---|---:|---|---:|");
+    for _ in Baseline::ALL {
+        s.push_str("---:|");
+    }
+    s.push('\n');
+    for e in &m.equal_error {
+        let Some(sp) = m.points.get(e.scode) else {
+            continue;
+        };
+        let Some(sm) = sp.measured() else { continue };
+        let best = e
+            .best
+            .and_then(|j| m.points.get(j))
+            .and_then(|p| p.measured().map(|d| (p, d)));
+        let (dl, db, de) = match best {
+            Some((p, d)) => (
+                format!("{} {}", p.setting.codec(), p.label()),
+                d.rd.bytes.to_string(),
+                format!("{} / {}", sci(d.rd.max_error), sci(d.rd.rms_error)),
+            ),
+            None => ("none".into(), String::new(), String::new()),
+        };
+        let _ = write!(
+            s,
+            "| {} {} | {} | {} / {} | {} | {} | {} | **{}** |",
+            sp.setting.codec(),
+            sp.setting.label(),
+            sm.rd.bytes,
+            sci(sm.rd.max_error),
+            sci(sm.rd.rms_error),
+            dl,
+            db,
+            de,
+            ratio(e.ratio)
+        );
+        for b in Baseline::ALL {
+            let _ = write!(s, " {} |", ratio(e.for_baseline(b).and_then(|x| x.ratio)));
+        }
+        s.push('\n');
+    }
 }
 
 fn csv_field(s: &str) -> String {
@@ -313,7 +426,7 @@ fn csv_field(s: &str) -> String {
 }
 
 /// Column names of `results.csv`.
-pub const CSV_HEADER: &str = "model,codec,setting,bytes,bits_per_vertex,ratio_to_raw,max_error,rms_error,mean_error,encode_ms,decode_ms,equal_error_draco_setting,equal_error_draco_bytes,draco_over_scode,error";
+pub const CSV_HEADER: &str = "model,codec,setting,bytes,bits_per_vertex,ratio_to_raw,max_error,rms_error,mean_error,encode_ms,decode_ms,equal_error_best_setting,equal_error_best_bytes,best_over_scode,draco_over_scode,gltfpack_over_scode,error";
 
 /// One row per model and setting (one row per unmeasured model); errors relative to the
 /// bounding-box diagonal; empty fields where there is no value.
@@ -321,55 +434,65 @@ pub fn csv(report: &Report) -> String {
     let mut s = String::from(CSV_HEADER);
     s.push('\n');
     for m in &report.models {
-        if let Some(e) = &m.error {
-            let _ = writeln!(s, "{},,,,,,,,,,,,,,{}", csv_field(&m.name), csv_field(e));
-            continue;
-        }
-        for (i, p) in m.points.iter().enumerate() {
-            let eq = m.equal_error.iter().find(|e| e.scode == i);
-            let (ds, db) = match eq.and_then(|e| e.draco) {
-                Some(j) => (
-                    m.points[j].setting.label(),
-                    m.points[j]
-                        .measured()
-                        .map_or(String::new(), |d| d.rd.bytes.to_string()),
-                ),
-                None => (String::new(), String::new()),
-            };
-            let r = eq
-                .and_then(|e| e.ratio)
-                .map_or(String::new(), |r| format!("{r:.6}"));
-            match &p.outcome {
-                Ok(me) => {
-                    let _ = writeln!(
-                        s,
-                        "{},{},{},{},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.3},{:.3},{},{},{},",
-                        csv_field(&m.name),
-                        p.setting.codec(),
-                        p.setting.label(),
-                        me.rd.bytes,
-                        me.rd.bits_per_vertex,
-                        me.rd.ratio_to_raw,
-                        me.rd.max_error,
-                        me.rd.rms_error,
-                        me.rd.mean_error,
-                        me.encode_ms,
-                        me.decode_ms,
-                        ds,
-                        db,
-                        r
-                    );
-                }
-                Err(e) => {
-                    let _ = writeln!(
-                        s,
-                        "{},{},{},,,,,,,,,,,,{}",
-                        csv_field(&m.name),
-                        p.setting.codec(),
-                        p.setting.label(),
-                        csv_field(e)
-                    );
-                }
+        s.push_str(&csv_rows(m));
+    }
+    s
+}
+
+/// The rows of one model in [`csv`] (no header).
+pub fn csv_rows(m: &ModelReport) -> String {
+    let mut s = String::new();
+    if let Some(e) = &m.error {
+        let _ = writeln!(s, "{},,,,,,,,,,,,,,,,{}", csv_field(&m.name), csv_field(e));
+        return s;
+    }
+    for (i, p) in m.points.iter().enumerate() {
+        let eq = m.equal_error.iter().find(|e| e.scode == i);
+        let (ds, db) = match eq.and_then(|e| e.best).and_then(|j| m.points.get(j)) {
+            Some(b) => (
+                format!("{} {}", b.setting.codec(), b.setting.label()),
+                b.measured()
+                    .map_or(String::new(), |d| d.rd.bytes.to_string()),
+            ),
+            None => (String::new(), String::new()),
+        };
+        let fmt = |r: Option<f64>| r.map_or(String::new(), |r| format!("{r:.6}"));
+        let r = fmt(eq.and_then(|e| e.ratio));
+        let per: Vec<String> = Baseline::ALL
+            .iter()
+            .map(|&b| fmt(eq.and_then(|e| e.for_baseline(b)).and_then(|x| x.ratio)))
+            .collect();
+        match &p.outcome {
+            Ok(me) => {
+                let _ = writeln!(
+                    s,
+                    "{},{},{},{},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.3},{:.3},{},{},{},{},",
+                    csv_field(&m.name),
+                    p.setting.codec(),
+                    p.label(),
+                    me.rd.bytes,
+                    me.rd.bits_per_vertex,
+                    me.rd.ratio_to_raw,
+                    me.rd.max_error,
+                    me.rd.rms_error,
+                    me.rd.mean_error,
+                    me.encode_ms,
+                    me.decode_ms,
+                    csv_field(&ds),
+                    db,
+                    r,
+                    per.join(",")
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(
+                    s,
+                    "{},{},{},,,,,,,,,,,,,,{}",
+                    csv_field(&m.name),
+                    p.setting.codec(),
+                    p.label(),
+                    csv_field(e)
+                );
             }
         }
     }
@@ -387,6 +510,6 @@ mod tests {
         assert_eq!(csv_field("plain"), "plain");
         assert_eq!(anchor("tess/screw_coarse.obj"), "tessscrew_coarseobj");
         assert_eq!(md_cell("a|b"), "a\\|b");
-        assert_eq!(CSV_HEADER.split(',').count(), 15);
+        assert_eq!(CSV_HEADER.split(',').count(), 17);
     }
 }
