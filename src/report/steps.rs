@@ -194,7 +194,7 @@ fn run_step_job(job: &ScodeJob) -> Result<ScodeJobResult> {
         if run == 0 && !fit.within_tolerance {
             result.note = Some(format!(
                 "fit missed its tolerance by {:.2}x after {} rounds",
-                fit.error.max_beyond_chord / fit.tolerance.max(f64::MIN_POSITIVE),
+                fit.error.max_excess / fit.tolerance.max(f64::MIN_POSITIVE),
                 fit.rounds
             ));
         }
