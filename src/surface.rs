@@ -66,6 +66,10 @@ pub struct SurfaceOptions {
     pub limit: Option<bool>,
     /// How boundary patches are triangulated (sparse, as S-CODE, by default).
     pub boundary_patches: crate::subdiv::BoundaryPatchOutput,
+    /// The longest edge allowed, in model units: longer edges of the decoded surface are
+    /// split at their midpoints, conforming across faces (see
+    /// [`crate::subdiv::split_to_max_edge`]). For solvers that need an element size.
+    pub max_edge: Option<f64>,
 }
 
 /// The encoder's default tolerance, relative to the model's diagonal: without a tolerance of
@@ -106,6 +110,28 @@ pub fn decode_surface(
     limits: &Limits,
     opts: &SurfaceOptions,
 ) -> Result<DecodedSurface> {
+    let Some(max_edge) = opts.max_edge else {
+        return decode_detail(bytes, limits, opts);
+    };
+    if !(max_edge > 0.0 && max_edge.is_finite()) {
+        return Err(Error::Parameter(format!(
+            "the longest edge must be a positive length, got {max_edge}"
+        )));
+    }
+    let mut surface = decode_detail(bytes, limits, opts)?;
+    let (mesh, normals) = crate::subdiv::split_to_max_edge(
+        &surface.mesh,
+        surface.normals.as_deref(),
+        max_edge,
+        limits.max_subdivided_faces,
+    )?;
+    surface.mesh = mesh;
+    surface.normals = normals;
+    Ok(surface)
+}
+
+/// [`decode_surface`] up to the detail asked for, before any edge is split.
+fn decode_detail(bytes: &[u8], limits: &Limits, opts: &SurfaceOptions) -> Result<DecodedSurface> {
     let (decoded, usage) = codec::decode_with_usage(bytes, limits);
     let decoded = decoded?;
     let content = decoded.header.content;

@@ -415,6 +415,13 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             );
         }
     }
+    if let Some(h) = args.max_edge {
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(
+                scode::Error::Parameter(format!("--max-edge must be positive, got {h}")).into(),
+            );
+        }
+    }
     let bytes = read_scode(&args.input, &limits)?;
     let detail = match (args.level, args.tolerance) {
         (Some(level), _) => Detail::Level(level),
@@ -433,6 +440,7 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             None
         },
         boundary_patches: boundary_output(args.dense_boundary),
+        max_edge: args.max_edge,
     };
     let t0 = Instant::now();
     let surface = decode_surface(&bytes, &limits, &opts)

@@ -359,6 +359,12 @@ pub struct DecodeArgs {
     /// uniform level: the file's default level unless --level).
     #[arg(long, conflicts_with_all = ["limit", "tolerance"])]
     pub no_limit: bool,
+    /// Longest edge of the output, in model units: every longer edge is split at its midpoint, the same
+    /// way for both faces beside it, so the mesh stays watertight and keeps its groups, sharp
+    /// edges and corners; edges inside a plane are then flipped toward well-shaped
+    /// triangles. For solvers that need an element size, e.g. --max-edge 2.5.
+    #[arg(long, value_name = "H")]
+    pub max_edge: Option<f64>,
     /// Output boundary patches (planes, cylinders, cones) as the full 1-to-4 grid instead of
     /// S-CODE's sparse triangulation.
     #[arg(long)]

@@ -30,6 +30,7 @@ mod frame;
 mod lazy;
 mod lod;
 mod masks;
+mod max_edge;
 mod next_level;
 mod par;
 mod sparse;
@@ -54,6 +55,7 @@ pub use accuracy::{
 };
 pub use lod::{lod_corner_face, AdaptiveMesh};
 pub use masks::{loop_beta, loop_omega};
+pub use max_edge::split_to_max_edge;
 pub use sparse::BoundaryPatchOutput;
 pub use uniform::UniformSurface;
 
