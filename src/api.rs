@@ -326,6 +326,10 @@ pub struct DecodeOptions {
     /// them, so the surface stays watertight and keeps its groups, sharp edges and corners
     /// (see [`crate::subdiv::split_to_max_edge`]). `None` (the default) splits nothing.
     pub max_edge: Option<f64>,
+    /// With `max_edge`: the smallest angle (degrees, up to 30) of the triangles inside plane
+    /// patches, which are triangulated anew by constrained Delaunay refinement inside their
+    /// outlines (feature `remesh`, on by default); curved patches keep the split triangles.
+    pub min_angle: Option<f64>,
 }
 
 impl DecodeOptions {
@@ -356,6 +360,20 @@ impl DecodeOptions {
     pub fn max_edge(self, max_edge: f64) -> Self {
         DecodeOptions {
             max_edge: Some(max_edge),
+            ..self
+        }
+    }
+
+    /// These options with plane patches refined to no angle under `min_angle` degrees (up
+    /// to 30); needs [`DecodeOptions::max_edge`].
+    ///
+    /// ```
+    /// let opts = scode::DecodeOptions::default().max_edge(0.5).min_angle(25.0);
+    /// assert_eq!(opts.min_angle, Some(25.0));
+    /// ```
+    pub fn min_angle(self, min_angle: f64) -> Self {
+        DecodeOptions {
+            min_angle: Some(min_angle),
             ..self
         }
     }
@@ -392,6 +410,7 @@ pub fn decode(bytes: &[u8], opts: &DecodeOptions) -> Result<Surface> {
         detail: opts.detail,
         limit: opts.limit,
         max_edge: opts.max_edge,
+        min_angle: opts.min_angle,
         ..Default::default()
     };
     let s = decode_surface(bytes, &opts.limits, &sopts)?;

@@ -422,6 +422,14 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             );
         }
     }
+    if let Some(a) = args.min_angle {
+        if !(a > 0.0 && a <= 30.0) {
+            return Err(scode::Error::Parameter(format!(
+                "--min-angle must be in (0, 30] degrees, got {a}"
+            ))
+            .into());
+        }
+    }
     let bytes = read_scode(&args.input, &limits)?;
     let detail = match (args.level, args.tolerance) {
         (Some(level), _) => Detail::Level(level),
@@ -441,6 +449,7 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
         },
         boundary_patches: boundary_output(args.dense_boundary),
         max_edge: args.max_edge,
+        min_angle: args.min_angle,
     };
     let t0 = Instant::now();
     let surface = decode_surface(&bytes, &limits, &opts)
