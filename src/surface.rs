@@ -72,7 +72,7 @@ pub struct SurfaceOptions {
     pub max_edge: Option<f64>,
     /// The smallest angle (degrees, at most 30) of the triangles inside plane patches, with
     /// `max_edge`: planes are triangulated anew by constrained Delaunay refinement inside
-    /// their outlines (see [`crate::subdiv::refine_planes`], feature `remesh`); curved
+    /// their outlines (`crate::subdiv::refine_planes`, feature `remesh`); curved
     /// patches keep the triangles `max_edge` gives.
     pub min_angle: Option<f64>,
 }

@@ -482,7 +482,33 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             a.max_level
         );
     }
+    if let Some(limit) = args.min_angle {
+        let (longest, under) = edge_and_angle_summary(&surface.mesh, limit);
+        println!(
+            "longest edge {longest:.4e}; {under} of {} triangles have an angle under {limit} \
+             degrees (--min-angle refines plane patches; curved patches keep the triangles \
+             --max-edge gives)",
+            surface.mesh.face_count()
+        );
+    }
     Ok(())
+}
+
+/// The longest edge of `mesh`'s triangles, and how many triangles have an angle under
+/// `limit` degrees.
+fn edge_and_angle_summary(mesh: &scode::ControlMesh, limit: f64) -> (f64, usize) {
+    let (mut longest, mut under) = (0.0f64, 0);
+    for face in mesh.faces() {
+        let q: Vec<_> = face.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let mut smallest = 180.0f64;
+        for k in 0..q.len() {
+            let (a, b, c) = (q[k], q[(k + 1) % q.len()], q[(k + q.len() - 1) % q.len()]);
+            longest = longest.max(a.distance(b));
+            smallest = smallest.min((b - a).angle_between(c - a).to_degrees());
+        }
+        under += usize::from(smallest < limit);
+    }
+    (longest, under)
 }
 
 /// "0:12 1:40 3:2": control triangles per level shown, levels with none left out.

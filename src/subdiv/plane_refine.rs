@@ -110,7 +110,7 @@ pub fn refine_planes(
     min_angle: f64,
     max_faces: u64,
 ) -> Result<(ControlMesh, Option<Vec<DVec3>>, PlaneRefinement)> {
-    if !(min_angle > 0.0 && min_angle <= 30.0) || !(max_edge > 0.0 && max_edge.is_finite()) {
+    if !(min_angle > 0.0 && min_angle <= 30.0 && max_edge > 0.0 && max_edge.is_finite()) {
         return Err(Error::Parameter(format!(
             "the smallest angle must be in (0, 30] degrees and the longest edge a positive \
              length, got {min_angle} and {max_edge}"
@@ -132,26 +132,26 @@ pub fn refine_planes(
     let tolerance = PLANAR * mesh.diagonal();
     let mut report = PlaneRefinement::default();
     let mut total: u64 = mesh.face_count() as u64;
-    for g in 0..by_group.len() {
-        let Some(patch) = Patch::of(&positions, &by_group[g], tolerance) else {
+    for list in by_group.iter_mut() {
+        let Some(patch) = Patch::of(&positions, list, tolerance) else {
             continue;
         };
         let budget = max_faces.saturating_sub(total);
         match refine_patch(
             &patch,
             &mut positions,
-            &by_group[g],
+            list,
             mesh,
             max_edge,
             min_angle,
             budget,
         )? {
             Some(tris) => {
-                total = total - by_group[g].len() as u64 + tris.len() as u64;
+                total = total - list.len() as u64 + tris.len() as u64;
                 if let Some(n) = normals.as_mut() {
                     n.resize(positions.len(), patch.normal);
                 }
-                by_group[g] = tris;
+                *list = tris;
                 report.refined += 1;
             }
             None => report.kept += 1,
@@ -172,9 +172,9 @@ pub fn refine_planes(
             new_index[v as usize] = 0;
         }
     }
-    for v in 0..positions.len() {
-        if new_index[v] != u32::MAX || mesh.corners.contains(&(v as u32)) {
-            new_index[v] = kept.len() as u32;
+    for (v, index) in new_index.iter_mut().enumerate() {
+        if *index != u32::MAX || mesh.corners.contains(&(v as u32)) {
+            *index = kept.len() as u32;
             kept.push(v);
         }
     }
