@@ -279,10 +279,11 @@ fn refine_patch(
         }
         let t = face.vertices().map(|h| {
             let i = h.fix().index();
+            // Points past the outline's are the ones refinement added, in order.
             vertex_of
                 .get(i)
                 .copied()
-                .unwrap_or(first_new + (i - vertex_of.len()) as u32)
+                .unwrap_or_else(|| first_new + (i - vertex_of.len()) as u32)
         });
         out.push(t);
     }
