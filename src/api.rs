@@ -335,6 +335,15 @@ pub struct DecodeOptions {
     pub limit: Option<bool>,
     /// Resource limits for untrusted files (default [`Limits::default`]).
     pub limits: Limits,
+    /// The longest edge of the output in model units, for solvers that need an element
+    /// size: longer edges are split at their midpoints, the same way for both faces beside
+    /// them, so the surface stays watertight and keeps its groups, sharp edges and corners
+    /// (see [`crate::subdiv::split_to_max_edge`]). `None` (the default) splits nothing.
+    pub max_edge: Option<f64>,
+    /// With `max_edge`: the smallest angle (degrees, up to 30) of the triangles inside plane
+    /// patches, which are triangulated anew by constrained Delaunay refinement inside their
+    /// outlines (feature `remesh`, on by default); curved patches keep the split triangles.
+    pub min_angle: Option<f64>,
 }
 
 impl DecodeOptions {
@@ -351,6 +360,35 @@ impl DecodeOptions {
         DecodeOptions {
             detail: DecodeDetail::Tolerance(tolerance),
             ..Default::default()
+        }
+    }
+
+    /// These options with no output edge longer than `max_edge` (model units). The surface
+    /// does not move: new vertices lie on the edges they split, so the decode's accuracy
+    /// holds.
+    ///
+    /// ```
+    /// let opts = scode::DecodeOptions::default().max_edge(0.5);
+    /// assert_eq!(opts.max_edge, Some(0.5));
+    /// ```
+    pub fn max_edge(self, max_edge: f64) -> Self {
+        DecodeOptions {
+            max_edge: Some(max_edge),
+            ..self
+        }
+    }
+
+    /// These options with plane patches refined to no angle under `min_angle` degrees (up
+    /// to 30); needs [`DecodeOptions::max_edge`].
+    ///
+    /// ```
+    /// let opts = scode::DecodeOptions::default().max_edge(0.5).min_angle(25.0);
+    /// assert_eq!(opts.min_angle, Some(25.0));
+    /// ```
+    pub fn min_angle(self, min_angle: f64) -> Self {
+        DecodeOptions {
+            min_angle: Some(min_angle),
+            ..self
         }
     }
 }
@@ -385,6 +423,8 @@ pub fn decode(bytes: &[u8], opts: &DecodeOptions) -> Result<Surface> {
     let sopts = SurfaceOptions {
         detail: opts.detail,
         limit: opts.limit,
+        max_edge: opts.max_edge,
+        min_angle: opts.min_angle,
         ..Default::default()
     };
     let s = decode_surface(bytes, &opts.limits, &sopts)?;

@@ -66,6 +66,15 @@ pub struct SurfaceOptions {
     pub limit: Option<bool>,
     /// How boundary patches are triangulated (sparse, as S-CODE, by default).
     pub boundary_patches: crate::subdiv::BoundaryPatchOutput,
+    /// The longest edge allowed, in model units: longer edges of the decoded surface are
+    /// split at their midpoints, conforming across faces (see
+    /// [`crate::subdiv::split_to_max_edge`]). For solvers that need an element size.
+    pub max_edge: Option<f64>,
+    /// The smallest angle (degrees, at most 30) of the triangles inside plane patches, with
+    /// `max_edge`: planes are triangulated anew by constrained Delaunay refinement inside
+    /// their outlines (`crate::subdiv::refine_planes`, feature `remesh`); curved
+    /// patches keep the triangles `max_edge` gives.
+    pub min_angle: Option<f64>,
 }
 
 /// The encoder's default tolerance, relative to the model's diagonal: without a tolerance of
@@ -106,6 +115,65 @@ pub fn decode_surface(
     limits: &Limits,
     opts: &SurfaceOptions,
 ) -> Result<DecodedSurface> {
+    let Some(max_edge) = opts.max_edge else {
+        if opts.min_angle.is_some() {
+            return Err(Error::Parameter(
+                "a smallest angle needs a longest edge (max_edge) to size the triangles".into(),
+            ));
+        }
+        return decode_detail(bytes, limits, opts);
+    };
+    if !(max_edge > 0.0 && max_edge.is_finite()) {
+        return Err(Error::Parameter(format!(
+            "the longest edge must be a positive length, got {max_edge}"
+        )));
+    }
+    if let Some(a) = opts.min_angle {
+        if !(a > 0.0 && a <= 30.0) {
+            return Err(Error::Parameter(format!(
+                "the smallest angle must be in (0, 30] degrees, got {a}"
+            )));
+        }
+        if cfg!(not(feature = "remesh")) {
+            return Err(Error::Parameter(
+                "a smallest angle needs the library's `remesh` feature".into(),
+            ));
+        }
+    }
+    let mut surface = decode_detail(bytes, limits, opts)?;
+    let (mesh, normals) = crate::subdiv::split_to_max_edge(
+        &surface.mesh,
+        surface.normals.as_deref(),
+        max_edge,
+        limits.max_subdivided_faces,
+    )?;
+    surface.mesh = mesh;
+    surface.normals = normals;
+    #[cfg(feature = "remesh")]
+    if let Some(min_angle) = opts.min_angle {
+        let (mesh, normals, _) = crate::subdiv::refine_planes(
+            &surface.mesh,
+            surface.normals.as_deref(),
+            max_edge,
+            min_angle,
+            limits.max_subdivided_faces,
+        )?;
+        // Refinement keeps the outlines, so a triangle spanning a narrow strip between two
+        // of them can keep an edge over the length: split those, conforming as before.
+        let (mesh, normals) = crate::subdiv::split_to_max_edge(
+            &mesh,
+            normals.as_deref(),
+            max_edge,
+            limits.max_subdivided_faces,
+        )?;
+        surface.mesh = mesh;
+        surface.normals = normals;
+    }
+    Ok(surface)
+}
+
+/// [`decode_surface`] up to the detail asked for, before any edge is split.
+fn decode_detail(bytes: &[u8], limits: &Limits, opts: &SurfaceOptions) -> Result<DecodedSurface> {
     let (decoded, usage) = codec::decode_with_usage(bytes, limits);
     let decoded = decoded?;
     let content = decoded.header.content;

@@ -490,6 +490,21 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             );
         }
     }
+    if let Some(h) = args.max_edge {
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(
+                scode::Error::Parameter(format!("--max-edge must be positive, got {h}")).into(),
+            );
+        }
+    }
+    if let Some(a) = args.min_angle {
+        if !(a > 0.0 && a <= 30.0) {
+            return Err(scode::Error::Parameter(format!(
+                "--min-angle must be in (0, 30] degrees, got {a}"
+            ))
+            .into());
+        }
+    }
     let bytes = read_scode(&args.input, &limits)?;
     let detail = match (args.level, args.tolerance) {
         (Some(level), _) => Detail::Level(level),
@@ -508,6 +523,8 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             None
         },
         boundary_patches: boundary_output(args.dense_boundary),
+        max_edge: args.max_edge,
+        min_angle: args.min_angle,
     };
     let t0 = Instant::now();
     let surface = decode_surface(&bytes, &limits, &opts)
@@ -540,7 +557,33 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
             a.max_level
         );
     }
+    if let Some(limit) = args.min_angle {
+        let (longest, under) = edge_and_angle_summary(&surface.mesh, limit);
+        println!(
+            "longest edge {longest:.4e}; {under} of {} triangles have an angle under {limit} \
+             degrees (--min-angle refines plane patches; curved patches keep the triangles \
+             --max-edge gives)",
+            surface.mesh.face_count()
+        );
+    }
     Ok(())
+}
+
+/// The longest edge of `mesh`'s triangles, and how many triangles have an angle under
+/// `limit` degrees.
+fn edge_and_angle_summary(mesh: &scode::ControlMesh, limit: f64) -> (f64, usize) {
+    let (mut longest, mut under) = (0.0f64, 0);
+    for face in mesh.faces() {
+        let q: Vec<_> = face.iter().map(|&v| mesh.positions[v as usize]).collect();
+        let mut smallest = 180.0f64;
+        for k in 0..q.len() {
+            let (a, b, c) = (q[k], q[(k + 1) % q.len()], q[(k + q.len() - 1) % q.len()]);
+            longest = longest.max(a.distance(b));
+            smallest = smallest.min((b - a).angle_between(c - a).to_degrees());
+        }
+        under += usize::from(smallest < limit);
+    }
+    (longest, under)
 }
 
 /// "0:12 1:40 3:2": control triangles per level shown, levels with none left out.

@@ -384,6 +384,18 @@ pub struct DecodeArgs {
     /// uniform level: the file's default level unless --level).
     #[arg(long, conflicts_with_all = ["limit", "tolerance"])]
     pub no_limit: bool,
+    /// Longest edge of the output, in model units: every longer edge is split at its midpoint, the same
+    /// way for both faces beside it, so the mesh stays watertight and keeps its groups, sharp
+    /// edges and corners; edges inside a plane are then flipped toward well-shaped
+    /// triangles. For solvers that need an element size, e.g. --max-edge 2.5.
+    #[arg(long, value_name = "H")]
+    pub max_edge: Option<f64>,
+    /// With --max-edge: the smallest angle in degrees (up to 30) of the triangles inside
+    /// plane patches, which are triangulated anew by constrained Delaunay refinement inside
+    /// their outlines (the outline's edges stay as they are, so the mesh stays watertight);
+    /// curved patches keep the triangles --max-edge gives. E.g. --max-edge 2.5 --min-angle 25.
+    #[arg(long, value_name = "DEGREES", requires = "max_edge")]
+    pub min_angle: Option<f64>,
     /// Output boundary patches (planes, cylinders, cones) as the full 1-to-4 grid instead of
     /// S-CODE's sparse triangulation.
     #[arg(long)]

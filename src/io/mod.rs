@@ -322,9 +322,21 @@ pub fn write_mesh_with(
     opts: &WriteOptions,
 ) -> Result<()> {
     let format = MeshFormat::from_path(path)?;
-    let mut bytes = Vec::new();
-    write_mesh_to_with(&mut bytes, format, mesh, normals, opts)?;
-    std::fs::write(path, &bytes).map_err(|e| Error::io(path, e))
+    // Checked before the file is created, so a refused mesh leaves no file behind.
+    check_writable(format, mesh, normals, opts)?;
+    // The writers stream into the file through their own buffer: no copy of the whole
+    // output is ever held in memory.
+    let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+    if let Err(e) = write_checked(&mut file, format, mesh, normals, opts) {
+        // A half-written file must not pass for a mesh.
+        drop(file);
+        let _ = std::fs::remove_file(path);
+        return Err(match e {
+            Error::Io { source, .. } => Error::io(path, source),
+            other => other,
+        });
+    }
+    Ok(())
 }
 
 /// Writes a mesh in `format` to `writer` with the default [`WriteOptions`]. The mesh must
@@ -346,6 +358,18 @@ pub fn write_mesh_to_with(
     normals: Option<&[DVec3]>,
     opts: &WriteOptions,
 ) -> Result<()> {
+    check_writable(format, mesh, normals, opts)?;
+    write_checked(writer, format, mesh, normals, opts)
+}
+
+/// Refuses what no writer can write: quantization outside glTF, an invalid mesh, a normal
+/// count that is not the vertex count.
+fn check_writable(
+    format: MeshFormat,
+    mesh: &ControlMesh,
+    normals: Option<&[DVec3]>,
+    opts: &WriteOptions,
+) -> Result<()> {
     if opts.quantize && !matches!(format, MeshFormat::Glb | MeshFormat::Gltf) {
         return Err(Error::Parameter(format!(
             "quantization is a glTF option; {format} output cannot be quantized"
@@ -361,6 +385,17 @@ pub fn write_mesh_to_with(
             )));
         }
     }
+    Ok(())
+}
+
+/// Runs the writer of `format` on a mesh [`check_writable`] accepted.
+fn write_checked(
+    writer: &mut dyn std::io::Write,
+    format: MeshFormat,
+    mesh: &ControlMesh,
+    normals: Option<&[DVec3]>,
+    opts: &WriteOptions,
+) -> Result<()> {
     let result = match format {
         MeshFormat::Obj => obj::write(writer, mesh, normals),
         MeshFormat::Off => off::write(writer, mesh),
@@ -370,6 +405,26 @@ pub fn write_mesh_to_with(
         MeshFormat::Gltf => gltf::write_gltf(writer, mesh, normals, opts),
     };
     result.map_err(|e| Error::io(format!("<{format} output>"), e))
+}
+
+/// The writers' output buffer: large enough that each write reaches the file in few system
+/// calls, since decoded meshes run to hundreds of megabytes.
+pub(crate) fn buffered(
+    out: &mut dyn std::io::Write,
+) -> std::io::BufWriter<&mut dyn std::io::Write> {
+    std::io::BufWriter::with_capacity(1 << 20, out)
+}
+
+/// `mask[v]` is true for the corner vertices `v` of `mesh`: a lookup per vertex that does
+/// not search the set.
+pub(crate) fn corner_mask(mesh: &ControlMesh) -> Vec<bool> {
+    let mut mask = vec![false; mesh.vertex_count()];
+    for &c in &mesh.corners {
+        if let Some(m) = mask.get_mut(c as usize) {
+            *m = true;
+        }
+    }
+    mask
 }
 
 /// Triangulates face `f` as a fan from its first vertex (used by the STL and glb writers,

@@ -301,7 +301,7 @@ fn resolve(i: i64, n_so_far: i64, line: usize, what: &str, path: &Path) -> Resul
 /// Writes `mesh` as OBJ: full-precision `v` lines, optional `vn` (then faces use `v//vn`),
 /// faces under `g` lines, `l` lines for sharp edges and `p` lines for corners.
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>) -> io::Result<()> {
-    let mut w = io::BufWriter::new(out);
+    let mut w = super::buffered(out);
     writeln!(w, "# written by scode {}", env!("CARGO_PKG_VERSION"))?;
     writeln!(
         w,
@@ -310,12 +310,21 @@ pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>)
         mesh.face_count(),
         mesh.groups.len()
     )?;
-    for p in &mesh.positions {
-        writeln!(w, "v {:?} {:?} {:?}", p.x, p.y, p.z)?;
-    }
-    if let Some(normals) = normals {
-        for n in normals {
-            writeln!(w, "vn {:?} {:?} {:?}", n.x, n.y, n.z)?;
+    // Numbers are formatted into one reusable line: the shortest text that reads back as
+    // the same f64, as `{:?}` gives, without going through `fmt`.
+    let mut floats = zmij::Buffer::new();
+    let mut ints = itoa::Buffer::new();
+    let mut line = Vec::with_capacity(128);
+    for (tag, values) in [(&b"v"[..], Some(&mesh.positions[..])), (b"vn", normals)] {
+        for p in values.into_iter().flatten() {
+            line.clear();
+            line.extend_from_slice(tag);
+            for c in p.to_array() {
+                line.push(b' ');
+                line.extend_from_slice(floats.format(c).as_bytes());
+            }
+            line.push(b'\n');
+            w.write_all(&line)?;
         }
     }
     let name = |g: u32| -> String {
@@ -348,15 +357,19 @@ pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>)
             writeln!(w, "g {}", name(g))?;
             current = Some(g);
         }
-        w.write_all(b"f")?;
+        line.clear();
+        line.push(b'f');
         for &v in mesh.face(f) {
+            let index = ints.format(u64::from(v) + 1).as_bytes();
+            line.push(b' ');
+            line.extend_from_slice(index);
             if normals.is_some() {
-                write!(w, " {}//{}", v + 1, v + 1)?;
-            } else {
-                write!(w, " {}", v + 1)?;
+                line.extend_from_slice(b"//");
+                line.extend_from_slice(index);
             }
         }
-        w.write_all(b"\n")?;
+        line.push(b'\n');
+        w.write_all(&line)?;
     }
     for &(a, b) in &mesh.sharp_edges {
         writeln!(w, "l {} {}", a + 1, b + 1)?;

@@ -385,7 +385,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
 
 /// Writes `mesh` as binary little-endian PLY (see the module docs for the layout).
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>) -> io::Result<()> {
-    let mut w = io::BufWriter::new(out);
+    let mut w = super::buffered(out);
     let max_degree = mesh.faces().map(<[u32]>::len).max().unwrap_or(0);
     let count_type = if max_degree <= u8::MAX as usize {
         "uchar"
@@ -419,31 +419,42 @@ pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>)
     writeln!(w, "property uint vertex1")?;
     writeln!(w, "property uint vertex2")?;
     writeln!(w, "end_header")?;
+    // One record per vertex and face, assembled on the stack and written in one call: the
+    // output is the mesh's arrays in file order, with no copy of the whole file.
+    let corners = super::corner_mask(mesh);
+    let mut record = [0u8; 3 * 8 + 3 * 4 + 1];
+    let len = if normals.is_some() { 37 } else { 25 };
     for (v, p) in mesh.positions.iter().enumerate() {
-        for c in p.to_array() {
-            w.write_all(&c.to_le_bytes())?;
+        for (k, c) in p.to_array().into_iter().enumerate() {
+            record[8 * k..8 * k + 8].copy_from_slice(&c.to_le_bytes());
         }
         if let Some(normals) = normals {
-            for c in normals[v].to_array() {
-                w.write_all(&(c as f32).to_le_bytes())?;
+            for (k, c) in normals[v].to_array().into_iter().enumerate() {
+                record[24 + 4 * k..28 + 4 * k].copy_from_slice(&(c as f32).to_le_bytes());
             }
         }
-        w.write_all(&[mesh.corners.contains(&(v as u32)) as u8])?;
+        record[len - 1] = corners[v] as u8;
+        w.write_all(&record[..len])?;
     }
+    let mut record = Vec::with_capacity(4 + 4 * max_degree + 4);
     for (f, face) in mesh.faces().enumerate() {
+        record.clear();
         if count_type == "uchar" {
-            w.write_all(&[face.len() as u8])?;
+            record.push(face.len() as u8);
         } else {
-            w.write_all(&(face.len() as u32).to_le_bytes())?;
+            record.extend_from_slice(&(face.len() as u32).to_le_bytes());
         }
         for &v in face {
-            w.write_all(&v.to_le_bytes())?;
+            record.extend_from_slice(&v.to_le_bytes());
         }
-        w.write_all(&mesh.face_groups[f].to_le_bytes())?;
+        record.extend_from_slice(&mesh.face_groups[f].to_le_bytes());
+        w.write_all(&record)?;
     }
     for &(a, b) in &mesh.sharp_edges {
-        w.write_all(&a.to_le_bytes())?;
-        w.write_all(&b.to_le_bytes())?;
+        let mut pair = [0u8; 8];
+        pair[..4].copy_from_slice(&a.to_le_bytes());
+        pair[4..].copy_from_slice(&b.to_le_bytes());
+        w.write_all(&pair)?;
     }
     w.flush()
 }

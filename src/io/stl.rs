@@ -6,8 +6,8 @@
 //! Detection: a file whose size is exactly `84 + 50 × count` (count from bytes 80..84) is
 //! binary even if its header starts with `solid` (several exporters do that); otherwise a
 //! file starting with `solid` is ascii. Binary triangles are decoded here (50 fixed bytes
-//! each, with a size check first); ascii goes through `stl_io`. Writing uses `stl_io`, with
-//! polygons fan-triangulated and face normals computed from the geometry.
+//! each, with a size check first); ascii goes through `stl_io`. The writer streams binary STL,
+//! with polygons fan-triangulated and face normals computed from the geometry.
 
 use std::io::{self, Cursor, Write};
 use std::path::Path;
@@ -118,24 +118,31 @@ fn parse_ascii(bytes: &[u8], path: &Path, raw: &mut RawMesh) -> Result<()> {
 }
 
 /// Writes `mesh` as binary STL: polygons fan-triangulated, positions as f32, face normals
-/// from the geometry (zero for degenerate triangles).
+/// from the geometry (zero for degenerate triangles). Each 50-byte triangle record goes
+/// straight from the mesh's arrays to the output.
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh) -> io::Result<()> {
-    let to_f32 = |p: DVec3| stl_io::Vector::new([p.x as f32, p.y as f32, p.z as f32]);
-    let mut triangles = Vec::new();
+    let triangles: usize = mesh.faces().map(|f| f.len().saturating_sub(2)).sum();
+    let count = u32::try_from(triangles)
+        .map_err(|_| io::Error::other("too many triangles for binary STL"))?;
+    let mut w = super::buffered(out);
+    // A blank header: one starting with "solid" would pass for ascii STL in some readers.
+    w.write_all(&[0u8; 80])?;
+    w.write_all(&count.to_le_bytes())?;
+    let mut record = [0u8; 50];
     for face in mesh.faces() {
         for [a, b, c] in fan_triangles(face) {
             let [pa, pb, pc] = [a, b, c].map(|v| mesh.positions[v as usize]);
             let normal = (pb - pa).cross(pc - pa).normalize_or_zero();
-            triangles.push(stl_io::Triangle {
-                normal: to_f32(normal),
-                vertices: [to_f32(pa), to_f32(pb), to_f32(pc)],
-            });
+            for (k, p) in [normal, pa, pb, pc].into_iter().enumerate() {
+                for (j, c) in p.to_array().into_iter().enumerate() {
+                    let at = 12 * k + 4 * j;
+                    record[at..at + 4].copy_from_slice(&(c as f32).to_le_bytes());
+                }
+            }
+            w.write_all(&record)?;
         }
     }
-    if u32::try_from(triangles.len()).is_err() {
-        return Err(io::Error::other("too many triangles for binary STL"));
-    }
-    stl_io::write_stl(&mut { out }, triangles.iter())
+    w.flush()
 }
 
 #[cfg(test)]

@@ -38,6 +38,28 @@ pub(crate) fn flip_to_well_shaped(
     fixed: &std::collections::BTreeSet<(u32, u32)>,
     max_deviation: f64,
 ) -> usize {
+    flip_to_well_shaped_within(
+        positions,
+        tris,
+        groups,
+        flippable,
+        fixed,
+        max_deviation,
+        f64::INFINITY,
+    )
+}
+
+/// [`flip_to_well_shaped`] that never makes an edge longer than `max_edge` (a mesh sized for
+/// a solver keeps its size).
+pub(crate) fn flip_to_well_shaped_within(
+    positions: &[DVec3],
+    tris: &mut [[u32; 3]],
+    groups: &[u32],
+    flippable: &[bool],
+    fixed: &std::collections::BTreeSet<(u32, u32)>,
+    max_deviation: f64,
+    max_edge: f64,
+) -> usize {
     let can = |t: usize| flippable.get(groups[t] as usize).copied().unwrap_or(false);
     // Edge -> the triangles on either side (and the slot of the edge in each).
     let mut sides: HashMap<(u32, u32), [(u32, u8); 2]> = HashMap::new();
@@ -84,6 +106,9 @@ pub(crate) fn flip_to_well_shaped(
             continue;
         }
         let p = |v: u32| positions[v as usize];
+        if p(c).distance(p(d)) > max_edge {
+            continue;
+        }
         if !better_flipped(p(a), p(b), p(c), p(d), max_deviation) {
             continue;
         }

@@ -30,8 +30,11 @@ mod frame;
 mod lazy;
 mod lod;
 mod masks;
+mod max_edge;
 mod next_level;
 mod par;
+#[cfg(feature = "remesh")]
+mod plane_refine;
 mod sparse;
 mod topology;
 mod uniform;
@@ -54,6 +57,9 @@ pub use accuracy::{
 };
 pub use lod::{lod_corner_face, AdaptiveMesh};
 pub use masks::{loop_beta, loop_omega};
+pub use max_edge::split_to_max_edge;
+#[cfg(feature = "remesh")]
+pub use plane_refine::{refine_planes, PlaneRefinement};
 pub use sparse::BoundaryPatchOutput;
 pub use uniform::UniformSurface;
 

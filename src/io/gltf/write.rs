@@ -29,40 +29,41 @@ const I8_MAX: f64 = 127.0;
 /// Feature ids above this are not exact in the `FLOAT` attribute that holds them.
 const MAX_FLOAT_ID: usize = 1 << 24;
 
-/// Writes `mesh` as a `.glb`.
+/// Writes `mesh` as a `.glb`. The document is laid out first (every buffer view's offset
+/// and length follow from the counts); the binary chunk is then written straight from the
+/// mesh's arrays, with no copy of it in memory.
 pub fn write_glb(
     out: &mut dyn Write,
     mesh: &ControlMesh,
     normals: Option<&[DVec3]>,
     opts: &WriteOptions,
 ) -> io::Result<()> {
-    let (mut document, mut bin) = build_document(mesh, normals, opts)?;
-    if !bin.is_empty() {
-        document["buffers"] = json!([{ "byteLength": bin.len() }]);
+    let bodies = bodies(mesh);
+    let (mut document, bin) = build_document(mesh, &bodies, normals, opts)?;
+    if bin.len > 0 {
+        document["buffers"] = json!([{ "byteLength": bin.len }]);
     }
     let mut json = serde_json::to_vec(&document).map_err(io::Error::other)?;
     while json.len() % 4 != 0 {
         json.push(b' ');
     }
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
+    let bin_len = bin.len.next_multiple_of(4);
     // A file without a buffer has no BIN chunk.
-    let bin_chunk = if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let bin_chunk = if bin.len == 0 { 0 } else { 8 + bin_len };
     let total = 12 + 8 + json.len() + bin_chunk;
-    let total =
-        u32::try_from(total).map_err(|_| io::Error::other("mesh too large for a .glb file"))?;
-    let mut w = io::BufWriter::new(out);
-    w.write_all(b"glTF")?;
-    w.write_all(&2u32.to_le_bytes())?;
-    w.write_all(&total.to_le_bytes())?;
-    w.write_all(&(json.len() as u32).to_le_bytes())?;
-    w.write_all(b"JSON")?;
-    w.write_all(&json)?;
-    if !bin.is_empty() {
-        w.write_all(&(bin.len() as u32).to_le_bytes())?;
-        w.write_all(b"BIN\0")?;
-        w.write_all(&bin)?;
+    let too_large = || io::Error::other("mesh too large for a .glb file");
+    let total = u32::try_from(total).map_err(|_| too_large())?;
+    let mut w = Sink::new(out);
+    w.put(b"glTF")?;
+    w.put(&2u32.to_le_bytes())?;
+    w.put(&total.to_le_bytes())?;
+    w.put(&(json.len() as u32).to_le_bytes())?;
+    w.put(b"JSON")?;
+    w.put(&json)?;
+    if bin.len > 0 {
+        w.put(&(bin_len as u32).to_le_bytes())?;
+        w.put(b"BIN\0")?;
+        bin.write(&mut w, bin_len)?;
     }
     w.flush()
 }
@@ -75,17 +76,57 @@ pub fn write_gltf(
     normals: Option<&[DVec3]>,
     opts: &WriteOptions,
 ) -> io::Result<()> {
-    let (mut document, bin) = build_document(mesh, normals, opts)?;
-    if !bin.is_empty() {
+    let bodies = bodies(mesh);
+    let (mut document, bin) = build_document(mesh, &bodies, normals, opts)?;
+    if bin.len > 0 {
+        // base64 needs the bytes in one piece.
+        let mut bytes = Vec::with_capacity(bin.len);
+        let mut sink = Sink::new(&mut bytes);
+        bin.write(&mut sink, bin.len)?;
+        sink.flush()?;
+        drop(sink);
         document["buffers"] = json!([{
-            "byteLength": bin.len(),
-            "uri": format!("data:application/octet-stream;base64,{}", super::base64_encode(&bin)),
+            "byteLength": bin.len,
+            "uri": format!("data:application/octet-stream;base64,{}", super::base64_encode(&bytes)),
         }]);
     }
-    let mut w = io::BufWriter::new(out);
+    let mut w = super::super::buffered(out);
     serde_json::to_writer(&mut w, &document).map_err(io::Error::other)?;
     w.write_all(b"\n")?;
     w.flush()
+}
+
+/// The buffered output of the binary chunk, counting the bytes written so that each buffer
+/// view is checked to be as long as the document says.
+struct Sink<'w> {
+    w: io::BufWriter<&'w mut dyn Write>,
+    written: usize,
+}
+
+impl<'w> Sink<'w> {
+    fn new(out: &'w mut dyn Write) -> Self {
+        Sink {
+            w: super::super::buffered(out),
+            written: 0,
+        }
+    }
+
+    #[inline]
+    fn put(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.written += bytes.len();
+        self.w.write_all(bytes)
+    }
+
+    fn zeros(&mut self, n: usize) -> io::Result<()> {
+        for _ in 0..n {
+            self.put(&[0])?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.w.flush()
+    }
 }
 
 /// One connected component of the mesh, with its vertices split by CAD face.
@@ -101,18 +142,56 @@ struct Body {
     lines: Vec<u32>,
 }
 
-impl Body {
-    fn index_of(&self, vertex: u32, group: u32) -> u32 {
-        // Every (vertex, group) of the body's faces is in `copies`.
-        self.copies
-            .binary_search(&(vertex, group))
-            .map_or(0, |i| i as u32)
+/// The distinct groups of the faces around each vertex, in increasing order: `groups[start[v]
+/// ..start[v + 1]]` for vertex `v`.
+struct VertexGroups {
+    start: Vec<u32>,
+    groups: Vec<u32>,
+}
+
+impl VertexGroups {
+    fn new(mesh: &ControlMesh) -> VertexGroups {
+        let nv = mesh.vertex_count();
+        // Counting sort of the face corners by vertex, then each vertex's few groups sorted
+        // and deduplicated in place: linear in the corners, where sorting all `(vertex,
+        // group)` pairs is not.
+        let mut start = vec![0u32; nv + 1];
+        for &v in &mesh.face_vertices {
+            start[v as usize + 1] += 1;
+        }
+        for v in 0..nv {
+            start[v + 1] += start[v];
+        }
+        let mut cursor = start.clone();
+        let mut all = vec![0u32; mesh.face_vertices.len()];
+        for (f, face) in mesh.faces().enumerate() {
+            for &v in face {
+                all[cursor[v as usize] as usize] = mesh.face_groups[f];
+                cursor[v as usize] += 1;
+            }
+        }
+        let mut groups = Vec::with_capacity(all.len());
+        let mut out_start = Vec::with_capacity(nv + 1);
+        out_start.push(0u32);
+        for v in 0..nv {
+            let around = &mut all[start[v] as usize..start[v + 1] as usize];
+            around.sort_unstable();
+            let first = groups.len();
+            for &g in around.iter() {
+                if groups.len() == first || groups.last() != Some(&g) {
+                    groups.push(g);
+                }
+            }
+            out_start.push(groups.len() as u32);
+        }
+        VertexGroups {
+            start: out_start,
+            groups,
+        }
     }
 
-    /// The first copy of `vertex` in this body, if the body has it.
-    fn any_copy(&self, vertex: u32) -> Option<u32> {
-        let i = self.copies.partition_point(|&(v, _)| v < vertex);
-        (self.copies.get(i)?.0 == vertex).then_some(i as u32)
+    fn of(&self, v: u32) -> &[u32] {
+        &self.groups[self.start[v as usize] as usize..self.start[v as usize + 1] as usize]
     }
 }
 
@@ -140,87 +219,88 @@ fn bodies(mesh: &ControlMesh) -> Vec<Body> {
         }
     }
     let mut body_of_root = vec![u32::MAX; nv];
-    let mut face_lists: Vec<Vec<u32>> = Vec::new();
-    for (f, face) in mesh.faces().enumerate() {
+    let mut body_of_face = Vec::with_capacity(mesh.face_count());
+    let mut out: Vec<Body> = Vec::new();
+    for face in mesh.faces() {
         let r = root(&mut parent, face[0]) as usize;
         if body_of_root[r] == u32::MAX {
-            body_of_root[r] = face_lists.len() as u32;
-            face_lists.push(Vec::new());
-        }
-        face_lists[body_of_root[r] as usize].push(f as u32);
-    }
-    let mut out: Vec<Body> = face_lists
-        .iter()
-        .map(|faces| {
-            let mut copies: Vec<(u32, u32)> = faces
-                .iter()
-                .flat_map(|&f| {
-                    let g = mesh.face_groups[f as usize];
-                    mesh.face(f as usize).iter().map(move |&v| (v, g))
-                })
-                .collect();
-            copies.sort_unstable();
-            copies.dedup();
-            let mut body = Body {
-                copies,
+            body_of_root[r] = out.len() as u32;
+            out.push(Body {
+                copies: Vec::new(),
                 triangles: Vec::new(),
                 lines: Vec::new(),
-            };
-            for &f in faces {
-                let g = mesh.face_groups[f as usize];
-                for t in fan_triangles(mesh.face(f as usize)) {
-                    for v in t {
-                        let i = body.index_of(v, g);
-                        body.triangles.push(i);
-                    }
-                }
+            });
+        }
+        body_of_face.push(body_of_root[r]);
+    }
+    // Copies in vertex order, then group order: each body's list comes out sorted.
+    let around = VertexGroups::new(mesh);
+    let mut first_copy = vec![0u32; nv];
+    for v in 0..nv as u32 {
+        let groups = around.of(v);
+        if groups.is_empty() {
+            continue;
+        }
+        let body = &mut out[body_of_root[root(&mut parent, v) as usize] as usize];
+        first_copy[v as usize] = body.copies.len() as u32;
+        body.copies.extend(groups.iter().map(|&g| (v, g)));
+    }
+    for (f, face) in mesh.faces().enumerate() {
+        let g = mesh.face_groups[f];
+        let body = &mut out[body_of_face[f] as usize];
+        for t in fan_triangles(face) {
+            for v in t {
+                // Every (vertex, group) of the body's faces is among the copies.
+                let k = around.of(v).iter().position(|&h| h == g).unwrap_or(0);
+                body.triangles.push(first_copy[v as usize] + k as u32);
             }
-            body
-        })
-        .collect();
+        }
+    }
     for &(a, b) in &mesh.sharp_edges {
         if a as usize >= nv || b as usize >= nv {
             continue;
         }
         let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
         let body = body_of_root[ra as usize];
-        if ra != rb || body == u32::MAX {
+        if ra != rb || body == u32::MAX || around.of(a).is_empty() || around.of(b).is_empty() {
             continue; // not an edge of any face: nothing to draw it along
         }
         let body = &mut out[body as usize];
-        if let (Some(i), Some(j)) = (body.any_copy(a), body.any_copy(b)) {
-            body.lines.extend([i, j]);
-        }
+        body.lines
+            .extend([first_copy[a as usize], first_copy[b as usize]]);
     }
     out
 }
 
-/// The binary buffer and its buffer views.
-struct Bin {
-    bytes: Vec<u8>,
+/// Writes the bytes of one buffer view into the binary chunk.
+type Fill<'a> = Box<dyn Fn(&mut Sink<'_>) -> io::Result<()> + 'a>;
+
+/// The layout of the binary buffer: its buffer views, and for each the function that writes
+/// its bytes.
+#[derive(Default)]
+struct Bin<'a> {
+    /// Bytes so far (the end of the last view).
+    len: usize,
     views: Vec<Value>,
+    /// `(offset, bytes written by fill, fill)` of each view.
+    fills: Vec<(usize, usize, Fill<'a>)>,
 }
 
-impl Bin {
-    /// Appends a buffer view holding what `fill` writes, starting at a multiple of 8 bytes
-    /// (the alignment of the largest component type). Returns its index.
+impl<'a> Bin<'a> {
+    /// Appends a buffer view of `len` bytes, which `fill` writes, starting at a multiple of
+    /// 8 bytes (the alignment of the largest component type). Returns its index.
     fn view(
         &mut self,
         target: Option<u32>,
         stride: Option<usize>,
-        fill: impl FnOnce(&mut Vec<u8>),
+        len: usize,
+        fill: impl Fn(&mut Sink<'_>) -> io::Result<()> + 'a,
     ) -> usize {
-        while self.bytes.len() % 8 != 0 {
-            self.bytes.push(0);
-        }
-        let start = self.bytes.len();
-        fill(&mut self.bytes);
+        let start = self.len.next_multiple_of(8);
         // A buffer view holds at least one byte.
-        if self.bytes.len() == start {
-            self.bytes.push(0);
-        }
+        self.len = start + len.max(1);
         let mut view = json!({
-            "buffer": 0, "byteOffset": start, "byteLength": self.bytes.len() - start
+            "buffer": 0, "byteOffset": start, "byteLength": self.len - start
         });
         if let Some(t) = target {
             view["target"] = json!(t);
@@ -229,13 +309,31 @@ impl Bin {
             view["byteStride"] = json!(s);
         }
         self.views.push(view);
+        self.fills.push((start, len, Box::new(fill)));
         self.views.len() - 1
+    }
+
+    /// Writes the buffer, zero-padded to `padded_len` bytes.
+    fn write(&self, w: &mut Sink<'_>, padded_len: usize) -> io::Result<()> {
+        let base = w.written;
+        for (start, len, fill) in &self.fills {
+            w.zeros(base + start - w.written)?;
+            let before = w.written;
+            fill(w)?;
+            if w.written - before != *len {
+                return Err(io::Error::other(
+                    "glTF buffer view written with a length other than its declared one",
+                ));
+            }
+        }
+        w.zeros(base + padded_len - w.written)
     }
 }
 
 /// Maps positions to normalized 16-bit integers: `q = (p - center) / half * 32767`, so that
 /// the node transform `translation = center`, `scale = half` gives the positions back. One
 /// uniform scale for all axes keeps normals unchanged by the node transform.
+#[derive(Clone, Copy)]
 struct Quantizer {
     center: [f32; 3],
     half: f32,
@@ -286,56 +384,50 @@ fn unit(n: DVec3) -> DVec3 {
 }
 
 /// Accessors and buffer views of one body's vertices: `(POSITION, NORMAL, _FEATURE_ID_0)`.
-fn vertex_accessors(
-    body: &Body,
-    mesh: &ControlMesh,
-    normals: Option<&[DVec3]>,
-    quant: Option<&Quantizer>,
-    bin: &mut Bin,
+fn vertex_accessors<'a>(
+    body: &'a Body,
+    mesh: &'a ControlMesh,
+    normals: Option<&'a [DVec3]>,
+    quant: Option<Quantizer>,
+    bin: &mut Bin<'a>,
     accessors: &mut Vec<Value>,
 ) -> (usize, Option<usize>, usize) {
     let count = body.copies.len();
+    let at = |&(v, _): &(u32, u32)| mesh.positions[v as usize];
     let position = if let Some(q) = quant {
-        let values: Vec<[i16; 3]> = body
-            .copies
-            .iter()
-            .map(|&(v, _)| q.quantize(mesh.positions[v as usize]))
-            .collect();
         let (mut lo, mut hi) = ([i16::MAX; 3], [i16::MIN; 3]);
-        for p in &values {
+        for p in body.copies.iter().map(|c| q.quantize(at(c))) {
             for a in 0..3 {
                 lo[a] = lo[a].min(p[a]);
                 hi[a] = hi[a].max(p[a]);
             }
         }
         // 6 bytes padded to 8: vertex attribute elements start at multiples of 4.
-        let view = bin.view(Some(ARRAY_BUFFER), Some(8), |b| {
-            for p in &values {
-                for c in p {
-                    b.extend_from_slice(&c.to_le_bytes());
+        let view = bin.view(Some(ARRAY_BUFFER), Some(8), 8 * count, move |w| {
+            let mut record = [0u8; 8];
+            for c in &body.copies {
+                for (k, x) in q.quantize(at(c)).into_iter().enumerate() {
+                    record[2 * k..2 * k + 2].copy_from_slice(&x.to_le_bytes());
                 }
-                b.extend_from_slice(&[0, 0]);
+                w.put(&record)?;
             }
+            Ok(())
         });
         json!({ "bufferView": view, "componentType": SHORT, "normalized": true,
                 "count": count, "type": "VEC3", "min": lo, "max": hi })
     } else {
-        let values: Vec<[f32; 3]> = body
-            .copies
-            .iter()
-            .map(|&(v, _)| mesh.positions[v as usize].as_vec3().to_array())
-            .collect();
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for p in &values {
+        for p in body.copies.iter().map(|c| at(c).as_vec3().to_array()) {
             for a in 0..3 {
                 lo[a] = lo[a].min(p[a]);
                 hi[a] = hi[a].max(p[a]);
             }
         }
-        let view = bin.view(Some(ARRAY_BUFFER), None, |b| {
-            for c in values.iter().flatten() {
-                b.extend_from_slice(&c.to_le_bytes());
+        let view = bin.view(Some(ARRAY_BUFFER), None, 12 * count, move |w| {
+            for c in &body.copies {
+                w.put(&vec3_bytes(at(c)))?;
             }
+            Ok(())
         });
         json!({ "bufferView": view, "componentType": FLOAT, "count": count, "type": "VEC3",
                 "min": lo, "max": hi })
@@ -345,24 +437,24 @@ fn vertex_accessors(
 
     let normal = normals.map(|normals| {
         let accessor = if quant.is_some() {
-            let view = bin.view(Some(ARRAY_BUFFER), Some(4), |b| {
+            let view = bin.view(Some(ARRAY_BUFFER), Some(4), 4 * count, move |w| {
                 for &(v, _) in &body.copies {
-                    let n = unit(normals[v as usize]);
-                    for c in n.to_array() {
-                        b.push((c * I8_MAX).round().clamp(-I8_MAX, I8_MAX) as i8 as u8);
+                    let mut record = [0u8; 4];
+                    for (k, c) in unit(normals[v as usize]).to_array().into_iter().enumerate() {
+                        record[k] = (c * I8_MAX).round().clamp(-I8_MAX, I8_MAX) as i8 as u8;
                     }
-                    b.push(0);
+                    w.put(&record)?;
                 }
+                Ok(())
             });
             json!({ "bufferView": view, "componentType": BYTE, "normalized": true,
                     "count": count, "type": "VEC3" })
         } else {
-            let view = bin.view(Some(ARRAY_BUFFER), None, |b| {
+            let view = bin.view(Some(ARRAY_BUFFER), None, 12 * count, move |w| {
                 for &(v, _) in &body.copies {
-                    for c in unit(normals[v as usize]).to_array() {
-                        b.extend_from_slice(&(c as f32).to_le_bytes());
-                    }
+                    w.put(&vec3_bytes(unit(normals[v as usize])))?;
                 }
+                Ok(())
             });
             json!({ "bufferView": view, "componentType": FLOAT, "count": count, "type": "VEC3" })
         };
@@ -373,40 +465,62 @@ fn vertex_accessors(
     // Feature ids are group indices: 16-bit while they fit, else float (exact to 2^24).
     // Either takes 4 bytes a vertex, since attribute elements start at multiples of 4.
     let small = mesh.groups.len() <= usize::from(u16::MAX);
-    let view = bin.view(Some(ARRAY_BUFFER), small.then_some(4), |b| {
-        for &(_, g) in &body.copies {
-            if small {
-                b.extend_from_slice(&(g as u16).to_le_bytes());
-                b.extend_from_slice(&[0, 0]);
-            } else {
-                b.extend_from_slice(&(g as f32).to_le_bytes());
+    let view = bin.view(
+        Some(ARRAY_BUFFER),
+        small.then_some(4),
+        4 * count,
+        move |w| {
+            for &(_, g) in &body.copies {
+                if small {
+                    let [a, b] = (g as u16).to_le_bytes();
+                    w.put(&[a, b, 0, 0])?;
+                } else {
+                    w.put(&(g as f32).to_le_bytes())?;
+                }
             }
-        }
-    });
+            Ok(())
+        },
+    );
     let component = if small { UNSIGNED_SHORT } else { FLOAT };
     accessors.push(json!({ "bufferView": view, "componentType": component,
                            "count": count, "type": "SCALAR" }));
     (position, normal, accessors.len() - 1)
 }
 
+/// `p` as three little-endian f32.
+fn vec3_bytes(p: DVec3) -> [u8; 12] {
+    let mut out = [0u8; 12];
+    for (k, c) in p.to_array().into_iter().enumerate() {
+        out[4 * k..4 * k + 4].copy_from_slice(&(c as f32).to_le_bytes());
+    }
+    out
+}
+
 /// An index accessor (16-bit where the body's vertex count allows, else 32-bit; the largest
 /// value of either type is reserved for primitive restart) and its buffer view.
-fn index_accessor(
-    indices: &[u32],
+fn index_accessor<'a>(
+    indices: &'a [u32],
     vertex_count: usize,
-    bin: &mut Bin,
+    bin: &mut Bin<'a>,
     accessors: &mut Vec<Value>,
 ) -> usize {
     let small = vertex_count < usize::from(u16::MAX);
-    let view = bin.view(Some(ELEMENT_ARRAY_BUFFER), None, |b| {
-        for &i in indices {
-            if small {
-                b.extend_from_slice(&(i as u16).to_le_bytes());
-            } else {
-                b.extend_from_slice(&i.to_le_bytes());
+    let size = if small { 2 } else { 4 };
+    let view = bin.view(
+        Some(ELEMENT_ARRAY_BUFFER),
+        None,
+        size * indices.len(),
+        move |w| {
+            for &i in indices {
+                if small {
+                    w.put(&(i as u16).to_le_bytes())?;
+                } else {
+                    w.put(&i.to_le_bytes())?;
+                }
             }
-        }
-    });
+            Ok(())
+        },
+    );
     let component = if small { UNSIGNED_SHORT } else { UNSIGNED_INT };
     accessors.push(json!({ "bufferView": view, "componentType": component,
                            "count": indices.len(), "type": "SCALAR" }));
@@ -415,19 +529,22 @@ fn index_accessor(
 
 /// The `EXT_structural_metadata` root extension: a schema with one class, `cad_face`, whose
 /// one property is the face name, and a property table with one row per group.
-fn face_table(mesh: &ControlMesh, bin: &mut Bin) -> Value {
-    let values = bin.view(None, None, |b| {
+fn face_table<'a>(mesh: &'a ControlMesh, bin: &mut Bin<'a>) -> Value {
+    let total: usize = mesh.groups.iter().map(|g| g.name.len()).sum();
+    let values = bin.view(None, None, total, move |w| {
         for g in &mesh.groups {
-            b.extend_from_slice(g.name.as_bytes());
+            w.put(g.name.as_bytes())?;
         }
+        Ok(())
     });
-    let offsets = bin.view(None, None, |b| {
+    let offsets = bin.view(None, None, 4 * (mesh.groups.len() + 1), move |w| {
         let mut end = 0u32;
-        b.extend_from_slice(&end.to_le_bytes());
+        w.put(&end.to_le_bytes())?;
         for g in &mesh.groups {
             end += g.name.len() as u32;
-            b.extend_from_slice(&end.to_le_bytes());
+            w.put(&end.to_le_bytes())?;
         }
+        Ok(())
     });
     json!({
         "schema": {
@@ -457,12 +574,13 @@ fn face_table(mesh: &ControlMesh, bin: &mut Bin) -> Value {
     })
 }
 
-/// The glTF document (without `buffers`) and the binary buffer it indexes.
-fn build_document(
-    mesh: &ControlMesh,
-    normals: Option<&[DVec3]>,
+/// The glTF document (without `buffers`) and the layout of the binary buffer it indexes.
+fn build_document<'a>(
+    mesh: &'a ControlMesh,
+    bodies: &'a [Body],
+    normals: Option<&'a [DVec3]>,
     opts: &WriteOptions,
-) -> io::Result<(Value, Vec<u8>)> {
+) -> io::Result<(Value, Bin<'a>)> {
     if mesh.groups.len() > MAX_FLOAT_ID {
         return Err(io::Error::other(format!(
             "{} groups: glTF feature ids hold at most {MAX_FLOAT_ID}",
@@ -479,24 +597,15 @@ fn build_document(
         json!({ "version": "2.0", "generator": concat!("scode ", env!("CARGO_PKG_VERSION")) });
     if mesh.face_count() == 0 {
         // Nothing to draw: the asset alone (glTF allows no empty arrays).
-        return Ok((json!({ "asset": asset }), Vec::new()));
+        return Ok((json!({ "asset": asset }), Bin::default()));
     }
     let quant = opts.quantize.then(|| Quantizer::new(&mesh.positions));
-    let mut bin = Bin {
-        bytes: Vec::new(),
-        views: Vec::new(),
-    };
+    let mut bin = Bin::default();
     let mut accessors = Vec::new();
     let mut meshes = Vec::new();
-    for (b, body) in bodies(mesh).iter().enumerate() {
-        let (position, normal, feature) = vertex_accessors(
-            body,
-            mesh,
-            normals,
-            quant.as_ref(),
-            &mut bin,
-            &mut accessors,
-        );
+    for (b, body) in bodies.iter().enumerate() {
+        let (position, normal, feature) =
+            vertex_accessors(body, mesh, normals, quant, &mut bin, &mut accessors);
         let count = body.copies.len();
         let triangles = index_accessor(&body.triangles, count, &mut bin, &mut accessors);
         let mut groups: Vec<u32> = body.copies.iter().map(|&(_, g)| g).collect();
@@ -563,12 +672,12 @@ fn build_document(
                 "roughnessFactor": 1.0 } }
         ],
         "accessors": accessors,
-        "bufferViews": bin.views,
+        "bufferViews": std::mem::take(&mut bin.views),
     });
     if !required.is_empty() {
         document["extensionsRequired"] = json!(required);
     }
-    Ok((document, bin.bytes))
+    Ok((document, bin))
 }
 
 #[cfg(test)]
