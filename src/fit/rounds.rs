@@ -32,6 +32,14 @@ const STALL_RATIO: f64 = 0.85;
 const NO_GAIN_ROUNDS: usize = 3;
 const NO_GAIN_RATIO: f64 = 0.98;
 
+/// How many groups of `plan` are closed patches.
+fn closed_count(plan: &Plan) -> usize {
+    plan.groups
+        .iter()
+        .filter(|g| matches!(g.kind, PatchKind::Closed))
+        .count()
+}
+
 /// A fitted model within reach of the output: its error, control mesh, decode level and
 /// file size at the default quantisation.
 pub(super) struct Candidate {
@@ -155,6 +163,7 @@ impl Rounds<'_> {
                 .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
                 .map(|g| measured.group_excess[g].0)
                 .fold(0.0, f64::max);
+            let level_before = levels_tried;
             if opts.default_level.is_none()
                 && levels_tried.is_none()
                 && worst_closed > tol
@@ -176,6 +185,7 @@ impl Rounds<'_> {
             } else {
                 ChainReach::NearFailures
             };
+            let closed_before = closed_count(plan);
             refine_failing(
                 self.faces,
                 self.chains,
@@ -187,6 +197,10 @@ impl Rounds<'_> {
                 plan,
                 report,
             );
+            // A patch refitted as a closed one, or a finer decode level, is a new start.
+            if closed_count(plan) > closed_before || levels_tried != level_before {
+                no_gain = 0;
+            }
         }
         let Some(converged) = best else {
             return Err(Error::Mesh("fitting produced no control mesh".into()));
