@@ -464,112 +464,56 @@ fn dense_sphere_obj(n: u32) -> String {
     s
 }
 
-/// `encode --max-seconds`: an encode over its budget ends with status 4 and a message naming
-/// the option, writes nothing and leaves the input as it was; one within it succeeds; a
-/// budget that is not a positive number of seconds is a usage error.
-#[test]
-fn max_seconds_bounds_the_whole_encode() {
-    let input = tmp("dense_sphere.obj");
+/// An encode of a 180k-triangle sphere with `budget` (an option and its value) over it ends
+/// with status 4 and a message holding `says` and "not written", writes nothing and leaves
+/// the input as it was; with `roomy` it finishes; each of `bad` is a usage error.
+fn check_encode_budget(budget: &str, tight: &str, says: &str, roomy: &str, bad: &[&str]) {
+    let input = tmp(&format!("dense_sphere{budget}.obj"));
     std::fs::write(&input, dense_sphere_obj(300)).unwrap();
     let before = std::fs::read(&input).unwrap();
-    let out = tmp("dense_sphere.scode");
+    let out = tmp(&format!("dense_sphere{budget}.scode"));
     let _ = std::fs::remove_file(&out);
-    let t0 = std::time::Instant::now();
-    let (status, text) = scode_status(&[
-        "encode",
-        "--max-seconds",
-        "0.3",
-        input.to_str().unwrap(),
-        out.to_str().unwrap(),
-    ]);
-    let took = t0.elapsed();
+    let (input, out_path) = (input.to_str().unwrap(), out.to_str().unwrap());
+    let (status, text) = scode_status(&["encode", budget, tight, input, out_path]);
     assert_eq!(status, 4, "{text}");
     assert!(
-        text.contains("did not finish within 0.3 s (--max-seconds)")
-            && text.contains("not written"),
+        text.contains(says) && text.contains("not written"),
         "{text}"
     );
-    assert!(
-        !out.exists(),
-        "an encode over its budget wrote {}",
-        out.display()
-    );
-    assert_eq!(std::fs::read(&input).unwrap(), before);
-    eprintln!("stopped after {took:?}");
-    let (status, text) = scode_status(&[
-        "encode",
-        "--raw",
-        "--max-seconds",
-        "600",
-        input.to_str().unwrap(),
-        out.to_str().unwrap(),
-    ]);
+    assert!(!out.exists(), "an encode over its budget wrote {out_path}");
+    assert_eq!(std::fs::read(input).unwrap(), before);
+    let (status, text) = scode_status(&["encode", "--raw", budget, roomy, input, out_path]);
     assert_eq!(status, 0, "{text}");
     assert!(out.exists());
-    for bad in ["0", "-1", "nan", "inf", "soon"] {
-        let (status, text) = scode_status(&[
-            "encode",
-            "--max-seconds",
-            bad,
-            input.to_str().unwrap(),
-            out.to_str().unwrap(),
-        ]);
-        assert_eq!(status, 1, "{bad}: {text}");
+    for value in bad {
+        let (status, text) = scode_status(&["encode", budget, value, input, out_path]);
+        assert_eq!(status, 1, "{value}: {text}");
     }
 }
 
-/// `encode --max-memory`: an encode whose resident memory passes the budget ends with status
-/// 4 and a message naming the option and what was resident, writes nothing and leaves the
-/// input as it was; a generous budget lets it finish; a budget that is not a positive byte
-/// count is a usage error.
+/// `encode --max-seconds`: the whole encode's time.
+#[test]
+fn max_seconds_bounds_the_whole_encode() {
+    check_encode_budget(
+        "--max-seconds",
+        "0.3",
+        "did not finish within 0.3 s (--max-seconds)",
+        "600",
+        &["0", "-1", "nan", "inf", "soon"],
+    );
+}
+
+/// `encode --max-memory`: the whole encode's resident memory (a 180k-triangle fit holds far
+/// more than 16 MiB).
 #[test]
 fn max_memory_bounds_the_whole_encode() {
-    let input = tmp("dense_sphere_memory.obj");
-    std::fs::write(&input, dense_sphere_obj(300)).unwrap();
-    let before = std::fs::read(&input).unwrap();
-    let out = tmp("dense_sphere_memory.scode");
-    let _ = std::fs::remove_file(&out);
-    // A 180k-triangle fit holds far more than 16 MiB (the process alone is a few MiB).
-    let (status, text) = scode_status(&[
-        "encode",
+    check_encode_budget(
         "--max-memory",
         "16M",
-        input.to_str().unwrap(),
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(status, 4, "{text}");
-    assert!(
-        text.contains("needed more than 16 MiB of memory (--max-memory 16777216")
-            && text.contains("resident")
-            && text.contains("not written"),
-        "{text}"
-    );
-    assert!(
-        !out.exists(),
-        "an encode over its budget wrote {}",
-        out.display()
-    );
-    assert_eq!(std::fs::read(&input).unwrap(), before);
-    let (status, text) = scode_status(&[
-        "encode",
-        "--raw",
-        "--max-memory",
+        "needed more than 16 MiB of memory (--max-memory 16777216",
         "8G",
-        input.to_str().unwrap(),
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(status, 0, "{text}");
-    assert!(out.exists());
-    for bad in ["0", "-1", "2T", "lots", "1.5G"] {
-        let (status, text) = scode_status(&[
-            "encode",
-            "--max-memory",
-            bad,
-            input.to_str().unwrap(),
-            out.to_str().unwrap(),
-        ]);
-        assert_eq!(status, 1, "{bad}: {text}");
-    }
+        &["0", "-1", "2T", "lots", "1.5G"],
+    );
 }
 
 /// An OS error is printed once, after the path it is about.

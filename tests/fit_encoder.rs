@@ -224,11 +224,7 @@ fn max_effort_is_no_larger_than_either_plane_treatment_alone() {
     );
     println!("plate: planes kept on faces {kept:?}, decimated freely {plain:?}, max {max:?}");
     assert!(max.1, "{max:?}");
-    let best = [kept, plain]
-        .into_iter()
-        .filter(|s| s.1)
-        .map(|s| s.0)
-        .min();
+    let best = [kept, plain].into_iter().filter(|s| s.1).map(|s| s.0).min();
     assert_eq!(Some(max.0), best);
 }
 
