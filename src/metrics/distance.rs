@@ -65,6 +65,25 @@ pub struct DistanceReport {
 }
 
 impl DistanceReport {
+    /// The report of two one-sided measurements, A to B and B to A, of surfaces whose
+    /// common bounding-box diagonal is `diagonal`.
+    pub fn from_sides(ab: &OneSided, ba: &OneSided, diagonal: f64) -> DistanceReport {
+        DistanceReport {
+            max_a_to_b: ab.max,
+            max_b_to_a: ba.max,
+            rms_a_to_b: ab.rms,
+            rms_b_to_a: ba.rms,
+            mean_a_to_b: ab.mean,
+            mean_b_to_a: ba.mean,
+            max: ab.max.max(ba.max),
+            rms: ab.rms.max(ba.rms),
+            mean: ab.mean.max(ba.mean),
+            diagonal,
+            samples_a: ab.count,
+            samples_b: ba.count,
+        }
+    }
+
     /// The same report with every distance divided by `diagonal` (unchanged if it is 0).
     pub fn relative(&self) -> DistanceReport {
         let s = if self.diagonal > 0.0 {
@@ -201,20 +220,7 @@ pub fn hausdorff(
         (Some((l1, h1)), Some((l2, h2))) => (h1.max(h2) - l1.min(l2)).length(),
         _ => 0.0,
     };
-    Ok(DistanceReport {
-        max_a_to_b: ab.max,
-        max_b_to_a: ba.max,
-        rms_a_to_b: ab.rms,
-        rms_b_to_a: ba.rms,
-        mean_a_to_b: ab.mean,
-        mean_b_to_a: ba.mean,
-        max: ab.max.max(ba.max),
-        rms: ab.rms.max(ba.rms),
-        mean: ab.mean.max(ba.mean),
-        diagonal,
-        samples_a: ab.count,
-        samples_b: ba.count,
-    })
+    Ok(DistanceReport::from_sides(&ab, &ba, diagonal))
 }
 
 fn samples_of(s: &TriangleSurface, opts: &DistanceOptions, seed: u64) -> Vec<DVec3> {

@@ -154,20 +154,7 @@ impl BrepReference {
         .collect();
         let ba = one_sided_distances(&from_reference, &dec);
         let diagonal = self.mesh.diagonal();
-        Ok(DistanceReport {
-            max_a_to_b: ab.max,
-            max_b_to_a: ba.max,
-            rms_a_to_b: ab.rms,
-            rms_b_to_a: ba.rms,
-            mean_a_to_b: ab.mean,
-            mean_b_to_a: ba.mean,
-            max: ab.max.max(ba.max),
-            rms: ab.rms.max(ba.rms),
-            mean: ab.mean.max(ba.mean),
-            diagonal,
-            samples_a: ab.count,
-            samples_b: ba.count,
-        })
+        Ok(DistanceReport::from_sides(&ab, &ba, diagonal))
     }
 }
 
