@@ -375,6 +375,22 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
                 ""
             }
         );
+        if fit.faceted_groups > 0 {
+            let (faces, their, them) = match fit.faceted_groups {
+                1 => ("1 face is".to_string(), "its", "it"),
+                n => (format!("{n} faces are"), "their", "them"),
+            };
+            println!(
+                "{faces} stored as {their} input facets: no smooth patch came within the \
+                 tolerance of {them}{}",
+                if fit.reference == Reference::InputMesh {
+                    " (on coarse facets, --chord-allowance holds the tolerance beyond their \
+                     chord error and fits smooth patches, in fewer bytes)"
+                } else {
+                    ""
+                }
+            );
+        }
         let d = fit.diagonal.max(f64::MIN_POSITIVE);
         println!(
             "decoded surface at level {} vs {}: max {:.4e} ({:.2e} of the diagonal), rms {:.4e}, mean {:.4e}; \
@@ -394,9 +410,8 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
                     fit.reference.describe(),
                     fit.error.max_excess / fit.tolerance,
                     if fit.reference == Reference::InputMesh {
-                        " (a smooth surface cannot come nearer to coarse facets than their \
-                         sagitta: --chord-allowance holds the tolerance beyond the input's \
-                         chord error)"
+                        " (--chord-allowance holds the tolerance beyond the input's chord \
+                         error)"
                     } else {
                         ""
                     }

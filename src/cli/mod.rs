@@ -66,7 +66,8 @@ pub enum Command {
     /// primitive; an ungrouped mesh is segmented first) becomes a subdivision patch, and the
     /// coarse control mesh is stored. The encoder measures the decoded surface against the
     /// input and adds control points until --tolerance holds, then tries taking some back
-    /// from faces that ended far within it (the smaller file wins). A `<name>.faces.json`
+    /// from faces that ended far within it (the smaller file wins); a face no smooth patch
+    /// gets within the tolerance of is stored as its input facets. A `<name>.faces.json`
     /// sidecar next to the input (as in the corpus) supplies each face's surface type.
     ///
     /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex
@@ -298,7 +299,7 @@ pub struct EncodeArgs {
     /// Without it the tolerance bounds the plain distance between the decoded surface and the
     /// input mesh, which `scode info --against` and any mesh tool measure. Use it for coarse
     /// tessellations of smooth parts: a smooth surface cannot come nearer to a facet than its
-    /// sagitta. A STEP file is always measured against its B-rep (exact surfaces, and the
+    /// sagitta, so without it such faces are stored as their facets (more bytes). A STEP file is always measured against its B-rep (exact surfaces, and the
     /// tessellation less its chord error for the other faces).
     #[arg(long)]
     pub chord_allowance: bool,

@@ -101,8 +101,11 @@ pub(super) fn build_topology(
                 .push(control.face_groups[f]);
         }
     }
+    // A faceted group's edges are all sharp (its vertices all corners): its decoded surface
+    // is its control faces.
     for (&(a, b), groups) in &edge_faces {
-        if groups.len() == 2 && groups[0] != groups[1] {
+        let faceted = groups.iter().any(|&g| plans[g as usize].faceted);
+        if (groups.len() == 2 && groups[0] != groups[1]) || (faceted && groups.len() == 2) {
             control.set_sharp(a, b);
         }
     }
@@ -139,10 +142,11 @@ pub(super) fn build_topology(
     }
 }
 
-/// What the decimation may do with each input vertex: corners and chain control points
-/// stay, other chain vertices slide along their chain, the rest are free. Also returns the
-/// interior vertices of stuck Cartesian chains, which become control corners: a crease
-/// through corners only is the chain's polyline itself (see [`STUCK_CHAIN_TOL`]).
+/// What the decimation may do with each input vertex: corners, chain control points and
+/// the vertices of faceted groups stay, other chain vertices slide along their chain, the
+/// rest are free. Also returns the vertices that become control corners besides the B-rep
+/// vertices: the interior vertices of stuck Cartesian chains (a crease through corners only
+/// is the chain's polyline itself, see [`STUCK_CHAIN_TOL`]) and those of faceted groups.
 fn vertex_roles(
     faces: &Faces,
     chains: &Chains,
@@ -184,5 +188,15 @@ fn vertex_roles(
             };
         }
     }
+    for (t, tri) in faces.tris.iter().enumerate() {
+        if plan.groups[faces.mesh.face_groups[t] as usize].faceted {
+            for &v in tri {
+                roles[v as usize] = VertexRole::Keep;
+                pinned.push(v);
+            }
+        }
+    }
+    pinned.sort_unstable();
+    pinned.dedup();
     (roles, pinned)
 }

@@ -113,7 +113,8 @@ pub struct FitOptions {
     /// surface of cylinder and cone faces) is allowed on top of the tolerance. Off by default,
     /// so that the tolerance bounds the plain distance to the input, as any mesh tool
     /// measures it; on for a coarse tessellation of a smooth part, whose facets no smooth
-    /// surface comes nearer to than their sagitta. Implied by `exact_surfaces` (STEP input):
+    /// surface comes nearer to than their sagitta (without it, the fit stores such faces as
+    /// their facets: [`FitReport::faceted_groups`]). Implied by `exact_surfaces` (STEP input):
     /// the tessellation then stands in for the B-rep it approximates to within its chord
     /// error.
     pub chord_allowance: bool,
@@ -208,6 +209,9 @@ pub struct FitReport {
     /// How many times a failing closed patch was refined (over all rounds and groups). When
     /// it is 0, [`FitOptions::local_refinement`] would not have changed the fit.
     pub closed_refinements: usize,
+    /// Groups stored as their input facets: no smooth patch came within the tolerance of
+    /// them (see [`FitOptions::chord_allowance`] for coarse tessellations of smooth parts).
+    pub faceted_groups: usize,
     /// Stage name and seconds.
     pub timings: Vec<(&'static str, f64)>,
     pub notes: Vec<String>,
@@ -398,6 +402,7 @@ fn finish_report(report: &mut FitReport, chosen: &Quantised, tol: f64, mean_tol:
         ));
     }
     report.default_level = chosen.level;
+    report.faceted_groups = chosen.faceted;
     report.control_vertices = chosen.control.vertex_count();
     report.control_faces = chosen.control.face_count();
     for g in &chosen.control.groups {

@@ -16,6 +16,13 @@ pub(super) struct GroupPlan {
     pub failures: u32,
     /// Its excess over the tolerance when it last failed (0 before).
     pub last_excess: f64,
+    /// Failures in a row, as a closed patch, whose excess did not shrink.
+    pub stalls: u32,
+    /// The group is its input facets: every vertex kept as a corner, every edge sharp, so
+    /// its decoded surface is the input itself. The last resort for a face no smooth patch
+    /// gets within the tolerance of (facets whose chord error exceeds it, a face thinner
+    /// than its outline's error).
+    pub faceted: bool,
 }
 
 impl GroupPlan {
@@ -26,6 +33,8 @@ impl GroupPlan {
             cost_factor: INITIAL_CLOSED_COST,
             failures: 0,
             last_excess: 0.0,
+            stalls: 0,
+            faceted: false,
         }
     }
 }

@@ -17,6 +17,8 @@ pub(super) struct Quantised {
     pub level: u8,
     /// Quarter bits coarser than the caller's default step.
     pub coarser_quarter_bits: u8,
+    /// How many groups are their input facets.
+    pub faceted: usize,
 }
 
 /// Quantises each candidate as coarsely as the tolerances (max, and mean if bounded; model
@@ -59,6 +61,7 @@ pub(super) fn smallest_file(
                 control: candidate.control,
                 level: candidate.level,
                 coarser_quarter_bits: coarser,
+                faceted: candidate.faceted,
             };
             chosen = Some((quantised, bytes));
         }
@@ -102,6 +105,7 @@ fn coarsest_step(
         ref control,
         level,
         mut bytes,
+        ..
     } = *candidate;
     let mut coarser_bits = 0;
     if err.max_excess > tol {

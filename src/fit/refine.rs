@@ -108,11 +108,45 @@ pub(super) enum ChainReach {
 /// failure's becomes a closed patch.
 const BOUNDARY_STALL_RATIO: f64 = 0.9;
 
+/// A closed patch whose excess did not shrink this many times in a row is faceted (see
+/// [`GroupPlan::faceted`]): refining it further has stopped paying.
+const FACETED_AFTER_STALLS: u32 = 2;
+
+/// Facets every group of `plan` out of tolerance in `measured` that is not faceted yet, and
+/// makes closed the patches whose frames shape their creases; returns how many it faceted.
+/// The fit's last resort when its rounds stop gaining.
+pub(super) fn facet_failing(
+    chains: &Chains,
+    measured: &Measurement,
+    tol: f64,
+    plan: &mut Plan,
+    report: &mut FitReport,
+) -> usize {
+    let failing: Vec<usize> = (0..plan.groups.len())
+        .filter(|&g| measured.group_excess[g].0 > tol && !plan.groups[g].faceted)
+        .collect();
+    for &g in &failing {
+        let group = &mut plan.groups[g];
+        group.kind = PatchKind::Closed;
+        group.faceted = true;
+    }
+    if !failing.is_empty() {
+        report.notes.push(format!(
+            "  {} groups still beyond tolerance faceted (their input facets as control faces)",
+            failing.len()
+        ));
+    }
+    close_frame_owners(chains, &failing, &mut plan.groups, report);
+    failing.len()
+}
+
 /// Refines the plan of every group out of tolerance in `measured` (the measurement of
 /// `control`): a closed patch gets a lower decimation threshold (near its failures only with
-/// `local_refinement`), a boundary patch that failed four times, or twice without its excess shrinking, becomes a
-/// closed patch, and
-/// the chains `reach` selects get finer.
+/// `local_refinement`), a boundary patch that failed four times, or twice without its
+/// excess shrinking, becomes a closed patch, a closed patch that failed
+/// [`FACETED_AFTER_STALLS`] times in a row without its excess shrinking, measured at the
+/// last decode level the fit will try (`at_last_level`), is faceted, and the chains `reach`
+/// selects get finer.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn refine_failing(
     faces: &Faces,
@@ -121,6 +155,7 @@ pub(super) fn refine_failing(
     measured: &Measurement,
     reach: ChainReach,
     local_refinement: bool,
+    at_last_level: bool,
     tol: f64,
     plan: &mut Plan,
     report: &mut FitReport,
@@ -172,6 +207,22 @@ pub(super) fn refine_failing(
         let stalled = group.failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess;
         group.last_excess = excess;
         if matches!(group.kind, PatchKind::Closed) {
+            // Stalls count at the last decode level only: a finer level is the remedy for
+            // a smooth patch's piecewise-linear error, tried before faceting.
+            group.stalls = if stalled && at_last_level {
+                group.stalls + 1
+            } else {
+                0
+            };
+            if group.stalls >= FACETED_AFTER_STALLS && !group.faceted {
+                report.notes.push(format!(
+                    "group {g} faceted: {FACETED_AFTER_STALLS} refinements as a closed patch came no nearer than {:.2} tol",
+                    excess / tol
+                ));
+                group.faceted = true;
+                refitted_closed.push(g);
+                continue;
+            }
             report.closed_refinements += 1;
             let radius = 2.0 * mean_group_edge(control, g as u32);
             let lowered = if !local_refinement {

@@ -14,7 +14,9 @@ use super::exact::ExactSurface;
 use super::measure::{ErrorMeter, Measurement};
 use super::plan::Plan;
 use super::reference::Facets;
-use super::refine::{note_failures, refine_failing, relax_refined_groups, ChainReach, Relaxation};
+use super::refine::{
+    facet_failing, note_failures, refine_failing, relax_refined_groups, ChainReach, Relaxation,
+};
 use super::solve::fit_geometry;
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind};
@@ -47,6 +49,8 @@ pub(super) struct Candidate {
     pub control: ControlMesh,
     pub level: u8,
     pub bytes: usize,
+    /// How many of its groups are faceted (see `GroupPlan::faceted`).
+    pub faceted: usize,
 }
 
 /// What the rounds read and never change.
@@ -127,6 +131,7 @@ impl Rounds<'_> {
                 control: built.control.clone(),
                 level,
                 bytes,
+                faceted: plan.groups.iter().filter(|g| g.faceted).count(),
             };
             if relaxing.is_none() && (better || ok) {
                 best = Some(candidate());
@@ -140,6 +145,16 @@ impl Rounds<'_> {
                     0
                 };
                 nearest = nearest.min(worst);
+                // The last resort, while a round is left to measure it: the groups still
+                // failing become their input facets.
+                let stuck = no_gain >= NO_GAIN_ROUNDS || round + 2 == opts.max_rounds;
+                if stuck
+                    && round + 1 < opts.max_rounds
+                    && facet_failing(self.chains, &measured, tol, plan, report) > 0
+                {
+                    (nearest, no_gain) = (f64::INFINITY, 0);
+                    continue;
+                }
                 if no_gain >= NO_GAIN_ROUNDS {
                     report.notes.push(format!(
                         "  stopped: {NO_GAIN_ROUNDS} rounds came no nearer than {:.2} tol",
@@ -193,6 +208,7 @@ impl Rounds<'_> {
                 &measured,
                 reach,
                 opts.local_refinement,
+                level_before.is_some(),
                 tol,
                 plan,
                 report,
