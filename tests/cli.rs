@@ -48,6 +48,17 @@ fn encode_info_decode_roundtrip() {
         "{text}"
     );
     assert!(text.contains("symmetric: max"), "{text}");
+    // Where the farthest samples are, each a point inside the part's box.
+    let farthest = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("farthest: decoded point ("))
+        .unwrap_or_else(|| panic!("{text}"));
+    let coords: Vec<f64> = farthest
+        .split(['(', ')', ','])
+        .filter_map(|t| t.trim().parse().ok())
+        .collect();
+    assert_eq!(coords.len(), 6, "{farthest}");
+    assert!(coords.iter().all(|c| c.is_finite()), "{farthest}");
     assert!(
         text.contains("grid box min") && text.contains(", step "),
         "{text}"

@@ -846,6 +846,12 @@ pub fn info(args: &InfoArgs) -> Result<()> {
             r.mean,
             r.mean / d
         );
+        let at = |p: glam::DVec3| format!("({:.4}, {:.4}, {:.4})", p.x, p.y, p.z);
+        println!(
+            "    farthest: decoded point {} from the input, input point {} from the decoded surface",
+            at(r.worst_a_to_b),
+            at(r.worst_b_to_a)
+        );
     }
     Ok(())
 }

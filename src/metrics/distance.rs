@@ -62,6 +62,9 @@ pub struct DistanceReport {
     pub diagonal: f64,
     pub samples_a: usize,
     pub samples_b: usize,
+    /// The sample of A farthest from B, and of B farthest from A: where to look.
+    pub worst_a_to_b: DVec3,
+    pub worst_b_to_a: DVec3,
 }
 
 impl DistanceReport {
@@ -81,6 +84,8 @@ impl DistanceReport {
             diagonal,
             samples_a: ab.count,
             samples_b: ba.count,
+            worst_a_to_b: ab.argmax,
+            worst_b_to_a: ba.argmax,
         }
     }
 
@@ -102,8 +107,7 @@ impl DistanceReport {
             rms: self.rms * s,
             mean: self.mean * s,
             diagonal: 1.0,
-            samples_a: self.samples_a,
-            samples_b: self.samples_b,
+            ..*self
         }
     }
 }
