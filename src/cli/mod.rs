@@ -67,7 +67,10 @@ pub enum Command {
     /// coarse control mesh is stored. The encoder measures the decoded surface against the
     /// input and adds control points until --tolerance holds, then tries taking some back
     /// from faces that ended far within it (the smaller file wins); a face no smooth patch
-    /// gets within the tolerance of is stored as its input facets. A `<name>.faces.json`
+    /// gets within the tolerance of is stored as its input facets. The written file is then
+    /// measured as `scode info --against` measures it; where that finds the surface off and
+    /// the fit's own samples did not, the model is fitted again, measuring there too (at
+    /// most twice; --verbose says so). A `<name>.faces.json`
     /// sidecar next to the input (as in the corpus) supplies each face's surface type.
     ///
     /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex

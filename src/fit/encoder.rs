@@ -39,6 +39,7 @@ use super::reference::{reference_facets, triangulated, Allowances, Facets};
 use super::rounds::Rounds;
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind, Tolerance};
+use crate::metrics::Misses;
 
 /// What the input says a group's surface is (a STEP face type or a sidecar entry).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,6 +123,14 @@ pub struct FitOptions {
     /// to measure the decoded surface against instead of the input; the fit still starts
     /// from and fits to the input's triangles. `None`: measured against the input.
     pub reference: Option<ControlMesh>,
+    /// Where an earlier check of this model found its decoded surface out of tolerance (as
+    /// `scode info --against` samples it): points of that decoded surface, and points of
+    /// the input. Every measurement of the fit measures them too: the decoded surface's
+    /// point nearest each of the former against the input, and the latter against the
+    /// decoded surface. Random samples can miss a narrow excursion (a plane's sliver
+    /// crossing its outline) that the check's samples found; these keep the fit looking
+    /// there. Empty by default.
+    pub misses: Misses,
 }
 
 impl Default for FitOptions {
@@ -141,6 +150,7 @@ impl Default for FitOptions {
             exact_surfaces: Vec::new(),
             chord_allowance: false,
             reference: None,
+            misses: Misses::default(),
         }
     }
 }
@@ -303,7 +313,9 @@ pub fn fit_model(
             faces.mesh.groups.len()
         ));
     }
-    let meter = allowances.meter(measured, exact, opts.error_samples, tol);
+    let meter = allowances
+        .meter(measured, exact, opts.error_samples, tol)
+        .with_misses(&opts.misses);
     let mut plan = Plan::new(
         faces.plans.clone(),
         faces.mesh.vertex_count(),

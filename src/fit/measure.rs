@@ -27,8 +27,8 @@ use super::map_ordered;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    closest_points_near, closest_points_near_with, sample_surface, RandomSamples, SampleCount,
-    SurfaceSample, TriangleSurface,
+    closest_points_near, closest_points_near_with, sample_surface, Misses, RandomSamples,
+    SampleCount, SurfaceSample, TriangleSurface,
 };
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
@@ -197,6 +197,9 @@ pub(crate) struct ErrorMeter<'a> {
     /// Behind a lock only so the meter can be shared by the parallel queries; one
     /// measurement at a time holds it.
     cache: Mutex<MeasureCache>,
+    /// Points where an earlier check found a decoded surface off the input, and input
+    /// points it found off the decoded surface ([`ErrorMeter::with_misses`]).
+    misses: Misses,
 }
 
 /// How many of the worst samples of each direction a probe tests.
@@ -321,6 +324,67 @@ impl<'a> ErrorMeter<'a> {
             grid,
             tol,
             cache: Default::default(),
+            misses: Misses::default(),
+        }
+    }
+
+    /// The meter that also measures, every time, the decoded point nearest each of
+    /// `misses.a_to_b` against the input and each of `misses.b_to_a` (input points) against
+    /// the decoded surface (see [`super::encoder::FitOptions::misses`]).
+    pub fn with_misses(mut self, misses: &Misses) -> Self {
+        self.misses = misses.clone();
+        self
+    }
+
+    /// Adds the earlier misses' measurements to `m` (every group of `groups` measured).
+    fn measure_misses(&self, groups: &[Option<GroupDecoded>], m: &mut Measurement) {
+        let nearest_decoded = |p: DVec3| -> Option<(f64, DVec3, usize)> {
+            let mut best: Option<(f64, DVec3, usize)> = None;
+            for (g, gd) in groups.iter().enumerate() {
+                let Some(gd) = gd else { continue };
+                let bound = best.map_or(f64::INFINITY, |b| b.0);
+                let Some(s) = gd.surface.as_ref().filter(|_| gd.box_distance(p) <= bound) else {
+                    continue;
+                };
+                let hit = if bound.is_finite() {
+                    s.closest_point_within(p, bound)
+                } else {
+                    Some(s.closest_point(p))
+                };
+                if let Some(h) = hit.filter(|h| h.distance < bound) {
+                    best = Some((h.distance, h.point, g));
+                }
+            }
+            best
+        };
+        let mut note = |e: f64, d: f64, p: DVec3, g: usize, dir: &'static str| {
+            let err = &mut m.error;
+            err.max = err.max.max(d);
+            err.max_excess = err.max_excess.max(e);
+            if let Some(ge) = m.group_excess.get_mut(g) {
+                if e > ge.0 {
+                    *ge = (e, p, dir);
+                }
+                if e > self.tol {
+                    m.bad_points[g].push(p);
+                }
+            }
+        };
+        for &p in &self.misses.a_to_b {
+            let Some((_, q, g)) = nearest_decoded(p) else {
+                continue;
+            };
+            let hit = self.input_surface.closest_point(q);
+            let e = self.out_excess(q, g, hit.triangle, hit.distance);
+            note(e, hit.distance, q, g, "decoded->input");
+        }
+        for &p in &self.misses.b_to_a {
+            let Some((d, _, _)) = nearest_decoded(p) else {
+                continue;
+            };
+            let t = self.input_surface.closest_point(p).triangle as usize;
+            let g = self.mesh.face_groups[t] as usize;
+            note(d - self.chord[t], d, p, g, "input->decoded");
         }
     }
 
@@ -420,6 +484,7 @@ impl<'a> ErrorMeter<'a> {
             cache.groups[g] = Some(gd);
         }
         let mut measurement = self.summarise(&in_hits, &mut cache);
+        self.measure_misses(&cache.groups, &mut measurement);
         measurement.changed_groups = changed.len();
         cache.in_hits = in_hits;
         Ok(Some(measurement))
@@ -775,6 +840,44 @@ mod tests {
             triangles: &[],
             max_allowance: &[],
             exact: &[],
+        }
+    }
+
+    /// The points an earlier check found off are measured too: an input point 0.3 above
+    /// the top face (where no sample of the meter's own is) counts against the top face's
+    /// group, and a point near the decoded surface is measured at the decoded point nearest
+    /// it, which changes nothing here.
+    #[test]
+    fn earlier_misses_are_measured_every_time() {
+        let input = grid_cube(6);
+        let (tris, surface, chord) = meter_parts(&input);
+        let decoded = grid_cube(2);
+        let plain = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
+        let before = plain.measure(&decoded, 3).unwrap();
+        // The decoded cube is smooth (no sharp edges): its corners are rounded off.
+        assert!(before.error.max < 0.25, "{:?}", before.error);
+        let above = DVec3::new(0.5, 0.5, 1.3);
+        let misses = Misses {
+            a_to_b: vec![DVec3::new(0.5, 0.5, 0.98)],
+            b_to_a: vec![above],
+        };
+        let meter = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01)
+            .with_misses(&misses);
+        for _ in 0..2 {
+            let m = meter.measure(&decoded, 3).unwrap();
+            let top = decoded.face_groups[decoded
+                .faces()
+                .position(|f| f.iter().all(|&v| decoded.positions[v as usize].z == 1.0))
+                .unwrap()] as usize;
+            let (e, p, dir) = m.group_excess[top];
+            assert_eq!((p, dir), (above, "input->decoded"));
+            // 0.3 above the top face's decoded surface, which passes z = 1 at its middle.
+            assert!((0.29..0.4).contains(&e), "{e}");
+            assert_eq!(m.error.max_excess, e);
+            assert!(m.bad_points[top].contains(&above));
+            // The decoded point nearest the decoded-side miss is measured: no larger than
+            // what the meter finds anyway, so the rest is as before.
+            assert_eq!(m.group_excess[..top], before.group_excess[..top]);
         }
     }
 

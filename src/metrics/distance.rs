@@ -186,7 +186,11 @@ pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> 
 
 /// Statistics of the distances from `points` to `surface` (sequential, ordered reduction).
 pub fn one_sided_distances(points: &[DVec3], surface: &TriangleSurface) -> OneSided {
-    let d = point_distances(points, surface);
+    one_sided_of(points, &point_distances(points, surface))
+}
+
+/// Statistics of the distances `d` of `points` (sequential, ordered reduction).
+fn one_sided_of(points: &[DVec3], d: &[f64]) -> OneSided {
     let mut out = OneSided {
         count: d.len(),
         ..Default::default()
@@ -214,17 +218,48 @@ pub fn hausdorff(
     b: &ControlMesh,
     opts: &DistanceOptions,
 ) -> Result<DistanceReport> {
+    Ok(hausdorff_with_misses(a, b, opts, f64::INFINITY)?.0)
+}
+
+/// The samples of each side farther than some distance from the other surface.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Misses {
+    /// Samples of A farther than the distance from B, in sample order.
+    pub a_to_b: Vec<DVec3>,
+    /// Samples of B farther than the distance from A.
+    pub b_to_a: Vec<DVec3>,
+}
+
+/// [`hausdorff`], and the samples of each side farther than `beyond` from the other (the
+/// same samples: where a check with this report fails).
+pub fn hausdorff_with_misses(
+    a: &ControlMesh,
+    b: &ControlMesh,
+    opts: &DistanceOptions,
+    beyond: f64,
+) -> Result<(DistanceReport, Misses)> {
     let sa = blocked_surface(a)?;
     let sb = blocked_surface(b)?;
     let pa = samples_of(&sa, opts, opts.seed);
     let pb = samples_of(&sb, opts, opts.seed ^ 0xB);
-    let ab = one_sided_distances(&pa, &sb);
-    let ba = one_sided_distances(&pb, &sa);
+    let (da, db) = (point_distances(&pa, &sb), point_distances(&pb, &sa));
+    let (ab, ba) = (one_sided_of(&pa, &da), one_sided_of(&pb, &db));
     let diagonal = match (a.bounding_box(), b.bounding_box()) {
         (Some((l1, h1)), Some((l2, h2))) => (h1.max(h2) - l1.min(l2)).length(),
         _ => 0.0,
     };
-    Ok(DistanceReport::from_sides(&ab, &ba, diagonal))
+    let beyond_of = |p: &[DVec3], d: &[f64]| -> Vec<DVec3> {
+        p.iter()
+            .zip(d)
+            .filter(|(_, &x)| x > beyond)
+            .map(|(&q, _)| q)
+            .collect()
+    };
+    let misses = Misses {
+        a_to_b: beyond_of(&pa, &da),
+        b_to_a: beyond_of(&pb, &db),
+    };
+    Ok((DistanceReport::from_sides(&ab, &ba, diagonal), misses))
 }
 
 /// Triangles of one leaf of [`blocked_surface`]'s index.

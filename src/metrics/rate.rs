@@ -2,7 +2,7 @@
 //! size and its distance to the input. `scode info --against` and `scode report` both measure
 //! through here, so their numbers agree.
 
-use super::distance::{hausdorff, DistanceOptions, DistanceReport};
+use super::distance::{hausdorff, hausdorff_with_misses, DistanceOptions, DistanceReport, Misses};
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 
@@ -19,6 +19,16 @@ pub fn raw_binary_bytes(mesh: &ControlMesh) -> u64 {
 /// area-weighted samples on each side plus every vertex, fixed seed), decoded surface as A.
 pub fn measure_against_input(decoded: &ControlMesh, input: &ControlMesh) -> Result<DistanceReport> {
     hausdorff(decoded, input, &DistanceOptions::default())
+}
+
+/// [`measure_against_input`], and its samples farther than `beyond` from the other side
+/// (decoded samples from the input, input samples from the decoded surface).
+pub fn measure_against_input_with_misses(
+    decoded: &ControlMesh,
+    input: &ControlMesh,
+    beyond: f64,
+) -> Result<(DistanceReport, Misses)> {
+    hausdorff_with_misses(decoded, input, &DistanceOptions::default(), beyond)
 }
 
 /// One point of a rate-distortion curve.
