@@ -322,6 +322,12 @@ pub fn fit_model(
         chains.net.chains.len(),
         tol,
     );
+    // Faceting meets a tolerance held to the input mesh itself, which the facets are; a
+    // B-rep's exact surfaces are their chord error away from them, and beyond the chord
+    // error smooth patches get there.
+    for group in &mut plan.groups {
+        group.facetable = report.reference == Reference::InputMesh;
+    }
     let rounds = Rounds {
         faces: &faces,
         chains: &chains,

@@ -23,6 +23,9 @@ pub(super) struct GroupPlan {
     /// gets within the tolerance of (facets whose chord error exceeds it, a face thinner
     /// than its outline's error).
     pub faceted: bool,
+    /// Whether the group may be faceted: only when the tolerance is held to the input mesh
+    /// itself (a face held to its exact surface is its facets' chord error away from them).
+    pub facetable: bool,
 }
 
 impl GroupPlan {
@@ -35,6 +38,7 @@ impl GroupPlan {
             last_excess: 0.0,
             stalls: 0,
             faceted: false,
+            facetable: true,
         }
     }
 }

@@ -123,7 +123,10 @@ pub(super) fn facet_failing(
     report: &mut FitReport,
 ) -> usize {
     let failing: Vec<usize> = (0..plan.groups.len())
-        .filter(|&g| measured.group_excess[g].0 > tol && !plan.groups[g].faceted)
+        .filter(|&g| {
+            let group = &plan.groups[g];
+            measured.group_excess[g].0 > tol && group.facetable && !group.faceted
+        })
         .collect();
     for &g in &failing {
         let group = &mut plan.groups[g];
@@ -214,7 +217,7 @@ pub(super) fn refine_failing(
             } else {
                 0
             };
-            if group.stalls >= FACETED_AFTER_STALLS && !group.faceted {
+            if group.stalls >= FACETED_AFTER_STALLS && group.facetable && !group.faceted {
                 report.notes.push(format!(
                     "group {g} faceted: {FACETED_AFTER_STALLS} refinements as a closed patch came no nearer than {:.2} tol",
                     excess / tol
