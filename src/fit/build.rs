@@ -105,7 +105,7 @@ pub(super) fn build_topology(
     // is its control faces.
     for (&(a, b), groups) in &edge_faces {
         let faceted = groups.iter().any(|&g| plans[g as usize].faceted);
-        if (groups.len() == 2 && groups[0] != groups[1]) || (faceted && groups.len() == 2) {
+        if groups.len() == 2 && (groups[0] != groups[1] || faceted) {
             control.set_sharp(a, b);
         }
     }
