@@ -70,8 +70,8 @@ pub enum Command {
     /// gets within the tolerance of is stored as its input facets. The written file is then
     /// measured as `scode info --against` measures it; where that finds the surface off and
     /// the fit's own samples did not, the model is fitted again, measuring there too (at
-    /// most twice; --verbose says so). A `<name>.faces.json`
-    /// sidecar next to the input (as in the corpus) supplies each face's surface type.
+    /// most twice; --verbose says so). A `<name>.faces.json` sidecar next to the input (as
+    /// in the corpus) supplies each face's surface type.
     ///
     /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex
     /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the
