@@ -6,7 +6,9 @@
 //! that do not allow it.
 
 mod common;
+mod decode_support;
 use common::corpus_dir;
+use decode_support::open_and_overused_edges;
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -17,22 +19,6 @@ use scode::pipeline::{
     SurfaceOptions,
 };
 use scode::ControlMesh;
-
-/// Edges used by one face, and edges used by more than two.
-fn open_and_overused_edges(mesh: &ControlMesh) -> (usize, usize) {
-    let mut count = BTreeMap::new();
-    for f in mesh.faces() {
-        for k in 0..f.len() {
-            *count
-                .entry(scode::mesh::edge_key(f[k], f[(k + 1) % f.len()]))
-                .or_insert(0) += 1;
-        }
-    }
-    (
-        count.values().filter(|&&c| c == 1).count(),
-        count.values().filter(|&&c| c > 2).count(),
-    )
-}
 
 /// Per group: the vector area (the sum of the triangles' area vectors, which depends only on
 /// the group's outline) and the area.

@@ -1,5 +1,7 @@
 //! The check of a decode to the file's tolerance, shared by `decode_accuracy.rs` (small
-//! corpus models) and `sweep.rs` (the larger ones).
+//! corpus models) and `sweep.rs` (the larger ones), and the edge count `decode_max_edge.rs`
+//! checks watertightness with. Each test binary uses a part of it.
+#![allow(dead_code)]
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -12,7 +14,7 @@ use scode::pipeline::{
 use scode::ControlMesh;
 
 /// Edges used by one face, and edges used by more than two.
-fn open_and_overused_edges(mesh: &ControlMesh) -> (usize, usize) {
+pub fn open_and_overused_edges(mesh: &ControlMesh) -> (usize, usize) {
     let mut count = BTreeMap::new();
     for f in mesh.faces() {
         for k in 0..f.len() {
