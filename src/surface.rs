@@ -228,6 +228,50 @@ fn decode_detail(bytes: &[u8], limits: &Limits, opts: &SurfaceOptions) -> Result
     })
 }
 
+/// A file's surface at its default level (what [`Detail::DefaultLevel`] decodes), in the
+/// shape a measurement against a reference reads it: a control mesh's level-n limit surface
+/// handed out group by group, so that no array of its tens of millions of triangles exists
+/// (`metrics::hausdorff_by_group`); a raw-mode file's stored mesh as it is.
+pub enum DefaultSurface {
+    /// A raw-mode file's mesh.
+    Stored(ControlMesh),
+    /// A control mesh's limit surface at its default `level`, sparse boundary patches.
+    ByGroup {
+        surface: Box<crate::subdiv::UniformSurface>,
+        level: u32,
+    },
+}
+
+/// Bytes a [`DefaultSurface::ByGroup`] takes per finest-level triangle (fan-triangulated
+/// control faces times `4^level`), counted as [`check_subdivision`] counts: the level's
+/// limit positions (about half a vertex per triangle) and the coarser level's faces, plus
+/// the refinement that makes them, which is dropped once they are evaluated.
+pub const MEMORY_PER_GROUPED_TRIANGLE: u64 = 80;
+
+/// Decodes `bytes` to its [`DefaultSurface`], its subdivision checked against `limits`
+/// before it is made.
+pub fn decode_default_surface(bytes: &[u8], limits: &Limits) -> Result<DefaultSurface> {
+    let (decoded, usage) = codec::decode_with_usage(bytes, limits);
+    let decoded = decoded?;
+    let Content::ControlMesh { default_level } = decoded.header.content else {
+        return Ok(DefaultSurface::Stored(decoded.mesh));
+    };
+    let level = u32::from(default_level);
+    check_subdivision(
+        &decoded.mesh,
+        level,
+        MEMORY_PER_GROUPED_TRIANGLE,
+        usage.held,
+        limits,
+    )?;
+    let surface =
+        crate::subdiv::UniformSurface::new(&decoded.mesh, level, limits.max_subdivided_faces)?;
+    Ok(DefaultSurface::ByGroup {
+        surface: Box::new(surface),
+        level,
+    })
+}
+
 /// `Error::LimitsExceeded` unless `mesh`'s triangles at `level` (fan-triangulated faces
 /// times 4^level) fit `max_subdivided_faces` and, at `per_triangle` bytes each, the memory
 /// budget on top of the `held` bytes the decode still holds.

@@ -9,6 +9,7 @@ use std::path::Path;
 
 use scode::codec::{self, Limits};
 use scode::fit::encoder::{FitReport, SurfaceHint};
+use scode::metrics::DistanceReport;
 use scode::pipeline::{encode_fitted, sidecar_hints, Effort, ModelEncodeOptions};
 use scode::Tolerance;
 
@@ -133,10 +134,7 @@ fn fandisk_at_the_seed_coders_operating_point() {
         ..Default::default()
     };
     let (bytes, _) = encode_fitted(&input, &[], &opts).unwrap();
-    let surface = decode_at_default_level(&bytes);
-    let rel = scode::metrics::measure_against_input(&surface.mesh, &input)
-        .unwrap()
-        .relative();
+    let rel = measured_as_info_does(&bytes, &input).relative();
     println!(
         "fandisk: {} B, mean {:.3e}, max {:.3e} of the diagonal",
         bytes.len(),
@@ -157,8 +155,7 @@ fn the_file_decodes_to_the_surface_the_encoder_measured() {
     let Some(dir) = corpus_dir() else { return };
     let (input, _) = scode::io::read_mesh(&dir.join("meshes/fandisk.obj")).unwrap();
     let (bytes, report) = encode_fitted(&input, &[], &ModelEncodeOptions::default()).unwrap();
-    let surface = decode_at_default_level(&bytes);
-    let measured = scode::metrics::measure_against_input(&surface.mesh, &input).unwrap();
+    let measured = measured_as_info_does(&bytes, &input);
     // Both sample the same surfaces, at other points.
     assert!(
         (measured.max - report.error.max).abs() <= 0.05 * report.error.max,
@@ -168,17 +165,12 @@ fn the_file_decodes_to_the_surface_the_encoder_measured() {
     );
 }
 
-/// A file decoded at its default level, as `scode info --against` measures it.
-fn decode_at_default_level(bytes: &[u8]) -> scode::pipeline::DecodedSurface {
-    scode::pipeline::decode_surface(
-        bytes,
-        &Limits::default(),
-        &scode::pipeline::SurfaceOptions {
-            detail: scode::pipeline::Detail::DefaultLevel,
-            ..Default::default()
-        },
-    )
-    .unwrap()
+/// A file's distance to its input, as `scode info --against` measures it.
+fn measured_as_info_does(bytes: &[u8], input: &scode::ControlMesh) -> DistanceReport {
+    let near = 1e-3 * input.diagonal();
+    scode::pipeline::measure_file_against_input(bytes, input, &Limits::default(), near, f64::MAX)
+        .unwrap()
+        .0
 }
 
 /// A face-grouped corpus model with its sidecar's surface hints; `None` without the corpus.

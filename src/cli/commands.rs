@@ -817,17 +817,16 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         }
     }
     if let Some(reference) = &args.against {
-        let surface = decode_surface(
-            &bytes,
-            &limits,
-            &SurfaceOptions {
-                detail: Detail::DefaultLevel,
-                ..Default::default()
-            },
-        )?;
-        let level = surface.level;
         let (input, _) = io::read_mesh(reference)?;
-        let r = scode::metrics::measure_against_input(&surface.mesh, &input)?;
+        // Samples mostly lie within the default tolerance (it only splits the work).
+        let near = scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * input.diagonal();
+        let (r, _, level) = scode::pipeline::measure_file_against_input(
+            &bytes,
+            &input,
+            &limits,
+            near,
+            f64::INFINITY,
+        )?;
         let d = r.diagonal.max(f64::MIN_POSITIVE);
         println!(
             "  against {} (decoded at level {level}):",

@@ -190,7 +190,7 @@ pub fn one_sided_distances(points: &[DVec3], surface: &TriangleSurface) -> OneSi
 }
 
 /// Statistics of the distances `d` of `points` (sequential, ordered reduction).
-fn one_sided_of(points: &[DVec3], d: &[f64]) -> OneSided {
+pub(super) fn one_sided_of(points: &[DVec3], d: &[f64]) -> OneSided {
     let mut out = OneSided {
         count: d.len(),
         ..Default::default()
@@ -269,12 +269,12 @@ const LEAF_TRIANGLES: usize = 16;
 /// surface (subdivision lists each control face's descendants together) gets a tree many
 /// times smaller than one leaf per triangle, which matters at millions of triangles; a mesh
 /// in any other order stays correct (runs end where their box outgrows a typical triangle's).
-fn blocked_surface(mesh: &ControlMesh) -> Result<TriangleSurface> {
+pub(super) fn blocked_surface(mesh: &ControlMesh) -> Result<TriangleSurface> {
     let (triangles, _) = fan_triangulate(mesh)?;
     TriangleSurface::with_blocks(mesh.positions.clone(), triangles, LEAF_TRIANGLES)
 }
 
-fn samples_of(s: &TriangleSurface, opts: &DistanceOptions, seed: u64) -> Vec<DVec3> {
+pub(super) fn samples_of(s: &TriangleSurface, opts: &DistanceOptions, seed: u64) -> Vec<DVec3> {
     sample_surface(
         s.positions(),
         s.triangles(),

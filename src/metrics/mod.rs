@@ -5,11 +5,13 @@
 //! report (design.md: "Distances live in `metrics`"). Nothing here depends on `fit` or
 //! `codec`.
 
+mod by_group;
 mod distance;
 mod rate;
 mod sampling;
 mod surface;
 
+pub use by_group::hausdorff_by_group;
 pub use distance::{
     closest_points, closest_points_near, closest_points_near_with, hausdorff,
     hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions, DistanceReport,

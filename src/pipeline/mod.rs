@@ -4,19 +4,21 @@
 
 use std::path::Path;
 
-use crate::codec::{self, Content, EncodeOptions, Limits};
+use crate::codec::{self, Content, EncodeOptions};
 use crate::error::Result;
 use crate::fit::encoder::{fit_model, FitOptions, FitReport, Reference, SurfaceHint};
 use crate::io::faces_json::{self, SurfaceType};
 use crate::mesh::ControlMesh;
-use crate::metrics::Misses;
 use glam::DVec3;
 
+mod check;
 mod search;
 pub use crate::surface::{
     decode_surface, file_tolerance, AccuracyReport, DecodedSurface, Detail, SurfaceOptions,
     DEFAULT_RELATIVE_TOLERANCE, TOLERANCE_STEPS,
 };
+pub use check::measure_file_against_input;
+use check::{check_as_info_does, thinned, trusted_limits, MAX_MISSES, MISS_REFITS};
 pub use search::{
     encode_fitted, Effort, LOCAL_REFINEMENT_MAX_TRIANGLES, PLAIN_PLANES_MAX_TRIANGLES,
     TRAVERSAL_STARTS,
@@ -270,61 +272,6 @@ pub(crate) fn encode_fitted_once(
     }
 }
 
-/// How many more fits a model gets when the file of one fails the check of
-/// [`check_as_info_does`] that the fit's own measurement passed.
-const MISS_REFITS: usize = 2;
-
-/// The most points of each side a refit takes from the check's misses.
-const MAX_MISSES: usize = 2000;
-
-/// `points` thinned to one per cube of side `cell` (the first in order), and at most `max`
-/// of those, evenly spaced in order.
-fn thinned(points: &[DVec3], cell: f64, max: usize) -> Vec<DVec3> {
-    let mut seen = std::collections::HashSet::new();
-    let kept: Vec<DVec3> = points
-        .iter()
-        .copied()
-        .filter(|p| seen.insert((*p / cell).floor().as_i64vec3().to_array()))
-        .collect();
-    if kept.len() <= max {
-        return kept;
-    }
-    (0..max).map(|i| kept[i * kept.len() / max]).collect()
-}
-
-/// Measures the written file as `scode info --against` does (its default level decoded, the
-/// symmetric sampled distance to the input) and keeps the larger figures. The fit's own
-/// measurement samples the decoded surface per face and more sparsely, so a file it finds
-/// within the tolerance can come out a little farther by the user's check; "within
-/// tolerance" is then said only when both agree.
-fn check_as_info_does(bytes: &[u8], input: &ControlMesh, report: &mut FitReport) -> Result<Misses> {
-    let surface = crate::surface::decode_surface(
-        bytes,
-        &trusted_limits(),
-        &crate::surface::SurfaceOptions {
-            detail: crate::surface::Detail::DefaultLevel,
-            ..Default::default()
-        },
-    )?;
-    let (r, misses) =
-        crate::metrics::measure_against_input_with_misses(&surface.mesh, input, report.tolerance)?;
-    let e = &mut report.error;
-    e.max = e.max.max(r.max);
-    e.max_excess = e.max_excess.max(r.max);
-    e.rms = e.rms.max(r.rms);
-    e.mean = e.mean.max(r.mean);
-    let mean_ok = report.mean_tolerance.is_none_or(|mt| e.mean <= mt);
-    if report.within_tolerance && !(e.max_excess <= report.tolerance && mean_ok) {
-        report.within_tolerance = false;
-        report.notes.push(format!(
-            "measured as `scode info --against` does, the file is {:.3e} from the input \
-             (the fit's own samples found it within the tolerance)",
-            r.max
-        ));
-    }
-    Ok(misses)
-}
-
 /// The same control mesh with its face list rotated to begin at face `start` (positions,
 /// groups, sharp edges and corners unchanged): the codec's traversal then starts there.
 pub(crate) fn rotate_faces(mesh: &ControlMesh, start: usize) -> ControlMesh {
@@ -339,15 +286,4 @@ pub(crate) fn rotate_faces(mesh: &ControlMesh, start: usize) -> ControlMesh {
         out.push_face(mesh.face(f), mesh.face_groups[f]);
     }
     out
-}
-
-/// Limits for decoding the encoder's own output while fitting: only the format's count
-/// limits apply, not the budgets that guard a decode of untrusted files.
-fn trusted_limits() -> Limits {
-    Limits {
-        max_subdivided_faces: u64::MAX,
-        max_memory: u64::MAX,
-        max_work_per_element: u64::MAX,
-        ..Limits::default()
-    }
 }

@@ -582,8 +582,25 @@ pub(super) fn run_scode_point(
         surface = Some(s);
     }
     let surface = surface.ok_or("no decode run")?;
+    let rd = match ruler {
+        // As `scode info --against` measures it (group by group, the same figures).
+        Ruler::Input(input) => {
+            drop(surface);
+            let near = crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * input.diagonal();
+            let (distance, _, _) = crate::pipeline::measure_file_against_input(
+                &bytes,
+                input,
+                &Limits::default(),
+                near,
+                f64::INFINITY,
+            )
+            .map_err(|e| format!("cannot measure: {e}"))?;
+            RateDistortion::new(bytes.len() as u64, input, &distance)
+        }
+        Ruler::Brep { .. } => ruler.rate(bytes.len() as u64, &surface.mesh)?,
+    };
     Ok(Measured {
-        rd: ruler.rate(bytes.len() as u64, &surface.mesh)?,
+        rd,
         encode_ms: median(&encoded.encode_seconds) * 1e3,
         decode_ms: median(&decode_seconds) * 1e3,
         note: encoded.note,

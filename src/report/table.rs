@@ -228,9 +228,10 @@ pub fn markdown(
         "- Every output is decoded (scode: `pipeline::decode_surface`, the default level and \
          limit projection a viewer shows; Draco: `draco_decoder` to PLY; gltfpack: its own \
          repack with `-noq` to float glb, read by scode's glTF reader) and compared with \
-         the reference: a mesh file by `metrics::measure_against_input` (sampled symmetric \
-         Hausdorff (max) and RMS distance, 100,000 area-weighted samples per side plus every \
-         vertex, as fractions of the joint bounding-box diagonal — the same numbers as \
+         the reference: a mesh file by sampled symmetric Hausdorff (max) and RMS distance, \
+         100,000 area-weighted samples per side plus every vertex, as fractions of the joint \
+         bounding-box diagonal (`metrics::measure_against_input`; scode files through \
+         `pipeline::measure_file_against_input`, group by group, the same numbers as \
          `scode info --against`); a STEP part by the same sampling against its B-rep: the \
          distance to the exact plane, cylinder, cone, sphere or torus of the face nearest \
          to a point (where its projection lands on the face), to a tessellation 20x finer \
