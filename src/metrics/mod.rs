@@ -17,9 +17,7 @@ pub use distance::{
     hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions, DistanceReport,
     Misses, OneSided,
 };
-pub use rate::{
-    measure_against_input, measure_against_input_with_misses, raw_binary_bytes, RateDistortion,
-};
+pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
 pub use sampling::{sample_surface, RandomSamples, SampleCount, SurfaceSample};

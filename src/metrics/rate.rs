@@ -1,8 +1,10 @@
 //! Rate-distortion figures of one compressed file: its size against the input's raw binary
-//! size and its distance to the input. `scode info --against` and `scode report` both measure
-//! through here, so their numbers agree.
+//! size and its distance to the input. A decoded mesh is measured by
+//! [`measure_against_input`]; a `.scode` file by `pipeline::measure_file_against_input`, with
+//! the same samples on the input's side and the same counts on the file's, so `scode info
+//! --against` and `scode report` give the same figures.
 
-use super::distance::{hausdorff, hausdorff_with_misses, DistanceOptions, DistanceReport, Misses};
+use super::distance::{hausdorff, DistanceOptions, DistanceReport};
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 
@@ -19,16 +21,6 @@ pub fn raw_binary_bytes(mesh: &ControlMesh) -> u64 {
 /// area-weighted samples on each side plus every vertex, fixed seed), decoded surface as A.
 pub fn measure_against_input(decoded: &ControlMesh, input: &ControlMesh) -> Result<DistanceReport> {
     hausdorff(decoded, input, &DistanceOptions::default())
-}
-
-/// [`measure_against_input`], and its samples farther than `beyond` from the other side
-/// (decoded samples from the input, input samples from the decoded surface).
-pub fn measure_against_input_with_misses(
-    decoded: &ControlMesh,
-    input: &ControlMesh,
-    beyond: f64,
-) -> Result<(DistanceReport, Misses)> {
-    hausdorff_with_misses(decoded, input, &DistanceOptions::default(), beyond)
 }
 
 /// One point of a rate-distortion curve.
