@@ -168,9 +168,16 @@ fn the_file_decodes_to_the_surface_the_encoder_measured() {
 /// A file's distance to its input, as `scode info --against` measures it.
 fn measured_as_info_does(bytes: &[u8], input: &scode::ControlMesh) -> DistanceReport {
     let near = 1e-3 * input.diagonal();
-    scode::pipeline::measure_file_against_input(bytes, input, &Limits::default(), near, f64::MAX)
-        .unwrap()
-        .0
+    scode::pipeline::measure_file_against_input(
+        bytes,
+        input,
+        &Limits::default(),
+        &Default::default(),
+        near,
+        f64::MAX,
+    )
+    .unwrap()
+    .0
 }
 
 /// A face-grouped corpus model with its sidecar's surface hints; `None` without the corpus.

@@ -824,6 +824,7 @@ pub fn info(args: &InfoArgs) -> Result<()> {
             &bytes,
             &input,
             &limits,
+            &Default::default(),
             near,
             f64::INFINITY,
         )?;

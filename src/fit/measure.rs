@@ -27,8 +27,8 @@ use super::map_ordered;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    closest_points_near, closest_points_near_with, sample_surface, Misses, RandomSamples,
-    SampleCount, SurfaceSample, TriangleSurface,
+    closest_points_near, closest_points_near_with, edge_spacing_for_tolerance, sample_surface,
+    EdgeSamples, Misses, RandomSamples, SampleCount, SurfaceSample, TriangleSurface,
 };
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
@@ -128,32 +128,48 @@ struct GroupSamples<'a> {
     /// The face's vertices (every one is a corner of its triangles).
     vertices: &'a [DVec3],
     random: RandomSamples<'a>,
+    /// Points along its long edges, the slivers random points miss.
+    edges: EdgeSamples<'a>,
 }
 
 impl<'a> GroupSamples<'a> {
     /// The samples of group `g`'s `triangles` over its own `positions` (all of them
     /// corners), with `random` random points.
-    fn new(positions: &'a [DVec3], triangles: &'a [[u32; 3]], random: usize, g: usize) -> Self {
+    fn new(
+        positions: &'a [DVec3],
+        triangles: &'a [[u32; 3]],
+        random: usize,
+        spacing: f64,
+        g: usize,
+    ) -> Self {
         let seed = 0x5C0D_E000_0000_0002 ^ ((g as u64) << 20);
         GroupSamples {
             vertices: positions,
             random: RandomSamples::new(positions, triangles, SampleCount::Total(random), seed),
+            edges: EdgeSamples::new(positions, triangles, spacing),
         }
     }
 
     /// The samples of a face's index (`None`: the face has no triangles, so no samples).
-    fn of(surface: Option<&'a TriangleSurface>, random: usize, g: usize) -> Option<Self> {
-        surface.map(|s| GroupSamples::new(s.positions(), s.triangles(), random, g))
+    fn of(
+        surface: Option<&'a TriangleSurface>,
+        random: usize,
+        spacing: f64,
+        g: usize,
+    ) -> Option<Self> {
+        surface.map(|s| GroupSamples::new(s.positions(), s.triangles(), random, spacing, g))
     }
 
     fn len(&self) -> usize {
-        self.vertices.len() + self.random.len()
+        self.vertices.len() + self.random.len() + self.edges.len()
     }
 
     fn point(&self, i: usize) -> DVec3 {
+        let (nv, nr) = (self.vertices.len(), self.random.len());
         match self.vertices.get(i) {
             Some(&p) => p,
-            None => self.random.get(i - self.vertices.len()).point,
+            None if i < nv + nr => self.random.get(i - nv).point,
+            None => self.edges.get(i - nv - nr).point,
         }
     }
 }
@@ -194,6 +210,9 @@ pub(crate) struct ErrorMeter<'a> {
     /// Grid of the decoded faces' fingerprints: 2^-32 of the input's box diagonal.
     grid: f64,
     tol: f64,
+    /// Spacing of the points along decoded edges ([`EdgeSamples`]): the check of the written
+    /// file samples the same points ([`edge_spacing_for_tolerance`]).
+    edge_spacing: f64,
     /// Behind a lock only so the meter can be shared by the parallel queries; one
     /// measurement at a time holds it.
     cache: Mutex<MeasureCache>,
@@ -323,6 +342,7 @@ impl<'a> ErrorMeter<'a> {
             group_boxes,
             grid,
             tol,
+            edge_spacing: edge_spacing_for_tolerance(tol, diagonal),
             cache: Default::default(),
             misses: Misses::default(),
         }
@@ -511,7 +531,13 @@ impl<'a> ErrorMeter<'a> {
                     continue;
                 }
                 let random = self.group_samples.get(g).copied().unwrap_or(0);
-                let samples = GroupSamples::new(&local.positions, &local.triangles, random, g);
+                let samples = GroupSamples::new(
+                    &local.positions,
+                    &local.triangles,
+                    random,
+                    self.edge_spacing,
+                    g,
+                );
                 let points = run
                     .iter()
                     .map(|x| x.1 as usize)
@@ -630,7 +656,8 @@ impl<'a> ErrorMeter<'a> {
     /// Measures the samples of changed group `g` against the input.
     fn measure_decoded(&self, g: usize, gd: &mut GroupDecoded) {
         let random = self.group_samples.get(g).copied().unwrap_or(0);
-        let Some(samples) = GroupSamples::of(gd.surface.as_ref(), random, g) else {
+        let Some(samples) = GroupSamples::of(gd.surface.as_ref(), random, self.edge_spacing, g)
+        else {
             return;
         };
         let measured = closest_points_near_with(

@@ -2,10 +2,10 @@
 
 use glam::DVec3;
 
-use super::sampling::{sample_surface, SampleCount};
+use super::sampling::{sample_surface, EdgeSamples, SampleCount};
 use super::surface::{fan_triangulate, ClosestPoint, TriangleSurface};
 use crate::error::Result;
-use crate::mesh::ControlMesh;
+use crate::mesh::{ControlMesh, Tolerance};
 
 /// How densely to sample each mesh when measuring distances.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -16,6 +16,21 @@ pub struct DistanceOptions {
     pub include_vertices: bool,
     /// Seed of the sampler; the same seed gives the same report.
     pub seed: u64,
+    /// Also measure from points along every edge longer than this, this far apart at most
+    /// ([`EdgeSamples`]; a relative spacing is a fraction of the two meshes' joint
+    /// bounding-box diagonal): the thin slivers random samples miss. `None`: no edge points.
+    pub edge_spacing: Option<Tolerance>,
+}
+
+/// The edge spacing of [`DistanceOptions::default`]: twice the encoder's default tolerance.
+pub const DEFAULT_EDGE_SPACING: Tolerance = Tolerance::Relative(2e-3);
+
+/// The edge spacing for checking a surface held within `tol` of a mesh whose diagonal is
+/// `diagonal`: twice the tolerance, and never sparser than [`DEFAULT_EDGE_SPACING`] of that
+/// diagonal, so that the check samples at least the edge points `scode info --against`
+/// samples (its diagonal is the joint one, at least as long).
+pub fn edge_spacing_for_tolerance(tol: f64, diagonal: f64) -> f64 {
+    (2.0 * tol).min(DEFAULT_EDGE_SPACING.resolve(diagonal))
 }
 
 impl Default for DistanceOptions {
@@ -24,6 +39,7 @@ impl Default for DistanceOptions {
             samples: SampleCount::Total(100_000),
             include_vertices: true,
             seed: 0x5C0D_E5C0_DE5C_0DE5,
+            edge_spacing: Some(DEFAULT_EDGE_SPACING),
         }
     }
 }
@@ -240,14 +256,15 @@ pub fn hausdorff_with_misses(
 ) -> Result<(DistanceReport, Misses)> {
     let sa = blocked_surface(a)?;
     let sb = blocked_surface(b)?;
-    let pa = samples_of(&sa, opts, opts.seed);
-    let pb = samples_of(&sb, opts, opts.seed ^ 0xB);
-    let (da, db) = (point_distances(&pa, &sb), point_distances(&pb, &sa));
-    let (ab, ba) = (one_sided_of(&pa, &da), one_sided_of(&pb, &db));
     let diagonal = match (a.bounding_box(), b.bounding_box()) {
         (Some((l1, h1)), Some((l2, h2))) => (h1.max(h2) - l1.min(l2)).length(),
         _ => 0.0,
     };
+    let spacing = edge_spacing(opts, diagonal);
+    let pa = samples_of(&sa, opts, opts.seed, spacing);
+    let pb = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
+    let (da, db) = (point_distances(&pa, &sb), point_distances(&pb, &sa));
+    let (ab, ba) = (one_sided_of(&pa, &da), one_sided_of(&pb, &db));
     let beyond_of = |p: &[DVec3], d: &[f64]| -> Vec<DVec3> {
         p.iter()
             .zip(d)
@@ -274,8 +291,20 @@ pub(super) fn blocked_surface(mesh: &ControlMesh) -> Result<TriangleSurface> {
     TriangleSurface::with_blocks(mesh.positions.clone(), triangles, LEAF_TRIANGLES)
 }
 
-pub(super) fn samples_of(s: &TriangleSurface, opts: &DistanceOptions, seed: u64) -> Vec<DVec3> {
-    sample_surface(
+/// `opts`' edge spacing in model units for meshes of joint diagonal `diagonal` (0: none).
+pub(super) fn edge_spacing(opts: &DistanceOptions, diagonal: f64) -> f64 {
+    opts.edge_spacing.map_or(0.0, |t| t.resolve(diagonal))
+}
+
+/// The sample points of `s`: its vertices (with `opts.include_vertices`), its random points,
+/// then the points of its edges at `spacing` (none for 0).
+pub(super) fn samples_of(
+    s: &TriangleSurface,
+    opts: &DistanceOptions,
+    seed: u64,
+    spacing: f64,
+) -> Vec<DVec3> {
+    let mut points: Vec<DVec3> = sample_surface(
         s.positions(),
         s.triangles(),
         opts.samples,
@@ -284,5 +313,8 @@ pub(super) fn samples_of(s: &TriangleSurface, opts: &DistanceOptions, seed: u64)
     )
     .into_iter()
     .map(|s| s.point)
-    .collect()
+    .collect();
+    let edges = EdgeSamples::new(s.positions(), s.triangles(), spacing);
+    points.extend((0..edges.len()).map(|i| edges.get(i).point));
+    points
 }

@@ -13,14 +13,14 @@ mod surface;
 
 pub use by_group::hausdorff_by_group;
 pub use distance::{
-    closest_points, closest_points_near, closest_points_near_with, hausdorff,
-    hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions, DistanceReport,
-    Misses, OneSided,
+    closest_points, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
+    hausdorff, hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions,
+    DistanceReport, Misses, OneSided, DEFAULT_EDGE_SPACING,
 };
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
-pub use sampling::{sample_surface, RandomSamples, SampleCount, SurfaceSample};
+pub use sampling::{sample_surface, EdgeSamples, RandomSamples, SampleCount, SurfaceSample};
 pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
 
 #[cfg(test)]
@@ -325,8 +325,10 @@ mod tests {
     /// jittered, tilted triangle grid of another resolution).
     #[test]
     fn hausdorff_matches_brute_force_point_triangle() {
+        // Vertices and random points only, remade below (edge points: `sampling`'s tests).
         let opts = DistanceOptions {
             samples: SampleCount::Total(3000),
+            edge_spacing: None,
             ..Default::default()
         };
         let mut a = grid_mesh(9, 0.0, true);

@@ -1,7 +1,7 @@
 //! Rate-distortion figures of one compressed file: its size against the input's raw binary
 //! size and its distance to the input. A decoded mesh is measured by
 //! [`measure_against_input`]; a `.scode` file by `pipeline::measure_file_against_input`, with
-//! the same samples on the input's side and the same counts on the file's, so `scode info
+//! the same samples on the input's side and the file's drawn group by group, so `scode info
 //! --against` and `scode report` give the same figures.
 
 use super::distance::{hausdorff, DistanceOptions, DistanceReport};

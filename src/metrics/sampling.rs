@@ -169,6 +169,116 @@ impl<'a> RandomSamples<'a> {
     }
 }
 
+/// Points along the long edges of a triangle mesh: every edge longer than `spacing` gets
+/// evenly spaced points between its ends, no farther apart than `spacing`. Area-weighted
+/// random samples rarely land on a thin sliver (a long triangle of little area), which is
+/// where a decoded plane can cross its face's concave outline; the sliver's edges are as long
+/// as it is. An edge of two triangles is sampled once, from the one in which it runs from
+/// the smaller end (by coordinates) to the larger; an edge of one triangle (the mesh's
+/// boundary) from that one. The points are placed from the smaller end, so two meshes
+/// holding the same triangle (a face's triangles on their own and the whole surface) place
+/// the same points on its edges.
+pub struct EdgeSamples<'a> {
+    positions: &'a [DVec3],
+    triangles: &'a [[u32; 3]],
+    /// Per sampled edge: its triangle, the corner it starts at (it ends at the next one)
+    /// and how many segments it is cut into.
+    edges: Vec<(u32, u8, u32)>,
+    /// Samples before edge k: `start[k]` (one more entry than `edges`).
+    start: Vec<usize>,
+}
+
+/// `p` before `q` in lexicographic order of their coordinates.
+fn before(p: DVec3, q: DVec3) -> bool {
+    let (a, b) = (p.to_array(), q.to_array());
+    (0..3)
+        .map(|k| a[k].total_cmp(&b[k]))
+        .find(|o| o.is_ne())
+        .is_some_and(|o| o.is_lt())
+}
+
+impl<'a> EdgeSamples<'a> {
+    /// The samples of `triangles`' edges at `spacing` (none for a spacing that is not a
+    /// positive length).
+    pub fn new(positions: &'a [DVec3], triangles: &'a [[u32; 3]], spacing: f64) -> Self {
+        let mut edges = Vec::new();
+        let mut start = vec![0usize];
+        if !(spacing > 0.0 && spacing.is_finite()) {
+            return EdgeSamples {
+                positions,
+                triangles,
+                edges,
+                start,
+            };
+        }
+        let ends = |t: usize, k: usize| (triangles[t][k], triangles[t][(k + 1) % 3]);
+        let mut long = Vec::new();
+        for t in 0..triangles.len() {
+            for k in 0..3 {
+                let (a, b) = ends(t, k);
+                let length = (positions[b as usize] - positions[a as usize]).length();
+                if length > spacing {
+                    long.push((t as u32, k as u8, (length / spacing).ceil()));
+                }
+            }
+        }
+        let directed: rustc_hash::FxHashSet<(u32, u32)> = long
+            .iter()
+            .map(|&(t, k, _)| ends(t as usize, usize::from(k)))
+            .collect();
+        for (t, k, segments) in long {
+            let (a, b) = ends(t as usize, usize::from(k));
+            let forward = before(positions[a as usize], positions[b as usize]);
+            if forward || !directed.contains(&(b, a)) {
+                let segments = segments.min(f64::from(u32::MAX)) as u32;
+                edges.push((t, k, segments));
+                let last = start.last().copied().unwrap_or(0);
+                start.push(last + segments as usize - 1);
+            }
+        }
+        EdgeSamples {
+            positions,
+            triangles,
+            edges,
+            start,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.start.last().copied().unwrap_or(0)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Sample `i` (< [`EdgeSamples::len`]).
+    pub fn get(&self, i: usize) -> SurfaceSample {
+        let e = self.start.partition_point(|&s| s <= i) - 1;
+        let (t, k, segments) = self.edges[e];
+        let j = i - self.start[e] + 1;
+        let tri = self.triangles[t as usize];
+        let (mut k0, mut k1) = (usize::from(k), (usize::from(k) + 1) % 3);
+        let (mut p, mut q) = (
+            self.positions[tri[k0] as usize],
+            self.positions[tri[k1] as usize],
+        );
+        if before(q, p) {
+            (k0, k1, p, q) = (k1, k0, q, p);
+        }
+        let w1 = j as f64 / f64::from(segments);
+        let w0 = 1.0 - w1;
+        let mut barycentric = [0.0; 3];
+        barycentric[k0] = w0;
+        barycentric[k1] = w1;
+        SurfaceSample {
+            point: p * w0 + q * w1,
+            triangle: t,
+            barycentric,
+        }
+    }
+}
+
 /// Seeded generator for tests in other modules (same SplitMix64 stream).
 #[cfg(test)]
 pub(crate) struct SplitMixForTests(SplitMix64);
@@ -180,5 +290,50 @@ impl SplitMixForTests {
     }
     pub(crate) fn f(&mut self) -> f64 {
         self.0.next_f64()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A long sliver and a fat triangle sharing the sliver's long edge, numbered so that
+    /// the edge runs one way in each: every edge longer than the spacing is sampled once,
+    /// its points on it and no farther apart than the spacing.
+    #[test]
+    fn every_long_edge_once_at_most_the_spacing_apart() {
+        let positions = [
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(10.0, 0.0, 0.0),
+            DVec3::new(5.0, 0.2, 0.0),
+            DVec3::new(5.0, -3.0, 0.0),
+        ];
+        let triangles = [[0, 1, 2], [1, 0, 3]];
+        let spacing = 0.75;
+        let edges = EdgeSamples::new(&positions, &triangles, spacing);
+        // The shared edge 0-1 (10 long: 14 segments, 13 points) once; 0-2 and 1-2 (5.004
+        // long: 7 segments each); 0-3 and 1-3 (5.83 long: 8 segments each).
+        assert_eq!(edges.len(), 13 + 2 * 6 + 2 * 7);
+        let mut on_shared: Vec<f64> = (0..edges.len())
+            .map(|i| edges.get(i))
+            .inspect(|s| {
+                let [a, b, c] = triangles[s.triangle as usize].map(|v| positions[v as usize]);
+                let back = a * s.barycentric[0] + b * s.barycentric[1] + c * s.barycentric[2];
+                assert!((back - s.point).length() < 1e-12);
+                assert_eq!(s.barycentric.iter().filter(|&&w| w == 0.0).count(), 1);
+            })
+            .map(|s| s.point)
+            .filter(|p| p.y == 0.0)
+            .map(|p| p.x)
+            .collect();
+        on_shared.sort_by(f64::total_cmp);
+        assert_eq!(on_shared.len(), 13);
+        let mut last = 0.0;
+        for x in on_shared.iter().chain([10.0].iter()) {
+            assert!(x - last <= spacing + 1e-12 && x - last > 0.0);
+            last = *x;
+        }
+        assert!(EdgeSamples::new(&positions, &triangles, 0.0).is_empty());
+        assert!(EdgeSamples::new(&positions, &triangles, 11.0).is_empty());
     }
 }

@@ -7,8 +7,9 @@ use glam::DVec3;
 use crate::codec::Limits;
 use crate::error::Result;
 use crate::fit::encoder::FitReport;
-use crate::mesh::ControlMesh;
-use crate::metrics::{hausdorff_by_group, hausdorff_with_misses, DistanceOptions};
+use crate::mesh::{ControlMesh, Tolerance};
+use crate::metrics::DistanceOptions;
+use crate::metrics::{edge_spacing_for_tolerance, hausdorff_by_group, hausdorff_with_misses};
 use crate::metrics::{DistanceReport, Misses};
 use crate::surface::{decode_default_surface, DefaultSurface};
 
@@ -20,26 +21,27 @@ pub(super) const MISS_REFITS: usize = 2;
 pub(super) const MAX_MISSES: usize = 2000;
 
 /// The file `bytes` against `input`: the surface of its default level (a raw-mode file: its
-/// stored mesh) as A, the input as B, [`DistanceOptions::default`]'s samples; the level
-/// measured (0 for raw mode) and the samples farther than `beyond` from the other side.
-/// `near` is a distance most samples are expected within (the tolerance, when there is
-/// one): it only splits the work. A control mesh is measured group by group
-/// ([`hausdorff_by_group`]), so memory holds the level's positions, not its triangles.
+/// stored mesh) as A, the input as B, sampled as `opts` says (`scode info --against` and
+/// `scode report`: [`DistanceOptions::default`]); the level measured (0 for raw mode) and
+/// the samples farther than `beyond` from the other side. `near` is a distance most samples
+/// are expected within (the tolerance, when there is one): it only splits the work. A
+/// control mesh is measured group by group ([`hausdorff_by_group`]), so memory holds the
+/// level's positions, not its triangles.
 pub fn measure_file_against_input(
     bytes: &[u8],
     input: &ControlMesh,
     limits: &Limits,
+    opts: &DistanceOptions,
     near: f64,
     beyond: f64,
 ) -> Result<(DistanceReport, Misses, u32)> {
-    let opts = DistanceOptions::default();
     match decode_default_surface(bytes, limits)? {
         DefaultSurface::Stored(mesh) => {
-            let (r, m) = hausdorff_with_misses(&mesh, input, &opts, beyond)?;
+            let (r, m) = hausdorff_with_misses(&mesh, input, opts, beyond)?;
             Ok((r, m, 0))
         }
         DefaultSurface::ByGroup { surface, level } => {
-            let (r, m) = hausdorff_by_group(&surface, input, &opts, near, beyond)?;
+            let (r, m) = hausdorff_by_group(&surface, input, opts, near, beyond)?;
             Ok((r, m, level))
         }
     }
@@ -70,7 +72,16 @@ pub(super) fn check_as_info_does(
     report: &mut FitReport,
 ) -> Result<Misses> {
     let tol = report.tolerance;
-    let (r, misses, _) = measure_file_against_input(bytes, input, &trusted_limits(), tol, tol)?;
+    // The edge points the fit measured too, and at least those `scode info --against` takes.
+    let opts = DistanceOptions {
+        edge_spacing: Some(Tolerance::Absolute(edge_spacing_for_tolerance(
+            tol,
+            input.diagonal(),
+        ))),
+        ..Default::default()
+    };
+    let (r, misses, _) =
+        measure_file_against_input(bytes, input, &trusted_limits(), &opts, tol, tol)?;
     let e = &mut report.error;
     e.max = e.max.max(r.max);
     e.max_excess = e.max_excess.max(r.max);

@@ -591,6 +591,7 @@ pub(super) fn run_scode_point(
                 &bytes,
                 input,
                 &Limits::default(),
+                &Default::default(),
                 near,
                 f64::INFINITY,
             )
