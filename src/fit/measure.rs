@@ -63,6 +63,9 @@ struct GroupDecoded {
     /// kept (a face at a fine level has millions of samples): [`GroupSamples`] makes any of
     /// them again.
     samples: Vec<[f64; 2]>,
+    /// How many of `samples` are vertices and area-weighted points (the mean and RMS are
+    /// theirs; the rest are edge points, for the max).
+    area_samples: usize,
     /// The sample of largest excess (its excess and point), if any.
     worst: Option<(f64, DVec3)>,
     /// The samples whose excess is over the tolerance (index, point), in sample order.
@@ -676,6 +679,7 @@ impl<'a> ErrorMeter<'a> {
                 over_tolerance.push((i as u32, samples.point(i)));
             }
         }
+        gd.area_samples = samples.vertices.len() + samples.random.len();
         drop(samples);
         gd.samples = measured;
         gd.worst = worst;
@@ -702,8 +706,15 @@ impl<'a> ErrorMeter<'a> {
             (max, (sq / n).sqrt(), sum / n)
         };
         let (max_in, rms_in, mean_in) = stats(&mut in_hits.iter().map(|h| h.0));
-        let (max_out, rms_out, mean_out) =
-            stats(&mut groups.iter().flat_map(|g| g.samples.iter().map(|s| s[1])));
+        let (_, rms_out, mean_out) = stats(&mut groups.iter().flat_map(|g| {
+            g.samples[..g.area_samples.min(g.samples.len())]
+                .iter()
+                .map(|s| s[1])
+        }));
+        let max_out = groups
+            .iter()
+            .flat_map(|g| g.samples.iter().map(|s| s[1]))
+            .fold(0.0f64, f64::max);
         // Excess over the tolerance, beyond the input's chord allowance (zero unless the
         // fit allows for it), and
         // where it is.
@@ -844,6 +855,7 @@ fn index_group(surface: &UniformSurface, g: usize, grid: f64) -> Result<GroupDec
         lo,
         hi,
         samples: Vec::new(),
+        area_samples: 0,
         worst: None,
         over_tolerance: Vec::new(),
     })

@@ -77,7 +77,7 @@ pub fn hausdorff_by_group(
     };
     let spacing = edge_spacing(opts, diagonal);
     let sb = blocked_surface(b)?;
-    let pb = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
+    let (pb, nb) = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
     let near = if near > 0.0 && near.is_finite() {
         near
     } else {
@@ -112,17 +112,17 @@ pub fn hausdorff_by_group(
     });
     let mut ab = Summary::default();
     for (i, &d) in vertex_d.iter().enumerate() {
-        ab.add(positions[ids[i] as usize], d, beyond);
+        ab.add(positions[ids[i] as usize], d, beyond, true);
     }
-    for part in &random {
-        for &(p, d) in part {
-            ab.add(p, d, beyond);
+    for (part, &count) in random.iter().zip(&counts) {
+        for (k, &(p, d)) in part.iter().enumerate() {
+            ab.add(p, d, beyond, k < count);
         }
     }
 
     // B to A.
     let best = input_to_groups(a, &outlines, &pb, near);
-    let ba = one_sided_of(&pb, &best);
+    let ba = one_sided_of(&pb, &best, nb);
     let b_misses: Vec<DVec3> = pb
         .iter()
         .zip(&best)
@@ -140,32 +140,37 @@ pub fn hausdorff_by_group(
     ))
 }
 
-/// Running statistics of one side's distances, in sample order.
+/// Running statistics of one side's distances, in sample order (as `one_sided_of`: the
+/// max over all samples, the mean and RMS over the vertices and area-weighted points).
 #[derive(Default)]
 struct Summary {
     sums: [f64; 2],
     count: usize,
+    area: usize,
     max: f64,
     argmax: DVec3,
     misses: Vec<DVec3>,
 }
 
 impl Summary {
-    fn add(&mut self, p: DVec3, d: f64, beyond: f64) {
+    fn add(&mut self, p: DVec3, d: f64, beyond: f64, area: bool) {
         if d > self.max || self.count == 0 {
             self.max = d;
             self.argmax = p;
         }
         self.count += 1;
-        self.sums[0] += d;
-        self.sums[1] += d * d;
+        if area {
+            self.area += 1;
+            self.sums[0] += d;
+            self.sums[1] += d * d;
+        }
         if d > beyond {
             self.misses.push(p);
         }
     }
 
     fn one_sided(&self) -> OneSided {
-        let n = self.count.max(1) as f64;
+        let n = self.area.max(1) as f64;
         OneSided {
             max: self.max,
             rms: (self.sums[1] / n).sqrt(),

@@ -202,27 +202,32 @@ pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> 
 
 /// Statistics of the distances from `points` to `surface` (sequential, ordered reduction).
 pub fn one_sided_distances(points: &[DVec3], surface: &TriangleSurface) -> OneSided {
-    one_sided_of(points, &point_distances(points, surface))
+    one_sided_of(points, &point_distances(points, surface), points.len())
 }
 
-/// Statistics of the distances `d` of `points` (sequential, ordered reduction).
-pub(super) fn one_sided_of(points: &[DVec3], d: &[f64]) -> OneSided {
+/// Statistics of the distances `d` of `points` (sequential, ordered reduction): the max over
+/// all, the mean and RMS over the first `area` (the vertices and area-weighted points; edge
+/// points, placed by length, would weigh the edges of long triangles above their area).
+pub(super) fn one_sided_of(points: &[DVec3], d: &[f64], area: usize) -> OneSided {
     let mut out = OneSided {
         count: d.len(),
         ..Default::default()
     };
     let (mut sum, mut sum2) = (0.0, 0.0);
     for (i, &x) in d.iter().enumerate() {
-        sum += x;
-        sum2 += x * x;
+        if i < area {
+            sum += x;
+            sum2 += x * x;
+        }
         if x > out.max || i == 0 {
             out.max = x;
             out.argmax = points[i];
         }
     }
-    if !d.is_empty() {
-        out.mean = sum / d.len() as f64;
-        out.rms = (sum2 / d.len() as f64).sqrt();
+    let area = area.min(d.len());
+    if area > 0 {
+        out.mean = sum / area as f64;
+        out.rms = (sum2 / area as f64).sqrt();
     }
     out
 }
@@ -261,10 +266,10 @@ pub fn hausdorff_with_misses(
         _ => 0.0,
     };
     let spacing = edge_spacing(opts, diagonal);
-    let pa = samples_of(&sa, opts, opts.seed, spacing);
-    let pb = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
+    let (pa, na) = samples_of(&sa, opts, opts.seed, spacing);
+    let (pb, nb) = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
     let (da, db) = (point_distances(&pa, &sb), point_distances(&pb, &sa));
-    let (ab, ba) = (one_sided_of(&pa, &da), one_sided_of(&pb, &db));
+    let (ab, ba) = (one_sided_of(&pa, &da, na), one_sided_of(&pb, &db, nb));
     let beyond_of = |p: &[DVec3], d: &[f64]| -> Vec<DVec3> {
         p.iter()
             .zip(d)
@@ -297,13 +302,14 @@ pub(super) fn edge_spacing(opts: &DistanceOptions, diagonal: f64) -> f64 {
 }
 
 /// The sample points of `s`: its vertices (with `opts.include_vertices`), its random points,
-/// then the points of its edges at `spacing` (none for 0).
+/// then the points of its edges at `spacing` (none for 0); and how many come before the
+/// edge points.
 pub(super) fn samples_of(
     s: &TriangleSurface,
     opts: &DistanceOptions,
     seed: u64,
     spacing: f64,
-) -> Vec<DVec3> {
+) -> (Vec<DVec3>, usize) {
     let mut points: Vec<DVec3> = sample_surface(
         s.positions(),
         s.triangles(),
@@ -314,7 +320,8 @@ pub(super) fn samples_of(
     .into_iter()
     .map(|s| s.point)
     .collect();
+    let area = points.len();
     let edges = EdgeSamples::new(s.positions(), s.triangles(), spacing);
     points.extend((0..edges.len()).map(|i| edges.get(i).point));
-    points
+    (points, area)
 }
