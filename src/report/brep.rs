@@ -135,7 +135,15 @@ impl BrepReference {
         .into_iter()
         .map(|s| s.point)
         .collect();
-        let ab = stats(&self.distances(&from_decoded));
+        let mut ab = stats(&self.distances(&from_decoded));
+        // The max also at points along the decoded surface's long edges (thin slivers), as
+        // `scode info --against` takes them.
+        let spacing = crate::metrics::DEFAULT_EDGE_SPACING.resolve(self.mesh.diagonal());
+        let edges = crate::metrics::EdgeSamples::new(dec.positions(), dec.triangles(), spacing);
+        let along: Vec<DVec3> = (0..edges.len()).map(|i| edges.get(i).point).collect();
+        let edge_max = self.distances(&along).into_iter().fold(0.0, f64::max);
+        ab.max = ab.max.max(edge_max);
+        ab.count += along.len();
         let from_reference: Vec<DVec3> = sample_surface(
             self.surface.positions(),
             self.surface.triangles(),

@@ -229,7 +229,8 @@ pub fn markdown(
          limit projection a viewer shows; Draco: `draco_decoder` to PLY; gltfpack: its own \
          repack with `-noq` to float glb, read by scode's glTF reader) and compared with \
          the reference: a mesh file by sampled symmetric Hausdorff (max) and RMS distance, \
-         100,000 area-weighted samples per side plus every vertex, as fractions of the joint \
+         100,000 area-weighted samples per side plus every vertex (the max also at points \
+         along every edge longer than 2e-3 of the diagonal), as fractions of the joint \
          bounding-box diagonal (`metrics::measure_against_input`; scode files through \
          `pipeline::measure_file_against_input`, group by group, the same numbers as \
          `scode info --against`); a STEP part by the same sampling against its B-rep: the \
