@@ -199,7 +199,10 @@ struct MeasureCache {
 /// built once and reused by every round.
 pub(crate) struct ErrorMeter<'a> {
     mesh: &'a ControlMesh,
+    /// Vertices and area-weighted points, then edge points ([`EdgeSamples`]).
     input_samples: Vec<SurfaceSample>,
+    /// How many of `input_samples` come before the edge points (the mean and RMS are theirs).
+    input_area_samples: usize,
     input_surface: &'a TriangleSurface,
     chord: &'a [f64],
     /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
@@ -294,13 +297,14 @@ impl<'a> ErrorMeter<'a> {
         error_samples: usize,
         tol: f64,
     ) -> Self {
-        let input_samples = sample_surface(
+        let mut input_samples = sample_surface(
             &mesh.positions,
             triangles,
             SampleCount::Total(error_samples),
             true,
             0x5C0D_E000_0000_0001,
         );
+        let input_area_samples = input_samples.len();
         let mut area = vec![0.0f64; mesh.groups.len()];
         let mut group_boxes = vec![(DVec3::INFINITY, DVec3::NEG_INFINITY); mesh.groups.len()];
         for (t, g) in triangles.iter().zip(&mesh.face_groups) {
@@ -320,6 +324,10 @@ impl<'a> ErrorMeter<'a> {
                 (l.min(b.0), h.max(b.1))
             });
         let diagonal = (hi - lo).length();
+        // The input's thin triangles' edge points, as the check of the written file takes them.
+        let edge_spacing = edge_spacing_for_tolerance(tol, diagonal);
+        let edges = EdgeSamples::new(&mesh.positions, triangles, edge_spacing);
+        input_samples.extend((0..edges.len()).map(|i| edges.get(i)));
         let grid = if diagonal.is_finite() && diagonal > 0.0 {
             diagonal * (-32f64).exp2()
         } else {
@@ -338,6 +346,7 @@ impl<'a> ErrorMeter<'a> {
         ErrorMeter {
             mesh,
             input_samples,
+            input_area_samples,
             input_surface,
             chord,
             own_faces,
@@ -345,7 +354,7 @@ impl<'a> ErrorMeter<'a> {
             group_boxes,
             grid,
             tol,
-            edge_spacing: edge_spacing_for_tolerance(tol, diagonal),
+            edge_spacing,
             cache: Default::default(),
             misses: Misses::default(),
         }
@@ -705,7 +714,9 @@ impl<'a> ErrorMeter<'a> {
             let n = n.max(1) as f64;
             (max, (sq / n).sqrt(), sum / n)
         };
-        let (max_in, rms_in, mean_in) = stats(&mut in_hits.iter().map(|h| h.0));
+        let area_in = self.input_area_samples.min(in_hits.len());
+        let (_, rms_in, mean_in) = stats(&mut in_hits[..area_in].iter().map(|h| h.0));
+        let max_in = in_hits.iter().map(|h| h.0).fold(0.0f64, f64::max);
         let (_, rms_out, mean_out) = stats(&mut groups.iter().flat_map(|g| {
             g.samples[..g.area_samples.min(g.samples.len())]
                 .iter()

@@ -169,15 +169,17 @@ impl<'a> RandomSamples<'a> {
     }
 }
 
-/// Points along the long edges of a triangle mesh: every edge longer than `spacing` gets
-/// evenly spaced points between its ends, no farther apart than `spacing`. Area-weighted
-/// random samples rarely land on a thin sliver (a long triangle of little area), which is
-/// where a decoded plane can cross its face's concave outline; the sliver's edges are as long
-/// as it is. An edge of two triangles is sampled once, from the one in which it runs from
-/// the smaller end (by coordinates) to the larger; an edge of one triangle (the mesh's
-/// boundary) from that one. The points are placed from the smaller end, so two meshes
-/// holding the same triangle (a face's triangles on their own and the whole surface) place
-/// the same points on its edges.
+/// Points along the long edges of thin triangles: every edge longer than `spacing` of a
+/// triangle less than `spacing` high (over its longest edge) gets evenly spaced points
+/// between its ends, no farther apart than `spacing`, so every point of such a triangle is
+/// within about `spacing` of a sample. Area-weighted random samples rarely land on a thin
+/// sliver (a long triangle of little area), which is where a decoded plane can cross its
+/// face's concave outline; a well-shaped triangle holds random points in proportion to its
+/// area and is left to them. An edge is sampled once: from the triangle in which it runs
+/// from the smaller end (by coordinates) to the larger, unless only the other one samples
+/// it (the other triangle is well shaped, or there is none: the mesh's boundary). The points
+/// are placed from the smaller end, so two meshes holding the same triangles (a face's
+/// triangles on their own and the whole surface) place the same points on them.
 pub struct EdgeSamples<'a> {
     positions: &'a [DVec3],
     triangles: &'a [[u32; 3]],
@@ -212,24 +214,28 @@ impl<'a> EdgeSamples<'a> {
             };
         }
         let ends = |t: usize, k: usize| (triangles[t][k], triangles[t][(k + 1) % 3]);
+        // Every long edge with whether its triangle is thin.
         let mut long = Vec::new();
-        for t in 0..triangles.len() {
-            for k in 0..3 {
-                let (a, b) = ends(t, k);
-                let length = (positions[b as usize] - positions[a as usize]).length();
+        for (t, tri) in triangles.iter().enumerate() {
+            let [p, q, r] = tri.map(|v| positions[v as usize]);
+            let lengths = [(q - p).length(), (r - q).length(), (p - r).length()];
+            let longest = lengths[0].max(lengths[1]).max(lengths[2]);
+            let thin = (q - p).cross(r - p).length() < spacing * longest;
+            for (k, &length) in lengths.iter().enumerate() {
                 if length > spacing {
-                    long.push((t as u32, k as u8, (length / spacing).ceil()));
+                    long.push((t as u32, k as u8, (length / spacing).ceil(), thin));
                 }
             }
         }
-        let directed: rustc_hash::FxHashSet<(u32, u32)> = long
+        let directed: rustc_hash::FxHashMap<(u32, u32), bool> = long
             .iter()
-            .map(|&(t, k, _)| ends(t as usize, usize::from(k)))
+            .map(|&(t, k, _, thin)| (ends(t as usize, usize::from(k)), thin))
             .collect();
-        for (t, k, segments) in long {
+        for (t, k, segments, thin) in long {
             let (a, b) = ends(t as usize, usize::from(k));
             let forward = before(positions[a as usize], positions[b as usize]);
-            if forward || !directed.contains(&(b, a)) {
+            let other_samples = directed.get(&(b, a)).copied().unwrap_or(false);
+            if thin && (forward || !other_samples) {
                 let segments = segments.min(f64::from(u32::MAX)) as u32;
                 edges.push((t, k, segments));
                 let last = start.last().copied().unwrap_or(0);
@@ -297,6 +303,15 @@ impl SplitMixForTests {
 mod tests {
     use super::*;
 
+    /// The edge points `edges` takes from triangle `t`.
+    fn edges_of(edges: &EdgeSamples, t: u32) -> Vec<DVec3> {
+        (0..edges.len())
+            .map(|i| edges.get(i))
+            .filter(|s| s.triangle == t)
+            .map(|s| s.point)
+            .collect()
+    }
+
     /// A long sliver and a fat triangle sharing the sliver's long edge, numbered so that
     /// the edge runs one way in each: every edge longer than the spacing is sampled once,
     /// its points on it and no farther apart than the spacing.
@@ -307,13 +322,17 @@ mod tests {
             DVec3::new(10.0, 0.0, 0.0),
             DVec3::new(5.0, 0.2, 0.0),
             DVec3::new(5.0, -3.0, 0.0),
+            DVec3::new(5.0, 0.3, 0.0),
         ];
-        let triangles = [[0, 1, 2], [1, 0, 3]];
+        // A sliver 0.2 high on 0-1 (which the fat triangle runs the other way), and one
+        // 0.1 high on 1-2 (as a boundary edge of the sliver, 1-2 runs from the larger end).
+        let triangles = [[0, 1, 2], [1, 0, 3], [2, 1, 4]];
         let spacing = 0.75;
         let edges = EdgeSamples::new(&positions, &triangles, spacing);
-        // The shared edge 0-1 (10 long: 14 segments, 13 points) once; 0-2 and 1-2 (5.004
-        // long: 7 segments each); 0-3 and 1-3 (5.83 long: 8 segments each).
-        assert_eq!(edges.len(), 13 + 2 * 6 + 2 * 7);
+        // The shared edge 0-1 (10 long: 14 segments, 13 points) once, from the sliver; 0-2
+        // (5.004 long: 7 segments) and 1-2 once; 1-4 and 4-2 (5.009 and 0.1 long) of the
+        // second sliver; nothing of the fat triangle (0-3, 3-1 are not a sliver's).
+        assert_eq!(edges.len(), 13 + 6 + 6 + 6);
         let mut on_shared: Vec<f64> = (0..edges.len())
             .map(|i| edges.get(i))
             .inspect(|s| {
@@ -328,12 +347,15 @@ mod tests {
             .collect();
         on_shared.sort_by(f64::total_cmp);
         assert_eq!(on_shared.len(), 13);
+        assert!(edges_of(&edges, 1).is_empty());
         let mut last = 0.0;
         for x in on_shared.iter().chain([10.0].iter()) {
             assert!(x - last <= spacing + 1e-12 && x - last > 0.0);
             last = *x;
         }
         assert!(EdgeSamples::new(&positions, &triangles, 0.0).is_empty());
+        // Fat triangles alone: no edge points.
+        assert!(EdgeSamples::new(&positions, &triangles[1..2], spacing).is_empty());
         assert!(EdgeSamples::new(&positions, &triangles, 11.0).is_empty());
     }
 }
