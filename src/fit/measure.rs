@@ -126,12 +126,13 @@ impl GroupDecoded {
 }
 
 /// The decoded samples of one face: its vertices, then random points by area, seeded by the
-/// group so an unchanged face gets the same points. Each is made on its own, when needed.
+/// group so an unchanged face gets the same points, then points along its thin triangles'
+/// long edges ([`EdgeSamples`]). Each is made on its own, when needed.
 struct GroupSamples<'a> {
     /// The face's vertices (every one is a corner of its triangles).
     vertices: &'a [DVec3],
     random: RandomSamples<'a>,
-    /// Points along its long edges, the slivers random points miss.
+    /// Points along the long edges of its thin triangles, the slivers random points miss.
     edges: EdgeSamples<'a>,
 }
 
@@ -287,7 +288,8 @@ fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Sen
 
 impl<'a> ErrorMeter<'a> {
     /// A meter of `mesh` (triangulated: `triangles` are its faces) with `error_samples`
-    /// random samples each way, besides the vertices.
+    /// random samples each way, besides the vertices and the points along thin triangles'
+    /// long edges.
     pub fn new(
         mesh: &'a ControlMesh,
         triangles: &[[u32; 3]],
