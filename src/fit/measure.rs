@@ -27,8 +27,9 @@ use super::map_ordered;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    closest_points_near, closest_points_near_with, edge_spacing_for_tolerance, sample_surface,
-    EdgeSamples, Misses, RandomSamples, SampleCount, SurfaceSample, TriangleSurface,
+    box_distance, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
+    sample_surface, EdgeSamples, Misses, RandomSamples, SampleCount, SurfaceSample,
+    TriangleSurface,
 };
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
@@ -121,7 +122,7 @@ impl GroupDecoded {
 
     /// Distance from `p` to the box (0 inside).
     fn box_distance(&self, p: DVec3) -> f64 {
-        (self.lo - p).max(p - self.hi).max(DVec3::ZERO).length()
+        box_distance(self.lo, self.hi, p)
     }
 }
 

@@ -33,15 +33,7 @@ pub(crate) fn map_ordered<T: Sync, R: Send>(
     items: &[T],
     f: impl Fn(&T) -> R + Sync + Send,
 ) -> Vec<R> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        items.par_iter().map(f).collect()
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        items.iter().map(f).collect()
-    }
+    crate::subdiv::par::map_heavy(items.len(), |i| f(&items[i]))
 }
 
 #[cfg(test)]

@@ -17,9 +17,10 @@ use super::distance::samples_of;
 use super::distance::{blocked_surface, closest_points_near_with, edge_spacing, one_sided_of};
 use super::distance::{DistanceOptions, DistanceReport, Misses, OneSided};
 use super::sampling::{EdgeSamples, RandomSamples, SampleCount};
-use super::surface::TriangleSurface;
+use super::surface::{box_distance, TriangleSurface};
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
+use crate::subdiv::par::map_heavy;
 use crate::subdiv::UniformSurface;
 
 /// Triangles of one leaf of a group's closest-point index (subdivision lists each control
@@ -44,8 +45,7 @@ struct GroupOutline {
 
 impl GroupOutline {
     fn box_distance(&self, p: DVec3) -> f64 {
-        let d = (self.lo - p).max(p - self.hi).max(DVec3::ZERO);
-        d.length()
+        box_distance(self.lo, self.hi, p)
     }
 }
 
@@ -63,7 +63,7 @@ pub fn hausdorff_by_group(
     beyond: f64,
 ) -> Result<(DistanceReport, Misses)> {
     let positions = a.positions();
-    let outlines = map_groups(a.group_count(), |g| outline(a, g));
+    let outlines = map_heavy(a.group_count(), |g| outline(a, g));
     if outlines.iter().all(|o| o.vertices.is_empty()) {
         return Err(Error::Mesh("the decoded surface has no triangles".into()));
     }
@@ -106,22 +106,45 @@ pub fn hausdorff_by_group(
         near,
         |_, _, h| h.distance,
     );
+    // Each group's triangles made once: its random and edge points against B, and B's
+    // points near its box against it.
     let counts = split_samples(opts.samples, &outlines);
-    let random = map_groups(outlines.len(), |g| {
-        group_distances(a, g, counts[g], opts.seed, spacing, &sb, near)
+    let grid = PointGrid::new(&pb);
+    let parts = map_heavy(outlines.len(), |g| {
+        let mut tris = Vec::new();
+        a.group_triangles(g, &mut tris);
+        let samples = GroupPoints {
+            triangles: &tris,
+            count: counts[g],
+            seed: opts.seed ^ ((g as u64) << 20),
+            spacing,
+        };
+        let own = samples.distances(positions, &sb, near);
+        let o = &outlines[g];
+        let mut nearby = Vec::new();
+        grid.visit(o.lo - DVec3::splat(near), o.hi + DVec3::splat(near), |i| {
+            if o.box_distance(pb[i as usize]) <= near {
+                nearby.push((i, near));
+            }
+        });
+        (own, nearest_in_group(positions, o, tris, &pb, &nearby))
     });
     let mut ab = Summary::default();
     for (i, &d) in vertex_d.iter().enumerate() {
         ab.add(positions[ids[i] as usize], d, beyond, true);
     }
-    for (part, &count) in random.iter().zip(&counts) {
-        for (k, &(p, d)) in part.iter().enumerate() {
+    let mut best = vec![f64::INFINITY; pb.len()];
+    for ((own, hits), &count) in parts.into_iter().zip(&counts) {
+        for (k, &(p, d)) in own.iter().enumerate() {
             ab.add(p, d, beyond, k < count);
+        }
+        for (i, d) in hits {
+            best[i as usize] = best[i as usize].min(d);
         }
     }
 
-    // B to A.
-    let best = input_to_groups(a, &outlines, &pb, near);
+    // B to A: the points farther than `near` from every group.
+    far_to_groups(a, &outlines, &pb, near, &mut best);
     let ba = one_sided_of(&pb, &best, nb);
     let b_misses: Vec<DVec3> = pb
         .iter()
@@ -130,14 +153,12 @@ pub fn hausdorff_by_group(
         .map(|(&p, _)| p)
         .collect();
 
+    let report = DistanceReport::from_sides(&ab.one_sided(), &ba, diagonal);
     let misses = Misses {
-        a_to_b: ab.misses.clone(),
+        a_to_b: ab.misses,
         b_to_a: b_misses,
     };
-    Ok((
-        DistanceReport::from_sides(&ab.one_sided(), &ba, diagonal),
-        misses,
-    ))
+    Ok((report, misses))
 }
 
 /// Running statistics of one side's distances, in sample order (as `one_sided_of`: the
@@ -241,60 +262,51 @@ fn split_samples(count: SampleCount, outlines: &[GroupOutline]) -> Vec<usize> {
     }
 }
 
-/// Group `g`'s `count` random samples, then the points of its edges at `spacing`, and their
-/// distances to `input`.
-fn group_distances(
-    a: &UniformSurface,
-    g: usize,
+/// One group's own samples besides its vertices: `count` random points by area, then the
+/// points along its thin triangles' long edges at `spacing`.
+struct GroupPoints<'t> {
+    triangles: &'t [[u32; 3]],
     count: usize,
     seed: u64,
     spacing: f64,
-    input: &TriangleSurface,
-    near: f64,
-) -> Vec<(DVec3, f64)> {
-    let mut tris = Vec::new();
-    a.group_triangles(g, &mut tris);
-    let random = RandomSamples::new(
-        a.positions(),
-        &tris,
-        SampleCount::Total(count),
-        seed ^ ((g as u64) << 20),
-    );
-    let edges = EdgeSamples::new(a.positions(), &tris, spacing);
-    let point = |i: usize| match i.checked_sub(random.len()) {
-        None => random.get(i).point,
-        Some(e) => edges.get(e).point,
-    };
-    closest_points_near_with(random.len() + edges.len(), point, input, near, |_, p, h| {
-        (p, h.distance)
-    })
 }
 
-/// Distance from each of `points` to the surface of `a` (see the module comment).
-fn input_to_groups(
+impl GroupPoints<'_> {
+    /// The points, and their distances to `input`.
+    fn distances(
+        &self,
+        positions: &[DVec3],
+        input: &TriangleSurface,
+        near: f64,
+    ) -> Vec<(DVec3, f64)> {
+        let random = RandomSamples::new(
+            positions,
+            self.triangles,
+            SampleCount::Total(self.count),
+            self.seed,
+        );
+        let edges = EdgeSamples::new(positions, self.triangles, self.spacing);
+        let point = |i: usize| match i.checked_sub(random.len()) {
+            None => random.get(i).point,
+            Some(e) => edges.get(e).point,
+        };
+        closest_points_near_with(random.len() + edges.len(), point, input, near, |_, p, h| {
+            (p, h.distance)
+        })
+    }
+}
+
+/// Lowers `best` (each of `points`' distance to the groups found within `near` of it) to the
+/// distance to the whole surface of `a` for the points still farther than `near`: bounded
+/// by the known points of the surface, then measured against every group that can hold a
+/// nearer point.
+fn far_to_groups(
     a: &UniformSurface,
     outlines: &[GroupOutline],
     points: &[DVec3],
     near: f64,
-) -> Vec<f64> {
-    let grid = PointGrid::new(points);
-    let mut best = vec![f64::INFINITY; points.len()];
-    // Every group, the points within `near` of its box.
-    let found = map_groups(outlines.len(), |g| {
-        let o = &outlines[g];
-        let mut candidates = Vec::new();
-        grid.visit(o.lo - DVec3::splat(near), o.hi + DVec3::splat(near), |i| {
-            if o.box_distance(points[i as usize]) <= near {
-                candidates.push((i, near));
-            }
-        });
-        nearest_in_group(a, o, g, points, &candidates)
-    });
-    for (i, d) in found.into_iter().flatten() {
-        best[i as usize] = best[i as usize].min(d);
-    }
-    // The points farther than `near` from every group: bounded by the known points of the
-    // surface, then measured against every group that can hold a nearer point.
+    best: &mut [f64],
+) {
     let far: Vec<(u32, f64)> = (0..points.len())
         .filter(|&i| best[i] > near)
         .map(|i| {
@@ -308,43 +320,42 @@ fn input_to_groups(
         })
         .collect();
     if far.is_empty() {
-        return best;
+        return;
     }
-    let found = map_groups(outlines.len(), |g| {
+    let found = map_heavy(outlines.len(), |g| {
         let o = &outlines[g];
         let candidates: Vec<(u32, f64)> = far
             .iter()
             .filter(|&&(i, bound)| o.box_distance(points[i as usize]) <= bound)
             .copied()
             .collect();
-        nearest_in_group(a, o, g, points, &candidates)
+        if candidates.is_empty() {
+            return Vec::new();
+        }
+        let mut tris = Vec::new();
+        a.group_triangles(g, &mut tris);
+        nearest_in_group(a.positions(), o, tris, points, &candidates)
     });
     for (i, d) in found.into_iter().flatten() {
         best[i as usize] = best[i as usize].min(d);
     }
-    best
 }
 
-/// For each `(point, bound)` of `candidates`, the distance from the point to group `g`'s
-/// triangles if it is within the bound (padded for rounding).
+/// For each `(point, bound)` of `candidates`, the distance from the point to the group of
+/// outline `o`, whose triangles are `tris` (level-n ids), if it is within the bound (padded
+/// for rounding).
 fn nearest_in_group(
-    a: &UniformSurface,
+    all: &[DVec3],
     o: &GroupOutline,
-    g: usize,
+    mut tris: Vec<[u32; 3]>,
     points: &[DVec3],
     candidates: &[(u32, f64)],
 ) -> Vec<(u32, f64)> {
     if candidates.is_empty() || o.vertices.is_empty() {
         return Vec::new();
     }
-    let mut tris = Vec::new();
-    a.group_triangles(g, &mut tris);
     // The group's own vertices, numbered locally.
-    let positions: Vec<DVec3> = o
-        .vertices
-        .iter()
-        .map(|&v| a.positions()[v as usize])
-        .collect();
+    let positions: Vec<DVec3> = o.vertices.iter().map(|&v| all[v as usize]).collect();
     for t in &mut tris {
         for v in t {
             *v = o.vertices.binary_search(v).unwrap_or(0) as u32;
@@ -365,19 +376,6 @@ fn nearest_in_group(
             hit.map(|h| (i, h.distance))
         })
         .collect()
-}
-
-/// `f` over `0..n`, in parallel when the `parallel` feature is on, results in order.
-fn map_groups<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync + Send) -> Vec<R> {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        (0..n).into_par_iter().map(f).collect()
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        (0..n).map(f).collect()
-    }
 }
 
 /// Points bucketed in a uniform grid of about one point per cell, for "which points lie in

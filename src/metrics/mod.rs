@@ -21,6 +21,7 @@ pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
 pub use sampling::{sample_surface, EdgeSamples, RandomSamples, SampleCount, SurfaceSample};
+pub(crate) use surface::box_distance;
 pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
 
 #[cfg(test)]

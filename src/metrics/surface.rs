@@ -313,6 +313,12 @@ fn closest_in_blocks(
     })
 }
 
+/// Distance from `p` to the box `lo..hi` (0 inside): a lower bound of its distance to
+/// anything in the box.
+pub(crate) fn box_distance(lo: DVec3, hi: DVec3, p: DVec3) -> f64 {
+    (lo - p).max(p - hi).max(DVec3::ZERO).length()
+}
+
 /// Fan triangulation of every face (first vertex as apex) with the source face of each
 /// triangle. Errors when an index is out of range.
 pub(crate) fn fan_triangulate(mesh: &ControlMesh) -> Result<(Vec<[u32; 3]>, Vec<u32>)> {

@@ -32,7 +32,7 @@ mod lod;
 mod masks;
 mod max_edge;
 mod next_level;
-mod par;
+pub(crate) mod par;
 #[cfg(feature = "remesh")]
 mod plane_refine;
 mod sparse;

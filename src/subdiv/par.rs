@@ -57,6 +57,17 @@ pub(crate) fn for_each_heavy<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) 
     }
 }
 
+/// `f(i)` for every `i` in `0..n`, in order, in parallel from two items on (for items that
+/// each take long, as [`for_each_heavy`]).
+pub(crate) fn map_heavy<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync + Send) -> Vec<R> {
+    #[cfg(feature = "parallel")]
+    if n >= 2 {
+        use rayon::prelude::*;
+        return (0..n).into_par_iter().map(f).collect();
+    }
+    (0..n).map(f).collect()
+}
+
 /// Calls `f(i, segment_i)` where segment i is `data[offsets[i]..offsets[i + 1]]`
 /// (`offsets[0] == 0`, `offsets.last() == data.len()`).
 pub(crate) fn for_each_segment_mut<T: Send>(
