@@ -4,13 +4,16 @@
 //! A refinement round changes a few faces and leaves the others' decoded surfaces as they
 //! were, so the measurement is kept per face ([`GroupDecoded`]): a face whose decoded
 //! triangles did not change keeps its closest-point index, its samples and their distances to
-//! the input, and only changed faces are indexed, sampled and queried again. "Did not change"
-//! compares the triangles as a set, corners on a grid of 2^-32 of the model's size
-//! ([`block_fingerprint`]): when another face gains control points, the control mesh is
-//! numbered anew, and an unchanged face's triangles come out in another order and with
-//! other roundings in the last bits. The kept measurement is then one of a surface within
-//! that grid of the current one, far below any tolerance, and the encoder's decisions stay a
-//! function of its inputs alone (the same bytes on every run and thread count).
+//! the input, and only changed faces are subdivided, indexed, sampled and queried again.
+//! "Did not change" is decided on the control mesh, before anything is subdivided: a face's
+//! triangles are a function of its support (the control faces within two rings of it, see
+//! [`crate::subdiv::support`]), whose fingerprint is kept. The changed faces are subdivided
+//! on the union of their supports alone, so a round that refits a few faces subdivides a few
+//! faces' worth, not the model. When another face gains control points the control mesh is
+//! numbered anew; the fingerprints describe faces by their corners' positions, so an
+//! unchanged face stays unchanged, and its kept measurement is of the surface the decoder
+//! makes of it up to last-bit roundings. The encoder's decisions stay a function of its
+//! inputs alone (the same bytes on every run and thread count).
 //!
 //! At a fine level the decoded surface has millions of triangles, so nothing holds all of
 //! them twice: the surface is handed out face by face ([`UniformSurface`]), a changed face's
@@ -31,6 +34,7 @@ use crate::metrics::{
     sample_surface, EdgeSamples, Misses, RandomSamples, SampleCount, SurfaceSample,
     TriangleSurface,
 };
+use crate::subdiv::support::Supports;
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
 /// Error of a decoded surface against the input, measured both ways.
@@ -48,11 +52,8 @@ pub(crate) struct Measurement {
 
 /// One face's decoded triangles and what was measured on them. Everything in it is a
 /// function of the triangles' corners alone (and of the input, which never changes), so it
-/// is reused while the face decodes to the same triangles (see [`GroupDecoded::same_triangles`]).
+/// is reused while the face's support is unchanged ([`MeasureCache::supports`]).
 struct GroupDecoded {
-    /// What identifies the face's decoded triangles: the [`block_fingerprint`] of each
-    /// control face's, sorted (the order in which control faces come out is not kept).
-    blocks: Vec<u64>,
     /// Closest-point index over the face's decoded triangles; `None` for a face without any.
     surface: Option<TriangleSurface>,
     /// Bounding box of the corners: a point farther from it than a distance already found
@@ -73,53 +74,7 @@ struct GroupDecoded {
     over_tolerance: Vec<(u32, DVec3)>,
 }
 
-/// What identifies one control face's decoded triangles as a set: each triangle's corners
-/// snapped to a grid of spacing `grid`, rotated to start at the smallest (orientation kept),
-/// hashed, and the hashes summed with the count, so the order of the triangles and last-bit
-/// roundings (a grid line crossed aside) do not change it. Equal fingerprints of different
-/// sets take a 64-bit coincidence.
-fn block_fingerprint(positions: &[DVec3], triangles: &[[u32; 3]], grid: f64) -> u64 {
-    let inv = 1.0 / grid;
-    // Truncation snaps as well as rounding does (grid lines at the integers), in one
-    // instruction: this runs over the decoded triangles of every measurement.
-    let snap = |p: DVec3| (p * inv).to_array().map(|x| x as i64);
-    let mut sum = mix(triangles.len() as u64);
-    for t in triangles {
-        let corners = t.map(|v| snap(positions[v as usize]));
-        let first = (0..3).min_by_key(|&k| corners[k]).unwrap_or(0);
-        let mut h: u64 = 0;
-        for k in 0..3 {
-            for x in corners[(first + k) % 3] {
-                h = (h.rotate_left(5) ^ x as u64).wrapping_mul(0x517C_C1B7_2722_0A95);
-            }
-        }
-        sum = sum.wrapping_add(mix(h));
-    }
-    sum
-}
-
-/// SplitMix64's finaliser: every input bit moves every output bit.
-fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 impl GroupDecoded {
-    /// Whether group `g` of `surface` decodes to the same triangles as this face, by the
-    /// fingerprints of its control faces' (stops making them at the first one not kept).
-    fn same_triangles(&self, surface: &UniformSurface, g: usize, grid: f64) -> bool {
-        let mut seen = Vec::with_capacity(self.blocks.len());
-        let all = surface.visit_group_triangles(g, |tris| {
-            let f = block_fingerprint(surface.positions(), tris, grid);
-            seen.push(f);
-            seen.len() <= self.blocks.len() && self.blocks.binary_search(&f).is_ok()
-        });
-        seen.sort_unstable();
-        all && seen == self.blocks
-    }
-
     /// Distance from `p` to the box (0 inside).
     fn box_distance(&self, p: DVec3) -> f64 {
         box_distance(self.lo, self.hi, p)
@@ -187,6 +142,10 @@ struct MeasureCache {
     /// were dropped before the new ones were made, so that the two never take memory at
     /// once).
     groups: Vec<Option<GroupDecoded>>,
+    /// The decode level and each group's support fingerprint ([`Supports::fingerprints`])
+    /// of the control mesh `groups` were measured on.
+    level: u8,
+    supports: Vec<Option<u64>>,
     /// Input->decoded, per input sample: the distance and the group holding the nearest
     /// decoded point. While that group is unchanged the distance is still reachable, so
     /// only changed groups can bring it down.
@@ -215,8 +174,6 @@ pub(crate) struct ErrorMeter<'a> {
     /// Bounding box of each input group's triangles (which hold its samples): a lower
     /// bound of its samples' distances to any decoded face ([`search_orders`]).
     group_boxes: Vec<(DVec3, DVec3)>,
-    /// Grid of the decoded faces' fingerprints: 2^-32 of the input's box diagonal.
-    grid: f64,
     tol: f64,
     /// Spacing of the points along decoded edges ([`EdgeSamples`]): the check of the written
     /// file samples the same points ([`edge_spacing_for_tolerance`]).
@@ -331,11 +288,6 @@ impl<'a> ErrorMeter<'a> {
         let edge_spacing = edge_spacing_for_tolerance(tol, diagonal);
         let edges = EdgeSamples::new(&mesh.positions, triangles, edge_spacing);
         input_samples.extend((0..edges.len()).map(|i| edges.get(i)));
-        let grid = if diagonal.is_finite() && diagonal > 0.0 {
-            diagonal * (-32f64).exp2()
-        } else {
-            1.0
-        };
         let group_samples = area
             .iter()
             .map(|&a| {
@@ -355,7 +307,6 @@ impl<'a> ErrorMeter<'a> {
             own_faces,
             group_samples,
             group_boxes,
-            grid,
             tol,
             edge_spacing,
             cache: Default::default(),
@@ -485,30 +436,59 @@ impl<'a> ErrorMeter<'a> {
         level: u8,
         over: Option<f64>,
     ) -> Result<Option<Measurement>> {
-        let surface = UniformSurface::new(decoded, u32::from(level), DEFAULT_MAX_FACES)?;
-        let n_groups = self.mesh.groups.len().max(surface.group_count());
+        let n_groups = self.mesh.groups.len().max(decoded.groups.len());
+        let support = Supports::new(decoded);
+        let mut supports = support.fingerprints()?;
+        supports.resize(n_groups, None);
         let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
         cache.groups.resize_with(n_groups, || None);
-        let groups: Vec<usize> = (0..n_groups).collect();
-        let unchanged = map_ordered(&groups, |&g| {
-            cache.groups[g]
-                .as_ref()
-                .is_some_and(|c| c.same_triangles(&surface, g, self.grid))
-        });
-        let changed: Vec<usize> = groups.into_iter().filter(|&g| !unchanged[g]).collect();
+        let same_level = cache.level == level;
+        let changed: Vec<usize> = (0..n_groups)
+            .filter(|&g| {
+                !same_level
+                    || cache.groups[g].is_none()
+                    || supports[g].is_none()
+                    || cache.supports.get(g) != Some(&supports[g])
+            })
+            .collect();
+        // Only the changed groups' triangles are read: their supports are subdivided alone
+        // (the whole mesh when every group changed, or when one is not sharp-bounded).
+        let subdivide = |groups: &[usize]| -> Result<Option<UniformSurface>> {
+            if groups.is_empty() {
+                return Ok(None);
+            }
+            let part = (groups.len() < n_groups)
+                .then(|| support.submesh(groups))
+                .flatten();
+            let mesh = part.as_ref().unwrap_or(decoded);
+            UniformSurface::new(mesh, u32::from(level), DEFAULT_MAX_FACES).map(Some)
+        };
         if let Some(max_cap) = over {
-            if self.decoded_probe_fails(&cache, &changed, &surface, max_cap) {
+            // The probe reads the probed groups alone: a failing probe (the common case
+            // of a coarser quantisation, which moves every vertex) subdivides a few groups.
+            let mut probed: Vec<usize> = cache
+                .probe_out
+                .iter()
+                .map(|&(g, _)| g as usize)
+                .filter(|g| changed.binary_search(g).is_ok())
+                .collect();
+            probed.dedup();
+            let surface = subdivide(&probed)?;
+            if self.decoded_probe_fails(&cache, &changed, surface.as_ref(), max_cap) {
                 return Ok(None);
             }
         }
+        let surface = subdivide(&changed)?;
         // What changed groups kept is of no more use: dropped before their new indexes exist.
         for &g in &changed {
             cache.groups[g] = None;
         }
-        let mut fresh: Vec<GroupDecoded> =
-            map_ordered(&changed, |&g| index_group(&surface, g, self.grid))
+        let mut fresh: Vec<GroupDecoded> = match &surface {
+            Some(surface) => map_ordered(&changed, |&g| index_group(surface, g))
                 .into_iter()
-                .collect::<Result<_>>()?;
+                .collect::<Result<_>>()?,
+            None => Vec::new(),
+        };
         drop(surface);
         let Some(in_hits) = self.input_to_decoded(&cache, &changed, &fresh, over) else {
             return Ok(None);
@@ -522,6 +502,8 @@ impl<'a> ErrorMeter<'a> {
         self.measure_misses(&cache.groups, &mut measurement);
         measurement.changed_groups = changed.len();
         cache.in_hits = in_hits;
+        cache.level = level;
+        cache.supports = supports;
         Ok(Some(measurement))
     }
 
@@ -533,7 +515,7 @@ impl<'a> ErrorMeter<'a> {
         &self,
         cache: &MeasureCache,
         changed: &[usize],
-        surface: &UniformSurface,
+        surface: Option<&UniformSurface>,
         max_cap: f64,
     ) -> bool {
         let mut probe: Vec<(usize, DVec3)> = Vec::new();
@@ -541,7 +523,8 @@ impl<'a> ErrorMeter<'a> {
         for run in cache.probe_out.chunk_by(|a, b| a.0 == b.0) {
             let g = run[0].0 as usize;
             if changed.binary_search(&g).is_ok() {
-                let local = localise(surface, g, self.grid);
+                let Some(surface) = surface else { continue };
+                let local = localise(surface, g);
                 if local.triangles.is_empty() {
                     continue;
                 }
@@ -803,12 +786,10 @@ struct LocalTriangles {
     triangles: Vec<[u32; 3]>,
     lo: DVec3,
     hi: DVec3,
-    /// The [`block_fingerprint`]s of its control faces' triangles, sorted.
-    blocks: Vec<u64>,
 }
 
-/// Group `g`'s decoded triangles over its own vertices, fingerprinted on a grid of `grid`.
-fn localise(surface: &UniformSurface, g: usize, grid: f64) -> LocalTriangles {
+/// Group `g`'s decoded triangles over its own vertices.
+fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
     let all = surface.positions();
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -816,9 +797,7 @@ fn localise(surface: &UniformSurface, g: usize, grid: f64) -> LocalTriangles {
         Default::default();
     let mut positions = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
-    let mut blocks = Vec::new();
     surface.visit_group_triangles(g, |block| {
-        blocks.push(block_fingerprint(all, block, grid));
         triangles.extend(block.iter().map(|t| {
             t.map(|v| {
                 *local.entry(v).or_insert_with(|| {
@@ -832,25 +811,22 @@ fn localise(surface: &UniformSurface, g: usize, grid: f64) -> LocalTriangles {
         }));
         true
     });
-    blocks.sort_unstable();
     LocalTriangles {
         positions,
         triangles,
         lo,
         hi,
-        blocks,
     }
 }
 
 /// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
-fn index_group(surface: &UniformSurface, g: usize, grid: f64) -> Result<GroupDecoded> {
+fn index_group(surface: &UniformSurface, g: usize) -> Result<GroupDecoded> {
     let LocalTriangles {
         mut positions,
         mut triangles,
         lo,
         hi,
-        blocks,
-    } = localise(surface, g, grid);
+    } = localise(surface, g);
     // Kept until the face changes: without the slack of growing by pushes.
     positions.shrink_to_fit();
     triangles.shrink_to_fit();
@@ -864,7 +840,6 @@ fn index_group(surface: &UniformSurface, g: usize, grid: f64) -> Result<GroupDec
         )?)
     };
     Ok(GroupDecoded {
-        blocks,
         surface,
         lo,
         hi,
@@ -941,8 +916,10 @@ mod tests {
         let input = grid_cube(6);
         let (tris, surface, chord) = meter_parts(&input);
         let meter = || ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
-        let first = grid_cube(2);
-        // One vertex inside face 1 (z = 1) moved outwards: only the faces around it change.
+        // Sharp CAD-face boundaries, as every fitted control mesh has them.
+        let mut first = grid_cube(2);
+        first.sharpen_group_boundaries();
+        // One vertex inside face 1 (z = 1) moved outwards: only that face changes.
         let mut one_face = first.clone();
         let v = (0..one_face.vertex_count())
             .find(|&v| (one_face.positions[v] - DVec3::new(0.5, 0.5, 1.0)).length() < 1e-9)
@@ -1011,6 +988,7 @@ mod tests {
         let (tris, surface, chord) = meter_parts(&input);
         let meter = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
         let mut first = grid_cube(2);
+        first.sharpen_group_boundaries();
         for p in &mut first.positions {
             *p += DVec3::new(0.013, -0.007, 0.002) * (p.x * 3.1 + p.y * 1.7).sin();
         }

@@ -259,6 +259,8 @@ impl Rounds<'_> {
         t = Instant::now();
         let (decoded, bytes) = reconstruct(&built.control, level, 0)
             .map_err(|e| with_faces_involved(e, &built.control))?;
+        let t_write = t.elapsed().as_secs_f64();
+        t = Instant::now();
         let measured = self
             .meter
             .measure(&decoded, level)
@@ -267,9 +269,11 @@ impl Rounds<'_> {
         let tol = self.tol;
         report.timings.push(("topology", t_top));
         report.timings.push(("fit", t_fit));
-        report.timings.push(("measure", t.elapsed().as_secs_f64()));
+        let t_measure = t.elapsed().as_secs_f64();
+        report.timings.push(("write", t_write));
+        report.timings.push(("measure", t_measure));
         report.notes.push(format!(
-            "round {}: {} control vertices ({} of {} faces decimated anew{}), level {level}, max error {:.3e} ({:.2} tol; {:.2} tol vs {}), rms {:.3e}; {} of {} faces measured anew",
+            "round {}: {} control vertices ({} of {} faces decimated anew{}), level {level}, max error {:.3e} ({:.2} tol; {:.2} tol vs {}), rms {:.3e}; {} of {} faces measured anew (build {:.2} s, fit {:.2} s, write {:.2} s, measure {:.2} s)",
             report.rounds,
             built.control.vertex_count(),
             built.decimation.faces_redone,
@@ -281,7 +285,11 @@ impl Rounds<'_> {
             report.reference.describe(),
             err.rms,
             measured.changed_groups,
-            self.faces.mesh.groups.len()
+            self.faces.mesh.groups.len(),
+            t_top,
+            t_fit,
+            t_write,
+            t_measure,
         ));
         Ok(Round {
             built,

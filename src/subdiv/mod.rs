@@ -36,6 +36,7 @@ pub(crate) mod par;
 #[cfg(feature = "remesh")]
 mod plane_refine;
 mod sparse;
+pub(crate) mod support;
 mod topology;
 mod uniform;
 
