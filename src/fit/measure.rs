@@ -5,15 +5,16 @@
 //! were, so the measurement is kept per face ([`GroupDecoded`]): a face whose decoded
 //! triangles did not change keeps its closest-point index, its samples and their distances to
 //! the input, and only changed faces are subdivided, indexed, sampled and queried again.
-//! "Did not change" is decided on the control mesh, before anything is subdivided: a face's
-//! triangles are a function of its support (the control faces within two rings of it, see
-//! [`crate::subdiv::support`]), whose fingerprint is kept. The changed faces are subdivided
-//! on the union of their supports alone, so a round that refits a few faces subdivides a few
-//! faces' worth, not the model. When another face gains control points the control mesh is
-//! numbered anew; the fingerprints describe faces by their corners' positions, so an
-//! unchanged face stays unchanged, and its kept measurement is of the surface the decoder
-//! makes of it up to last-bit roundings. The encoder's decisions stay a function of its
-//! inputs alone (the same bytes on every run and thread count).
+//! "Did not change" is decided on the control mesh, before anything is subdivided: a face
+//! bounded by sharp edges decodes to triangles that are a function of its own control faces
+//! and of the classes and frames of their vertices and edges ([`crate::subdiv::support`]),
+//! whose fingerprint is kept. The changed faces are subdivided on the control faces around
+//! them alone, so a round that refits a few faces subdivides a few faces' worth, not the
+//! model. When another face gains control points the control mesh is numbered anew; the
+//! fingerprints describe faces by their corners' positions, so an unchanged face stays
+//! unchanged, and its kept measurement is of the surface the decoder makes of it up to
+//! last-bit roundings. The encoder's decisions stay a function of its inputs alone (the same
+//! bytes on every run and thread count).
 //!
 //! At a fine level the decoded surface has millions of triangles, so nothing holds all of
 //! them twice: the surface is handed out face by face ([`UniformSurface`]), a changed face's
