@@ -6,10 +6,12 @@
 //! the codec, subdivision and fitting all speak it.
 
 mod analytic;
+mod buckets;
 mod tolerance;
 pub mod topology;
 
 pub use analytic::{AnalyticSurface, Residuals, SurfaceKind};
+pub use buckets::Buckets;
 pub use tolerance::Tolerance;
 
 use std::collections::BTreeSet;

@@ -36,6 +36,8 @@ pub(crate) mod par;
 #[cfg(feature = "remesh")]
 mod plane_refine;
 mod sparse;
+// What the encoder's measurement reads to subdivide only the groups that changed.
+#[cfg(feature = "encoder")]
 pub(crate) mod support;
 mod topology;
 mod uniform;

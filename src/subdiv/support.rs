@@ -24,39 +24,7 @@ use super::masks::eclass;
 use super::sparse::{SparsePlan, DENSE};
 use super::topology::build_level0;
 use crate::error::Result;
-use crate::mesh::{edge_key, ControlMesh};
-
-/// Faces around each vertex (CSR: `faces[offsets[v]..offsets[v + 1]]`), in face order.
-struct VertexFaces {
-    offsets: Vec<u32>,
-    faces: Vec<u32>,
-}
-
-impl VertexFaces {
-    fn new(mesh: &ControlMesh) -> Self {
-        let nv = mesh.vertex_count();
-        let mut offsets = vec![0u32; nv + 1];
-        for &v in &mesh.face_vertices {
-            offsets[v as usize + 1] += 1;
-        }
-        for v in 0..nv {
-            offsets[v + 1] += offsets[v];
-        }
-        let mut fill = offsets.clone();
-        let mut faces = vec![0u32; mesh.face_vertices.len()];
-        for f in 0..mesh.face_count() {
-            for &v in mesh.face(f) {
-                faces[fill[v as usize] as usize] = f as u32;
-                fill[v as usize] += 1;
-            }
-        }
-        VertexFaces { offsets, faces }
-    }
-
-    fn of(&self, v: u32) -> &[u32] {
-        &self.faces[self.offsets[v as usize] as usize..self.offsets[v as usize + 1] as usize]
-    }
-}
+use crate::mesh::{edge_key, Buckets, ControlMesh};
 
 /// SplitMix64's finaliser: every input bit moves every output bit.
 fn mix(mut z: u64) -> u64 {
@@ -99,7 +67,8 @@ impl Fans {
 /// The groups of one control mesh with what their supports are made of.
 pub(crate) struct Supports<'a> {
     mesh: &'a ControlMesh,
-    around: VertexFaces,
+    /// Faces around each vertex, in mesh order.
+    around: Buckets,
     /// Faces of each group, in mesh order.
     by_group: Vec<Vec<usize>>,
     /// Per group: every edge between one of its faces and a face of another group is sharp
@@ -118,7 +87,9 @@ pub(crate) struct Supports<'a> {
 
 impl<'a> Supports<'a> {
     pub fn new(mesh: &'a ControlMesh) -> Self {
-        let around = VertexFaces::new(mesh);
+        let around = Buckets::new(mesh.vertex_count(), || {
+            (0..mesh.face_count()).flat_map(|f| mesh.face(f).iter().map(move |&v| (v, f as u32)))
+        });
         let mut by_group: Vec<Vec<usize>> = vec![Vec::new(); mesh.groups.len()];
         for (f, &g) in mesh.face_groups.iter().enumerate() {
             if let Some(list) = by_group.get_mut(g as usize) {
@@ -130,7 +101,7 @@ impl<'a> Supports<'a> {
             (0..face.len()).any(|k| {
                 let (a, b) = (face[k], face[(k + 1) % face.len()]);
                 !mesh.sharp_edges.contains(&edge_key(a, b))
-                    && around.of(a).iter().any(|&n| {
+                    && around.of(a as usize).iter().any(|&n| {
                         n as usize != f
                             && mesh.face_groups[n as usize] != mesh.face_groups[f]
                             && mesh.face(n as usize).contains(&b)
@@ -300,7 +271,7 @@ impl<'a> Supports<'a> {
                 kept_around[v as usize] += 1;
             }
         }
-        let partial = |v: u32| (kept_around[v as usize] as usize) < around.of(v).len();
+        let partial = |v: u32| (kept_around[v as usize] as usize) < around.of(v as usize).len();
         // Corners of kept faces at partial vertices, joined across the edges they share.
         let mut slot_of: HashMap<(usize, usize), u32, FxBuildHasher> = HashMap::default();
         let mut slots: Vec<(usize, usize)> = Vec::new();
@@ -392,17 +363,24 @@ mod tests {
     use crate::subdiv::UniformSurface;
     use glam::DVec3;
 
-    /// A bumpy 8x8 grid of quads split into triangles, in four groups (quadrants) of
-    /// different kinds, with sharp quadrant boundaries and a corner tag.
-    fn quadrants() -> ControlMesh {
+    /// The vertices of an n x n grid of unit quads at heights `z(x, y)`, vertex `i + (n+1) j`
+    /// at `(i, j)`; no faces yet.
+    fn bumpy_grid(n: u32, z: impl Fn(f64, f64) -> f64) -> ControlMesh {
         let mut m = ControlMesh::new();
-        let n = 8u32;
         for j in 0..=n {
             for i in 0..=n {
                 let (x, y) = (f64::from(i), f64::from(j));
-                m.push_vertex(DVec3::new(x, y, 0.3 * (x * 0.7).sin() * (y * 0.4).cos()));
+                m.push_vertex(DVec3::new(x, y, z(x, y)));
             }
         }
+        m
+    }
+
+    /// A bumpy 8x8 grid of quads split into triangles, in four groups (quadrants) of
+    /// different kinds, with sharp quadrant boundaries and a corner tag.
+    fn quadrants() -> ControlMesh {
+        let n = 8u32;
+        let mut m = bumpy_grid(n, |x, y| 0.3 * (x * 0.7).sin() * (y * 0.4).cos());
         let kinds = [
             PatchKind::Closed,
             PatchKind::Boundary(BoundarySurface::Plane),
@@ -469,14 +447,8 @@ mod tests {
     /// A bumpy 8x8 grid of quads with alternating diagonals (vertices of valence 4 and 8)
     /// in sixteen groups of 2x2 quads (closed, planes and a cylinder) with sharp boundaries.
     fn checkerboard() -> ControlMesh {
-        let mut m = ControlMesh::new();
         let n = 8u32;
-        for j in 0..=n {
-            for i in 0..=n {
-                let (x, y) = (f64::from(i), f64::from(j));
-                m.push_vertex(DVec3::new(x, y, 0.4 * (x * 0.9).cos() * (y * 0.6).sin()));
-            }
-        }
+        let mut m = bumpy_grid(n, |x, y| 0.4 * (x * 0.9).cos() * (y * 0.6).sin());
         let cylinder = PatchKind::Boundary(BoundarySurface::Cylinder {
             axis: crate::mesh::Axis {
                 origin: DVec3::new(0.0, 4.0, -3.0),

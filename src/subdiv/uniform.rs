@@ -8,7 +8,7 @@ use super::sparse::{Chains, SparsePlan, UniformFaces};
 use super::topology::{Base, Level};
 use super::{limit_positions_of, Refinement};
 use crate::error::Result;
-use crate::mesh::ControlMesh;
+use crate::mesh::{Buckets, ControlMesh};
 
 /// The level-n limit surface [`super::subdivide`] outputs (sparse boundary patches, limit
 /// positions), as the limit positions of every level-n vertex and what makes a group's
@@ -27,9 +27,8 @@ pub struct UniformSurface {
     level_nv: Vec<usize>,
     n: u32,
     plan: Option<SparsePlan>,
-    /// Base faces of group g, in order: `group_faces[group_offsets[g]..group_offsets[g + 1]]`.
-    group_offsets: Vec<u32>,
-    group_faces: Vec<u32>,
+    /// Base faces of each group, in order.
+    group_faces: Buckets,
 }
 
 impl UniformSurface {
@@ -109,19 +108,9 @@ impl UniformSurface {
             .map(|&g| g as usize + 1)
             .max()
             .unwrap_or(0);
-        let mut group_offsets = vec![0u32; n_groups + 1];
-        for &g in &base.group {
-            group_offsets[g as usize + 1] += 1;
-        }
-        for g in 0..n_groups {
-            group_offsets[g + 1] += group_offsets[g];
-        }
-        let mut fill = group_offsets.clone();
-        let mut group_faces = vec![0u32; base.group.len()];
-        for (k, &g) in base.group.iter().enumerate() {
-            group_faces[fill[g as usize] as usize] = k as u32;
-            fill[g as usize] += 1;
-        }
+        let group_faces = Buckets::new(n_groups, || {
+            base.group.iter().enumerate().map(|(k, &g)| (g, k as u32))
+        });
         UniformSurface {
             positions,
             l0,
@@ -130,7 +119,6 @@ impl UniformSurface {
             level_nv,
             n,
             plan,
-            group_offsets,
             group_faces,
         }
     }
@@ -143,7 +131,7 @@ impl UniformSurface {
 
     /// One more than the largest group that has triangles.
     pub fn group_count(&self) -> usize {
-        self.group_offsets.len() - 1
+        self.group_faces.keys()
     }
 
     /// The triangles of group `g` (level-n vertex ids), in the order [`super::subdivide`]
@@ -160,9 +148,6 @@ impl UniformSurface {
     /// them, a base face's at a time, until it returns false (a comparison can stop at the
     /// first difference without making the rest); returns whether it saw them all.
     pub fn visit_group_triangles(&self, g: usize, mut f: impl FnMut(&[[u32; 3]]) -> bool) -> bool {
-        let Some(range) = self.group_offsets.get(g..g + 2) else {
-            return true;
-        };
         let faces = UniformFaces {
             l0: &self.l0,
             base: &self.base,
@@ -173,7 +158,7 @@ impl UniformSurface {
         };
         let (mut flat, mut tris) = (Vec::new(), Vec::new());
         let mut bufs = Chains::default();
-        for &k in &self.group_faces[range[0] as usize..range[1] as usize] {
+        for &k in self.group_faces.of(g) {
             flat.clear();
             faces.emit(k as usize, &mut bufs, &mut flat);
             tris.clear();
