@@ -187,6 +187,12 @@ pub(crate) struct ErrorMeter<'a> {
     misses: Misses,
 }
 
+/// Changed groups are subdivided in runs of about this fraction of the control faces each
+/// ([`Supports::runs`]): a run's level-n surface is what the measurement holds beside the
+/// indexes at its peak. Each run also subdivides the ring of faces around it, so more runs
+/// cost more subdivision.
+const SUBDIVISION_RUNS: usize = 4;
+
 /// How many of the worst samples of each direction a probe tests.
 const PROBE_SAMPLES: usize = 2000;
 
@@ -479,18 +485,20 @@ impl<'a> ErrorMeter<'a> {
                 return Ok(None);
             }
         }
-        let surface = subdivide(&changed)?;
         // What changed groups kept is of no more use: dropped before their new indexes exist.
         for &g in &changed {
             cache.groups[g] = None;
         }
-        let mut fresh: Vec<GroupDecoded> = match &surface {
-            Some(surface) => map_ordered(&changed, |&g| index_group(surface, g))
-                .into_iter()
-                .collect::<Result<_>>()?,
-            None => Vec::new(),
-        };
-        drop(surface);
+        // A run of groups at a time: the level-n surface of a part of the model is held
+        // beside the indexes, not the whole model's.
+        let mut fresh: Vec<GroupDecoded> = Vec::with_capacity(changed.len());
+        for run in support.runs(&changed, SUBDIVISION_RUNS) {
+            let Some(surface) = subdivide(run)? else {
+                continue;
+            };
+            let indexed = map_ordered(run, |&g| index_group(&surface, g));
+            fresh.extend(indexed.into_iter().collect::<Result<Vec<_>>>()?);
+        }
         let Some(in_hits) = self.input_to_decoded(&cache, &changed, &fresh, over) else {
             return Ok(None);
         };

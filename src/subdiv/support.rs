@@ -236,6 +236,31 @@ impl<'a> Supports<'a> {
             .collect())
     }
 
+    /// `groups` cut into consecutive runs of at most about `1/parts` of the mesh's faces each
+    /// (a group larger than that alone), so that their submeshes can be subdivided one at a
+    /// time; one run when one of them is not sharp-bounded (it is subdivided with the whole
+    /// mesh).
+    pub fn runs<'g>(&self, groups: &'g [usize], parts: usize) -> Vec<&'g [usize]> {
+        let sharp = |g: usize| self.sharp_bounded.get(g).copied().unwrap_or(true);
+        if !groups.iter().all(|&g| sharp(g)) {
+            return vec![groups];
+        }
+        let budget = self.mesh.face_count().div_ceil(parts.max(1));
+        let (mut runs, mut start, mut faces) = (Vec::new(), 0, 0);
+        for (i, &g) in groups.iter().enumerate() {
+            let n = self.by_group.get(g).map_or(0, Vec::len);
+            if faces > 0 && faces + n > budget {
+                runs.push(&groups[start..i]);
+                (start, faces) = (i, 0);
+            }
+            faces += n;
+        }
+        if start < groups.len() {
+            runs.push(&groups[start..]);
+        }
+        runs
+    }
+
     /// The faces around the vertices of `groups` (in mesh order), as a mesh whose subdivided
     /// surface over those groups' faces is the whole mesh's; `None` when one of them is not
     /// sharp-bounded. Every vertex is kept (unused ones are isolated), so vertex ids, groups
