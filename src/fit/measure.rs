@@ -187,11 +187,12 @@ pub(crate) struct ErrorMeter<'a> {
     misses: Misses,
 }
 
-/// Changed groups are subdivided in runs of about this fraction of the control faces each
-/// ([`Supports::runs`]): a run's level-n surface is what the measurement holds beside the
-/// indexes at its peak. Each run also subdivides the ring of faces around it, so more runs
-/// cost more subdivision.
-const SUBDIVISION_RUNS: usize = 4;
+/// Changed groups are subdivided in runs of at most this many level-n triangles each
+/// ([`Supports::runs`]): a run's level-n surface (about 40 bytes a triangle) is what the
+/// measurement holds beside the indexes at its peak. Each run also subdivides the ring of
+/// faces around it and gives the parallel indexing fewer groups, so a model that fits in one
+/// run is not cut.
+const RUN_TRIANGLES: u64 = 1 << 23;
 
 /// How many of the worst samples of each direction a probe tests.
 const PROBE_SAMPLES: usize = 2000;
@@ -492,7 +493,7 @@ impl<'a> ErrorMeter<'a> {
         // A run of groups at a time: the level-n surface of a part of the model is held
         // beside the indexes, not the whole model's.
         let mut fresh: Vec<GroupDecoded> = Vec::with_capacity(changed.len());
-        for run in support.runs(&changed, SUBDIVISION_RUNS) {
+        for run in support.runs(&changed, level, RUN_TRIANGLES) {
             let Some(surface) = subdivide(run)? else {
                 continue;
             };

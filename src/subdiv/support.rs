@@ -236,24 +236,29 @@ impl<'a> Supports<'a> {
             .collect())
     }
 
-    /// `groups` cut into consecutive runs of at most about `1/parts` of the mesh's faces each
-    /// (a group larger than that alone), so that their submeshes can be subdivided one at a
-    /// time; one run when one of them is not sharp-bounded (it is subdivided with the whole
-    /// mesh).
-    pub fn runs<'g>(&self, groups: &'g [usize], parts: usize) -> Vec<&'g [usize]> {
+    /// `groups` cut into consecutive runs of at most `max_triangles` level-`level`
+    /// triangles each (a group larger than that alone), so that their submeshes can be
+    /// subdivided one at a time; one run when one of them is not sharp-bounded (it is
+    /// subdivided with the whole mesh).
+    pub fn runs<'g>(&self, groups: &'g [usize], level: u8, max_triangles: u64) -> Vec<&'g [usize]> {
         let sharp = |g: usize| self.sharp_bounded.get(g).copied().unwrap_or(true);
         if !groups.iter().all(|&g| sharp(g)) {
             return vec![groups];
         }
-        let budget = self.mesh.face_count().div_ceil(parts.max(1));
-        let (mut runs, mut start, mut faces) = (Vec::new(), 0, 0);
+        let per_face = 1u64 << (2 * u32::from(level.min(31)));
+        let triangles = |g: usize| -> u64 {
+            let faces = self.by_group.get(g).map_or(&[][..], Vec::as_slice);
+            let fan: usize = faces.iter().map(|&f| self.mesh.face(f).len() - 2).sum();
+            (fan as u64).saturating_mul(per_face)
+        };
+        let (mut runs, mut start, mut held) = (Vec::new(), 0, 0u64);
         for (i, &g) in groups.iter().enumerate() {
-            let n = self.by_group.get(g).map_or(0, Vec::len);
-            if faces > 0 && faces + n > budget {
+            let n = triangles(g);
+            if held > 0 && held.saturating_add(n) > max_triangles {
                 runs.push(&groups[start..i]);
-                (start, faces) = (i, 0);
+                (start, held) = (i, 0);
             }
-            faces += n;
+            held = held.saturating_add(n);
         }
         if start < groups.len() {
             runs.push(&groups[start..]);
@@ -535,6 +540,22 @@ mod tests {
         }
         // The supports of two groups that touch at a corner meet at single vertices.
         assert!(split > 0);
+    }
+
+    #[test]
+    fn runs_hold_at_most_the_given_triangles() {
+        let m = checkerboard();
+        let supports = Supports::new(&m);
+        let groups: Vec<usize> = (0..16).collect();
+        // Every group has 8 triangles: 8 * 4^2 = 128 at level 2.
+        let runs = supports.runs(&groups, 2, 300);
+        assert_eq!(runs.iter().map(|r| r.len()).collect::<Vec<_>>(), [2; 8]);
+        assert_eq!(runs.concat(), groups);
+        assert_eq!(supports.runs(&groups, 2, 100).len(), 16);
+        assert_eq!(supports.runs(&groups, 2, u64::MAX).len(), 1);
+        let mut soft = checkerboard();
+        soft.sharp_edges.clear();
+        assert_eq!(Supports::new(&soft).runs(&groups, 2, 300).len(), 1);
     }
 
     #[test]
