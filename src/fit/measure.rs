@@ -963,35 +963,6 @@ mod tests {
         assert_eq!(kept.measure(&one_face, 3).unwrap().changed_groups, 0);
     }
 
-    /// The bounded heap keeps the k largest values, ties to the smaller id, in id order.
-    /// The same control mesh numbered the other way round: vertices reversed, faces
-    /// reversed, each face's corners rotated by one.
-    fn renumbered(mesh: &ControlMesh) -> ControlMesh {
-        let n = mesh.vertex_count() as u32;
-        let flip = |v: u32| n - 1 - v;
-        let mut out = ControlMesh {
-            positions: mesh.positions.iter().rev().copied().collect(),
-            face_offsets: vec![0],
-            face_vertices: Vec::new(),
-            face_groups: Vec::new(),
-            groups: mesh.groups.clone(),
-            sharp_edges: mesh
-                .sharp_edges
-                .iter()
-                .map(|&(a, b)| crate::mesh::edge_key(flip(a), flip(b)))
-                .collect(),
-            corners: mesh.corners.iter().map(|&v| flip(v)).collect(),
-        };
-        let faces: Vec<Vec<u32>> = mesh.faces().map(|f| f.to_vec()).collect();
-        for (f, g) in faces.iter().zip(&mesh.face_groups).rev() {
-            out.face_vertices
-                .extend(f.iter().cycle().skip(1).take(f.len()).map(|&v| flip(v)));
-            out.face_offsets.push(out.face_vertices.len() as u32);
-            out.face_groups.push(*g);
-        }
-        out
-    }
-
     #[test]
     fn a_renumbered_control_mesh_keeps_every_measurement() {
         let input = grid_cube(6);
@@ -1003,7 +974,7 @@ mod tests {
             *p += DVec3::new(0.013, -0.007, 0.002) * (p.x * 3.1 + p.y * 1.7).sin();
         }
         let m0 = meter.measure(&first, 3).unwrap();
-        let other = renumbered(&first);
+        let other = crate::subdiv::test_support::renumbered(&first);
         let m1 = meter.measure(&other, 3).unwrap();
         assert_eq!(m1.changed_groups, 0);
         assert_eq!(m1.error, m0.error);
@@ -1014,6 +985,7 @@ mod tests {
         assert!((fresh.error.max - m0.error.max).abs() < 0.05 * m0.error.max);
     }
 
+    /// The bounded heap keeps the k largest values, ties to the smaller id, in id order.
     #[test]
     fn top_k_keeps_the_largest_values_first_ids_on_ties() {
         let values = [3.0, 1.0, 3.0, f64::NAN, 2.0, 3.0, -1.0];

@@ -619,30 +619,7 @@ mod tests {
         assert!(after[0] != before[0] && after[1] != before[1]);
         assert_eq!(after[2..], before[2..]);
         // Reversed vertex order and rotated faces: the same supports.
-        let n = m.vertex_count() as u32;
-        let flip = |v: u32| n - 1 - v;
-        let mut renumbered = ControlMesh {
-            positions: m.positions.iter().rev().copied().collect(),
-            groups: m.groups.clone(),
-            sharp_edges: m
-                .sharp_edges
-                .iter()
-                .map(|&(a, b)| edge_key(flip(a), flip(b)))
-                .collect(),
-            corners: m.corners.iter().map(|&v| flip(v)).collect(),
-            ..ControlMesh::new()
-        };
-        for f in (0..m.face_count()).rev() {
-            let face: Vec<u32> = m
-                .face(f)
-                .iter()
-                .cycle()
-                .skip(1)
-                .take(3)
-                .map(|&v| flip(v))
-                .collect();
-            renumbered.push_face(&face, m.face_groups[f]);
-        }
+        let renumbered = crate::subdiv::test_support::renumbered(&m);
         assert_eq!(fingerprints(&renumbered), before);
     }
 

@@ -1,7 +1,7 @@
 //! Test helpers: corpus meshes read with `crate::io`, with CAD-face boundaries made sharp.
 
 pub(crate) use crate::io::test_support::corpus_dir;
-use crate::mesh::{ControlMesh, PatchKind};
+use crate::mesh::{edge_key, ControlMesh, PatchKind};
 
 /// Loads a corpus mesh with every group a closed patch and CAD-face boundaries sharp, or
 /// `None` (with a message) when the corpus is absent.
@@ -12,4 +12,34 @@ pub(crate) fn load_corpus(rel: &str) -> Option<ControlMesh> {
     }
     m.sharpen_group_boundaries();
     Some(m)
+}
+
+/// The same control mesh numbered the other way round: vertices reversed, faces reversed,
+/// each face's corners rotated by one.
+pub(crate) fn renumbered(mesh: &ControlMesh) -> ControlMesh {
+    let n = mesh.vertex_count() as u32;
+    let flip = |v: u32| n - 1 - v;
+    let mut out = ControlMesh {
+        positions: mesh.positions.iter().rev().copied().collect(),
+        groups: mesh.groups.clone(),
+        sharp_edges: mesh
+            .sharp_edges
+            .iter()
+            .map(|&(a, b)| edge_key(flip(a), flip(b)))
+            .collect(),
+        corners: mesh.corners.iter().map(|&v| flip(v)).collect(),
+        ..ControlMesh::new()
+    };
+    for f in (0..mesh.face_count()).rev() {
+        let face = mesh.face(f);
+        let rotated: Vec<u32> = face
+            .iter()
+            .cycle()
+            .skip(1)
+            .take(face.len())
+            .map(|&v| flip(v))
+            .collect();
+        out.push_face(&rotated, mesh.face_groups[f]);
+    }
+    out
 }
