@@ -31,9 +31,9 @@ use super::map_ordered;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    box_distance, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
-    sample_surface, EdgeSamples, Misses, RandomSamples, SampleCount, SurfaceSample,
-    TriangleSurface,
+    box_distance, closest_points_in_order, closest_points_near, edge_spacing_for_tolerance,
+    sample_surface, space_filling_order, EdgeSamples, Misses, RandomSamples, SampleCount,
+    SurfaceSample, TriangleSurface,
 };
 use crate::subdiv::support::Supports;
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
@@ -125,6 +125,17 @@ impl<'a> GroupSamples<'a> {
         self.vertices.len() + self.random.len() + self.edges.len()
     }
 
+    /// The order to measure the samples in: the vertices and edge points as they come
+    /// (neighbours follow each other), the random points by triangle, so that each query is
+    /// bounded by the previous one's hit.
+    fn query_order(&self) -> Vec<u32> {
+        let (nv, nr) = (self.vertices.len() as u32, self.random.len() as u32);
+        let mut order: Vec<u32> = (0..nv).collect();
+        order.extend(self.random.by_triangle().into_iter().map(|i| nv + i));
+        order.extend(nv + nr..self.len() as u32);
+        order
+    }
+
     fn point(&self, i: usize) -> DVec3 {
         let (nv, nr) = (self.vertices.len(), self.random.len());
         match self.vertices.get(i) {
@@ -133,6 +144,14 @@ impl<'a> GroupSamples<'a> {
             None => self.edges.get(i - nv - nr).point,
         }
     }
+}
+
+/// An input sample's nearest decoded point: its distance, its group and the point.
+#[derive(Clone, Copy)]
+struct InHit {
+    distance: f64,
+    group: u32,
+    point: DVec3,
 }
 
 /// What the previous full measurement kept for the next one.
@@ -147,10 +166,9 @@ struct MeasureCache {
     /// of the control mesh `groups` were measured on.
     level: u8,
     supports: Vec<Option<u64>>,
-    /// Input->decoded, per input sample: the distance and the group holding the nearest
-    /// decoded point. While that group is unchanged the distance is still reachable, so
-    /// only changed groups can bring it down.
-    in_hits: Vec<(f64, u32)>,
+    /// Input->decoded, per input sample: the nearest decoded point. While its group is
+    /// unchanged the distance is still reachable, so only changed groups can bring it down.
+    in_hits: Vec<InHit>,
     /// Input samples that were worst last time, and decoded samples (group, index), probed
     /// first by [`ErrorMeter::measure_unless_over`].
     probe_in: Vec<usize>,
@@ -165,6 +183,9 @@ pub(crate) struct ErrorMeter<'a> {
     input_samples: Vec<SurfaceSample>,
     /// How many of `input_samples` come before the edge points (the mean and RMS are theirs).
     input_area_samples: usize,
+    /// The input samples along a space-filling curve ([`space_filling_order`]): the order
+    /// their queries run in, each bounded by the previous hit.
+    input_order: Vec<u32>,
     input_surface: &'a TriangleSurface,
     chord: &'a [f64],
     /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
@@ -193,6 +214,11 @@ pub(crate) struct ErrorMeter<'a> {
 /// faces around it and gives the parallel indexing fewer groups, so a model that fits in one
 /// run is not cut.
 const RUN_TRIANGLES: u64 = 1 << 23;
+
+/// Input samples are measured in chunks of this many along their space-filling curve, each
+/// query bounded by the previous one's hit ([`ErrorMeter::input_to_decoded`]); fixed, so the
+/// answers do not depend on the thread count.
+const IN_CHUNK: usize = 256;
 
 /// How many of the worst samples of each direction a probe tests.
 const PROBE_SAMPLES: usize = 2000;
@@ -306,8 +332,10 @@ impl<'a> ErrorMeter<'a> {
                 }
             })
             .collect();
+        let input_order = space_filling_order(input_samples.iter().map(|s| s.point));
         ErrorMeter {
             mesh,
+            input_order,
             input_samples,
             input_area_samples,
             input_surface,
@@ -401,32 +429,38 @@ impl<'a> ErrorMeter<'a> {
         )
     }
 
-    /// Distance from input sample `p` to the decoded surface, and the group holding the
-    /// nearest point, searching the groups of `order` (the sample's input group's
-    /// [`search_orders`] entry) while their lower bound is below the best distance so far;
-    /// `best` is a distance already reached (infinite for none).
+    /// The decoded point nearest input sample `p`, searching the groups of `order` (the
+    /// sample's input group's [`search_orders`] entry) while their lower bound is below the
+    /// best distance so far; `best` is a point of the decoded surface already reached, if
+    /// any: it is the answer unless a nearer one is found.
     fn nearest_decoded(
         p: DVec3,
         groups: &[&GroupDecoded],
         order: &[(f64, u32)],
-        mut best: (f64, u32),
-    ) -> (f64, u32) {
+        best: Option<InHit>,
+    ) -> Option<InHit> {
+        let mut best = best;
         for &(bound, g) in order {
-            if bound > best.0 {
+            let limit = best.map_or(f64::INFINITY, |b| b.distance);
+            if bound > limit {
                 break;
             }
             let gd = groups[g as usize];
-            if gd.box_distance(p) > best.0 {
+            if gd.box_distance(p) > limit {
                 continue;
             }
             let Some(s) = &gd.surface else { continue };
-            let hit = if best.0.is_finite() {
-                s.closest_point_within(p, best.0 * (1.0 + 1e-9) + 1e-300)
+            let hit = if limit.is_finite() {
+                s.closest_point_within(p, limit * (1.0 + 1e-9) + 1e-300)
             } else {
                 Some(s.closest_point(p))
             };
-            if let Some(h) = hit.filter(|h| h.distance < best.0) {
-                best = (h.distance, g);
+            if let Some(h) = hit.filter(|h| h.distance < limit) {
+                best = Some(InHit {
+                    distance: h.distance,
+                    group: g,
+                    point: h.point,
+                });
             }
         }
         best
@@ -571,17 +605,20 @@ impl<'a> ErrorMeter<'a> {
         })
     }
 
-    /// Input->decoded: per input sample, the distance to the decoded surface and the group
-    /// holding the nearest point. While the group holding a sample's old nearest point is
-    /// unchanged, that distance is still reached and only changed groups can be nearer.
-    /// With `over = Some(max_cap)`, `None` when one of last time's worst samples fails.
+    /// Input->decoded: per input sample, the nearest point of the decoded surface. While
+    /// the group holding a sample's old nearest point is unchanged, that distance is still
+    /// reached and only changed groups can be nearer. The samples are visited along a
+    /// space-filling curve, in fixed chunks: within a chunk the previous sample's nearest
+    /// point bounds the search (exactly as an unbounded search finds, the bound being a
+    /// point of the surface). With `over = Some(max_cap)`, `None` when one of last time's
+    /// worst samples fails.
     fn input_to_decoded(
         &self,
         cache: &MeasureCache,
         changed: &[usize],
         fresh: &[GroupDecoded],
         over: Option<f64>,
-    ) -> Option<Vec<(f64, u32)>> {
+    ) -> Option<Vec<InHit>> {
         let groups: Vec<&GroupDecoded> = (0..cache.groups.len())
             .map(|g| match changed.binary_search(&g) {
                 Ok(k) => &fresh[k],
@@ -595,32 +632,67 @@ impl<'a> ErrorMeter<'a> {
         let all: Vec<usize> = (0..groups.len()).collect();
         let order_all = self.search_orders(&groups, &all);
         let order_changed = self.search_orders(&groups, changed);
-        let in_hit = |i: usize| -> (f64, u32) {
+        // Sample `i`'s nearest point, given a point of the surface `prev` (the previous
+        // sample's nearest) whose distance bounds the search.
+        let in_hit = |i: usize, prev: Option<InHit>| -> InHit {
             let s = &self.input_samples[i];
             let own = self.mesh.face_groups[s.triangle as usize] as usize;
-            match cache.in_hits.get(i) {
-                Some(&hit) if reuse && changed.binary_search(&(hit.1 as usize)).is_err() => {
-                    Self::nearest_decoded(s.point, &groups, &order_changed[own], hit)
+            let prev = prev.map(|q| InHit {
+                distance: (s.point - q.point).length(),
+                ..q
+            });
+            let nearer = |a: Option<InHit>, b: InHit| match a {
+                Some(a) if a.distance <= b.distance => a,
+                _ => b,
+            };
+            let hit = match cache.in_hits.get(i) {
+                Some(&hit) if reuse && changed.binary_search(&(hit.group as usize)).is_err() => {
+                    // A nearer `prev` is on a changed group (the unchanged ones are no nearer
+                    // than `hit`), which the search covers.
+                    let best = nearer(prev, hit);
+                    Self::nearest_decoded(s.point, &groups, &order_changed[own], Some(best))
                 }
-                _ => Self::nearest_decoded(
-                    s.point,
-                    &groups,
-                    &order_all[own],
-                    (f64::INFINITY, u32::MAX),
-                ),
-            }
+                _ => Self::nearest_decoded(s.point, &groups, &order_all[own], prev),
+            };
+            hit.unwrap_or(InHit {
+                distance: f64::INFINITY,
+                group: u32::MAX,
+                point: DVec3::NAN,
+            })
         };
         if let Some(max_cap) = over {
             let fails = |i: usize| {
-                let d = in_hit(i).0;
+                let d = in_hit(i, None).distance;
                 d - self.chord[self.input_samples[i].triangle as usize] > self.tol || d > max_cap
             };
             if cache.probe_in.iter().any(|&i| fails(i)) {
                 return None;
             }
         }
-        let indices: Vec<usize> = (0..n_in).collect();
-        Some(map_ordered(&indices, |&i| in_hit(i)))
+        let chunks: Vec<&[u32]> = self.input_order.chunks(IN_CHUNK).collect();
+        let visited = map_ordered(&chunks, |chunk| {
+            let mut prev: Option<InHit> = None;
+            chunk
+                .iter()
+                .map(|&i| {
+                    let hit = in_hit(i as usize, prev);
+                    prev = Some(hit).filter(|h| h.point.is_finite());
+                    hit
+                })
+                .collect::<Vec<InHit>>()
+        });
+        let mut hits = vec![
+            InHit {
+                distance: f64::INFINITY,
+                group: u32::MAX,
+                point: DVec3::NAN,
+            };
+            n_in
+        ];
+        for (&i, hit) in self.input_order.iter().zip(visited.into_iter().flatten()) {
+            hits[i as usize] = hit;
+        }
+        Some(hits)
     }
 
     /// Per input group, the decoded groups among `candidates` (ascending) with a surface,
@@ -668,8 +740,8 @@ impl<'a> ErrorMeter<'a> {
         else {
             return;
         };
-        let measured = closest_points_near_with(
-            samples.len(),
+        let measured = closest_points_in_order(
+            &samples.query_order(),
             |i| samples.point(i),
             self.input_surface,
             2.0 * self.tol,
@@ -693,7 +765,7 @@ impl<'a> ErrorMeter<'a> {
 
     /// Statistics, per-group excesses and the next probes of one measurement (every group
     /// of `cache` measured).
-    fn summarise(&self, in_hits: &[(f64, u32)], cache: &mut MeasureCache) -> Measurement {
+    fn summarise(&self, in_hits: &[InHit], cache: &mut MeasureCache) -> Measurement {
         let groups: Vec<&GroupDecoded> = cache
             .groups
             .iter()
@@ -711,8 +783,8 @@ impl<'a> ErrorMeter<'a> {
             (max, (sq / n).sqrt(), sum / n)
         };
         let area_in = self.input_area_samples.min(in_hits.len());
-        let (_, rms_in, mean_in) = stats(&mut in_hits[..area_in].iter().map(|h| h.0));
-        let max_in = in_hits.iter().map(|h| h.0).fold(0.0f64, f64::max);
+        let (_, rms_in, mean_in) = stats(&mut in_hits[..area_in].iter().map(|h| h.distance));
+        let max_in = in_hits.iter().map(|h| h.distance).fold(0.0f64, f64::max);
         let (_, rms_out, mean_out) = stats(&mut groups.iter().flat_map(|g| {
             g.samples[..g.area_samples.min(g.samples.len())]
                 .iter()
@@ -730,7 +802,7 @@ impl<'a> ErrorMeter<'a> {
         let mut bad_points = vec![Vec::new(); n_groups];
         let mut worst = 0.0f64;
         let mut excess_in = Vec::with_capacity(in_hits.len());
-        for (s, &(d, _)) in self.input_samples.iter().zip(in_hits) {
+        for (s, &InHit { distance: d, .. }) in self.input_samples.iter().zip(in_hits) {
             let e = d - self.chord[s.triangle as usize];
             excess_in.push(e);
             worst = worst.max(e);
@@ -755,7 +827,7 @@ impl<'a> ErrorMeter<'a> {
         // The next probe: the worst samples by excess and by plain distance.
         let mut probe_in = top_k(excess_in.iter().copied().zip(0..), PROBE_SAMPLES);
         probe_in.extend(top_k(
-            in_hits.iter().map(|h| h.0).zip(0..),
+            in_hits.iter().map(|h| h.distance).zip(0..),
             PROBE_SAMPLES / 4,
         ));
         probe_in.sort_unstable();

@@ -14,9 +14,10 @@
 use glam::DVec3;
 
 use super::distance::samples_of;
-use super::distance::{blocked_surface, closest_points_near_with, edge_spacing, one_sided_of};
+use super::distance::{blocked_surface, closest_points_in_order, closest_points_near_with};
+use super::distance::{edge_spacing, one_sided_of};
 use super::distance::{DistanceOptions, DistanceReport, Misses, OneSided};
-use super::sampling::{EdgeSamples, RandomSamples, SampleCount};
+use super::sampling::{space_filling_order, EdgeSamples, RandomSamples, SampleCount};
 use super::surface::{box_distance, TriangleSurface};
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
@@ -290,9 +291,11 @@ impl GroupPoints<'_> {
             None => random.get(i).point,
             Some(e) => edges.get(e).point,
         };
-        closest_points_near_with(random.len() + edges.len(), point, input, near, |_, p, h| {
-            (p, h.distance)
-        })
+        // Random points are visited by triangle, so that each query is bounded by the
+        // previous one's hit.
+        let mut order = random.by_triangle();
+        order.extend(random.len() as u32..(random.len() + edges.len()) as u32);
+        closest_points_in_order(&order, point, input, near, |_, p, h| (p, h.distance))
     }
 }
 
@@ -364,15 +367,25 @@ fn nearest_in_group(
     let Ok(surface) = TriangleSurface::with_blocks(positions, tris, LEAF_TRIANGLES) else {
         return Vec::new();
     };
-    candidates
+    // Visited along a space-filling curve, consecutive points are near each other: the
+    // previous hit is a point of the surface, and the distance to it bounds the search
+    // without changing which points are found within their bounds.
+    let order = space_filling_order(candidates.iter().map(|c| points[c.0 as usize]));
+    let mut prev: Option<DVec3> = None;
+    order
         .iter()
-        .filter_map(|&(i, bound)| {
+        .map(|&k| candidates[k as usize])
+        .filter_map(|(i, bound)| {
             let p = points[i as usize];
+            let bound = prev.map_or(bound, |q| bound.min((p - q).length()));
             let hit = if bound >= f64::MAX {
                 Some(surface.closest_point(p))
             } else {
                 surface.closest_point_within(p, bound * (1.0 + 1e-9) + 1e-300)
             };
+            if let Some(h) = hit.filter(|h| h.point.is_finite()) {
+                prev = Some(h.point);
+            }
             hit.map(|h| (i, h.distance))
         })
         .collect()

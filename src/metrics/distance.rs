@@ -192,6 +192,31 @@ pub fn closest_points_near_with<R: Copy + Default + Send>(
     out
 }
 
+/// [`closest_points_near_with`] for the points `point(i)` visited in the order `order` (a
+/// permutation of `0..order.len()`), the results indexed by `i`: an order in which
+/// consecutive points are near each other makes each query's bound (the previous hit) tight.
+/// The answers are those of any other order.
+pub fn closest_points_in_order<R: Copy + Default + Send>(
+    order: &[u32],
+    point: impl Fn(usize) -> DVec3 + Sync,
+    surface: &TriangleSurface,
+    radius: f64,
+    keep: impl Fn(usize, DVec3, &ClosestPoint) -> R + Sync,
+) -> Vec<R> {
+    let visited = closest_points_near_with(
+        order.len(),
+        |k| point(order[k] as usize),
+        surface,
+        radius,
+        |k, p, h| keep(order[k] as usize, p, h),
+    );
+    let mut out = vec![R::default(); order.len()];
+    for (&i, r) in order.iter().zip(visited) {
+        out[i as usize] = r;
+    }
+    out
+}
+
 /// Distances from each of `points` to `surface`, in the order of `points`.
 pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
     closest_points(points, surface)

@@ -13,14 +13,16 @@ mod surface;
 
 pub use by_group::hausdorff_by_group;
 pub use distance::{
-    closest_points, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
-    hausdorff, hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions,
-    DistanceReport, Misses, OneSided, DEFAULT_EDGE_SPACING,
+    closest_points, closest_points_in_order, closest_points_near, closest_points_near_with,
+    edge_spacing_for_tolerance, hausdorff, hausdorff_with_misses, one_sided_distances,
+    point_distances, DistanceOptions, DistanceReport, Misses, OneSided, DEFAULT_EDGE_SPACING,
 };
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
-pub use sampling::{sample_surface, EdgeSamples, RandomSamples, SampleCount, SurfaceSample};
+pub use sampling::{
+    sample_surface, space_filling_order, EdgeSamples, RandomSamples, SampleCount, SurfaceSample,
+};
 pub(crate) use surface::box_distance;
 pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
 
@@ -206,6 +208,48 @@ mod tests {
                 "sample {i}"
             );
         }
+    }
+
+    /// The order by triangle is a permutation of the samples whose triangles never decrease.
+    #[test]
+    fn random_samples_by_triangle_order_by_triangle() {
+        let (pos, tris) = random_mesh(3, 8);
+        let samples = RandomSamples::new(&pos, &tris, SampleCount::Total(500), 0x5EED);
+        let order = samples.by_triangle();
+        let mut seen = order.clone();
+        seen.sort_unstable();
+        assert_eq!(seen, (0..500).collect::<Vec<u32>>());
+        let t: Vec<u32> = order
+            .iter()
+            .map(|&i| samples.get(i as usize).triangle)
+            .collect();
+        assert!(t.windows(2).all(|w| w[0] <= w[1]), "{t:?}");
+    }
+
+    /// The space-filling order is a permutation that keeps neighbours together: on a grid
+    /// given in a scrambled order, consecutive points of the order are a few cells apart
+    /// on average, where the scrambled order jumps across the grid.
+    #[test]
+    fn space_filling_order_keeps_neighbours_together() {
+        let n = 20;
+        let mut points: Vec<DVec3> = (0..n * n * n)
+            .map(|i| DVec3::new((i % n) as f64, ((i / n) % n) as f64, (i / (n * n)) as f64))
+            .collect();
+        let mut rng = SplitMix64::new(7);
+        for i in (1..points.len()).rev() {
+            points.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
+        }
+        let order = space_filling_order(points.iter().copied());
+        let mut seen = order.clone();
+        seen.sort_unstable();
+        assert_eq!(seen, (0..points.len() as u32).collect::<Vec<u32>>());
+        let mean_step = |ids: &mut dyn Iterator<Item = usize>| {
+            let p: Vec<DVec3> = ids.map(|i| points[i]).collect();
+            p.windows(2).map(|w| (w[1] - w[0]).length()).sum::<f64>() / (p.len() - 1) as f64
+        };
+        let curve = mean_step(&mut order.iter().map(|&i| i as usize));
+        let scrambled = mean_step(&mut (0..points.len()));
+        assert!(curve < 2.0 && scrambled > 8.0, "{curve} {scrambled}");
     }
 
     fn grid_mesh(n: usize, z: f64, quads: bool) -> ControlMesh {

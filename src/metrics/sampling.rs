@@ -146,17 +146,33 @@ impl<'a> RandomSamples<'a> {
         self.count == 0
     }
 
+    /// The sample indices ordered by the triangle each lies in (then by index): on a
+    /// surface whose consecutive triangles are neighbours, consecutive samples of this order
+    /// are near each other, which bounds each closest-point query by the previous hit.
+    pub fn by_triangle(&self) -> Vec<u32> {
+        let mut keyed: Vec<(u32, u32)> = (0..self.count)
+            .map(|i| (self.triangle_of(i), i as u32))
+            .collect();
+        keyed.sort_unstable();
+        keyed.into_iter().map(|x| x.1).collect()
+    }
+
+    /// The triangle of sample `i` (as [`RandomSamples::get`] chooses it).
+    fn triangle_of(&self, i: usize) -> u32 {
+        let total = self.cumulative.last().copied().unwrap_or(0.0);
+        let mut rng = SplitMix64::after(self.seed, 3 * i as u64);
+        let target = rng.next_f64() * total;
+        self.cumulative
+            .partition_point(|&c| c <= target)
+            .min(self.triangles.len() - 1) as u32
+    }
+
     /// Sample `i` (< [`RandomSamples::len`]): a triangle chosen with probability proportional
     /// to its area (binary search in the cumulative areas), then a point uniformly inside it
     /// (square-root warp).
     pub fn get(&self, i: usize) -> SurfaceSample {
-        let total = self.cumulative.last().copied().unwrap_or(0.0);
-        let mut rng = SplitMix64::after(self.seed, 3 * i as u64);
-        let target = rng.next_f64() * total;
-        let t = self
-            .cumulative
-            .partition_point(|&c| c <= target)
-            .min(self.triangles.len() - 1);
+        let t = self.triangle_of(i) as usize;
+        let mut rng = SplitMix64::after(self.seed, 3 * i as u64 + 1);
         let (r1, r2) = (rng.next_f64(), rng.next_f64());
         let s = r1.sqrt();
         let bc = [1.0 - s, s * (1.0 - r2), s * r2];
@@ -167,6 +183,44 @@ impl<'a> RandomSamples<'a> {
             barycentric: bc,
         }
     }
+}
+
+/// The indices of `points` in the order of a Z-order (Morton) curve through their box (ties
+/// by index): consecutive points of the order are mostly near each other, so a run of
+/// closest-point queries in this order can bound each by the previous hit.
+pub fn space_filling_order(points: impl Iterator<Item = DVec3> + Clone) -> Vec<u32> {
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for p in points.clone().filter(|p| p.is_finite()) {
+        (lo, hi) = (lo.min(p), hi.max(p));
+    }
+    let scale = (hi - lo).max_element();
+    let scale = if scale > 0.0 && scale.is_finite() {
+        ((1u32 << 21) - 1) as f64 / scale
+    } else {
+        0.0
+    };
+    // Spreads the low 21 bits of `x` to every third bit.
+    let spread = |x: u64| {
+        let mut x = x & 0x1f_ffff;
+        x = (x | x << 32) & 0x1f_0000_0000_ffff;
+        x = (x | x << 16) & 0x1f_0000_ff00_00ff;
+        x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+        x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+        (x | x << 2) & 0x1249_2492_4924_9249
+    };
+    let mut keyed: Vec<(u64, u32)> = points
+        .enumerate()
+        .map(|(i, p)| {
+            // Non-finite points sort together (the cast saturates NaN to 0).
+            let q = ((p - lo) * scale).to_array().map(|c| c as u64);
+            (
+                spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2,
+                i as u32,
+            )
+        })
+        .collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|x| x.1).collect()
 }
 
 /// Points along the long edges of thin triangles: every edge longer than `spacing` of a
