@@ -78,8 +78,8 @@ fn decoded_analytic_faces_stay_on_their_exact_surfaces() {
 
 /// `fit_encoder.rs`' `corpus_models_within_tolerance` on the larger models: fillets and
 /// freeform faces; faces stored as their facets (bug33398: a plane ring thinner than its
-/// outline's error, facets whose chord error is twice the tolerance); a plate whose first
-/// fit passes its own samples but not `scode info --against`'s, fitted again.
+/// outline's error, facets whose chord error is twice the tolerance); a plate whose planes'
+/// thin slivers cross their outlines.
 #[test]
 fn fitted_corpus_models_within_tolerance() {
     let Some(dir) = corpus_dir() else { return };

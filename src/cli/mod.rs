@@ -67,11 +67,11 @@ pub enum Command {
     /// coarse control mesh is stored. The encoder measures the decoded surface against the
     /// input and adds control points until --tolerance holds, then tries taking some back
     /// from faces that ended far within it (the smaller file wins); a face no smooth patch
-    /// gets within the tolerance of is stored as its input facets. The written file is then
-    /// measured as `scode info --against` measures it; where that finds the surface off and
-    /// the fit's own samples did not, the model is fitted again, measuring there too (at
-    /// most twice; --verbose says so). A `<name>.faces.json` sidecar next to the input (as
-    /// in the corpus) supplies each face's surface type.
+    /// gets within the tolerance of is stored as its input facets. The encoder samples the
+    /// decoded surface and the input as `scode info --against` does (every decoded vertex,
+    /// the same random points, edge points at least as dense), so the error it prints is the
+    /// written file's. A `<name>.faces.json` sidecar next to the input (as in the corpus)
+    /// supplies each face's surface type.
     ///
     /// A STEP file (.step .stp) is read as a B-rep: each face is tessellated (one vertex
     /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the

@@ -39,7 +39,7 @@ use super::reference::{reference_facets, triangulated, Allowances, Facets};
 use super::rounds::Rounds;
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind, Tolerance};
-use crate::metrics::Misses;
+use crate::metrics::{DistanceOptions, SampleCount};
 
 /// What the input says a group's surface is (a STEP face type or a sidecar entry).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,8 +72,11 @@ pub struct FitOptions {
     pub sharp_angle_deg: f64,
     /// Rebuild rounds with more control points before giving up on the tolerance.
     pub max_rounds: usize,
-    /// Surface samples per direction for the error measurement.
-    pub error_samples: usize,
+    /// Random area-weighted samples of the input for the error measurement, and of the
+    /// decoded surface as many per unit of the input's area (besides the vertices and the
+    /// points along thin triangles' edges). The default is `scode info --against`'s, so the
+    /// fit measures a file as it does.
+    pub samples: SampleCount,
     /// After the fit, try up to this many bits coarser quantisation than the default, and keep
     /// the coarsest that still meets the tolerance (0: keep the default); then (with
     /// `quarter_bit_steps`) up to 3/4 bit more in quarter bits, each kept only if it also
@@ -123,14 +126,6 @@ pub struct FitOptions {
     /// to measure the decoded surface against instead of the input; the fit still starts
     /// from and fits to the input's triangles. `None`: measured against the input.
     pub reference: Option<ControlMesh>,
-    /// Where an earlier check of this model found its decoded surface out of tolerance (as
-    /// `scode info --against` samples it): points of that decoded surface, and points of
-    /// the input. Every measurement of the fit measures them too: the decoded surface's
-    /// point nearest each of the former against the input, and the latter against the
-    /// decoded surface. Random samples can miss a narrow excursion (a plane's sliver
-    /// crossing its outline) that the check's samples found; these keep the fit looking
-    /// there. Empty by default.
-    pub misses: Misses,
 }
 
 impl Default for FitOptions {
@@ -141,7 +136,7 @@ impl Default for FitOptions {
             default_level: None,
             sharp_angle_deg: 30.0,
             max_rounds: 8,
-            error_samples: 60_000,
+            samples: DistanceOptions::default().samples,
             max_coarser_bits: 3,
             quarter_bit_steps: true,
             local_refinement: false,
@@ -150,7 +145,6 @@ impl Default for FitOptions {
             exact_surfaces: Vec::new(),
             chord_allowance: false,
             reference: None,
-            misses: Misses::default(),
         }
     }
 }
@@ -313,9 +307,11 @@ pub fn fit_model(
             faces.mesh.groups.len()
         ));
     }
-    let meter = allowances
-        .meter(measured, exact, opts.error_samples, tol)
-        .with_misses(&opts.misses);
+    let sampling = DistanceOptions {
+        samples: opts.samples,
+        ..Default::default()
+    };
+    let meter = allowances.meter(measured, exact, &sampling, tol);
     let mut plan = Plan::new(
         faces.plans.clone(),
         faces.mesh.vertex_count(),

@@ -16,6 +16,10 @@
 //! last-bit roundings. The encoder's decisions stay a function of its inputs alone (the same
 //! bytes on every run and thread count).
 //!
+//! The samples are those `scode info --against` takes of a file ([`ErrorMeter::new`]), so
+//! the last measurement, of the control mesh the file stores, gives the file's figures: the
+//! encoder prints them and holds the tolerance to them without measuring the file again.
+//!
 //! At a fine level the decoded surface has millions of triangles, so nothing holds all of
 //! them twice: the surface is handed out face by face ([`UniformSurface`]), a changed face's
 //! old index is dropped before its new one is built, and decoded samples are made as they
@@ -31,9 +35,9 @@ use super::map_ordered;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::{
-    box_distance, closest_points_in_order, closest_points_near, edge_spacing_for_tolerance,
-    sample_surface, space_filling_order, EdgeSamples, Misses, RandomSamples, SampleCount,
-    SurfaceSample, TriangleSurface,
+    box_distance, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
+    reference_samples, sample_density, space_filling_order, surface_area, DistanceOptions,
+    EdgeSamples, SurfaceSample, TriangleSamples, TriangleSurface,
 };
 use crate::subdiv::support::Supports;
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
@@ -67,8 +71,11 @@ struct GroupDecoded {
     /// them again.
     samples: Vec<[f64; 2]>,
     /// How many of `samples` are vertices and area-weighted points (the mean and RMS are
-    /// theirs; the rest are edge points, for the max).
+    /// theirs, but for the `shared` vertices; the rest are edge points, for the max).
     area_samples: usize,
+    /// The vertices (sample indices, increasing) that an earlier face also holds: counted in
+    /// its mean and RMS, not in this one's ([`first_groups`]).
+    shared: Vec<u32>,
     /// The sample of largest excess (its excess and point), if any.
     worst: Option<(f64, DVec3)>,
     /// The samples whose excess is over the tolerance (index, point), in sample order.
@@ -82,58 +89,36 @@ impl GroupDecoded {
     }
 }
 
-/// The decoded samples of one face: its vertices, then random points by area, seeded by the
-/// group so an unchanged face gets the same points, then points along its thin triangles'
-/// long edges ([`EdgeSamples`]). Each is made on its own, when needed.
+/// The decoded samples of one face: its vertices, then its random points by area
+/// ([`TriangleSamples`], a function of each triangle alone, so an unchanged face keeps its
+/// points), then points along its thin triangles' long edges ([`EdgeSamples`]). Each is made
+/// on its own, when needed, in an order where neighbours follow each other.
 struct GroupSamples<'a> {
     /// The face's vertices (every one is a corner of its triangles).
     vertices: &'a [DVec3],
-    random: RandomSamples<'a>,
+    random: TriangleSamples<'a>,
     /// Points along the long edges of its thin triangles, the slivers random points miss.
     edges: EdgeSamples<'a>,
 }
 
 impl<'a> GroupSamples<'a> {
-    /// The samples of group `g`'s `triangles` over its own `positions` (all of them
-    /// corners), with `random` random points.
+    /// The samples of a face's `triangles` over its own `positions` (all of them corners).
     fn new(
         positions: &'a [DVec3],
         triangles: &'a [[u32; 3]],
-        random: usize,
+        density: f64,
+        seed: u64,
         spacing: f64,
-        g: usize,
     ) -> Self {
-        let seed = 0x5C0D_E000_0000_0002 ^ ((g as u64) << 20);
         GroupSamples {
             vertices: positions,
-            random: RandomSamples::new(positions, triangles, SampleCount::Total(random), seed),
+            random: TriangleSamples::new(positions, triangles, density, seed),
             edges: EdgeSamples::new(positions, triangles, spacing),
         }
     }
 
-    /// The samples of a face's index (`None`: the face has no triangles, so no samples).
-    fn of(
-        surface: Option<&'a TriangleSurface>,
-        random: usize,
-        spacing: f64,
-        g: usize,
-    ) -> Option<Self> {
-        surface.map(|s| GroupSamples::new(s.positions(), s.triangles(), random, spacing, g))
-    }
-
     fn len(&self) -> usize {
         self.vertices.len() + self.random.len() + self.edges.len()
-    }
-
-    /// The order to measure the samples in: the vertices and edge points as they come
-    /// (neighbours follow each other), the random points by triangle, so that each query is
-    /// bounded by the previous one's hit.
-    fn query_order(&self) -> Vec<u32> {
-        let (nv, nr) = (self.vertices.len() as u32, self.random.len() as u32);
-        let mut order: Vec<u32> = (0..nv).collect();
-        order.extend(self.random.by_triangle().into_iter().map(|i| nv + i));
-        order.extend(nv + nr..self.len() as u32);
-        order
     }
 
     fn point(&self, i: usize) -> DVec3 {
@@ -190,22 +175,21 @@ pub(crate) struct ErrorMeter<'a> {
     chord: &'a [f64],
     /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
     own_faces: OwnFaces<'a>,
-    /// Random decoded samples per group (besides its vertices), by the input face's share of
-    /// the input's area: fixed, so an unchanged face keeps its samples.
-    group_samples: Vec<usize>,
+    /// Random decoded samples per unit area and their seed ([`TriangleSamples`]): a face's
+    /// points depend on its triangles alone, so an unchanged face keeps its samples.
+    density: f64,
+    seed: u64,
     /// Bounding box of each input group's triangles (which hold its samples): a lower
     /// bound of its samples' distances to any decoded face ([`search_orders`]).
     group_boxes: Vec<(DVec3, DVec3)>,
     tol: f64,
-    /// Spacing of the points along decoded edges ([`EdgeSamples`]): the check of the written
-    /// file samples the same points ([`edge_spacing_for_tolerance`]).
+    /// Spacing of the points along decoded and input edges ([`EdgeSamples`]): the
+    /// tolerance's ([`edge_spacing_for_tolerance`]), at least as dense as `scode info
+    /// --against`'s.
     edge_spacing: f64,
     /// Behind a lock only so the meter can be shared by the parallel queries; one
     /// measurement at a time holds it.
     cache: Mutex<MeasureCache>,
-    /// Points where an earlier check found a decoded surface off the input, and input
-    /// points it found off the decoded surface ([`ErrorMeter::with_misses`]).
-    misses: Misses,
 }
 
 /// Changed groups are subdivided in runs of at most this many level-n triangles each
@@ -279,59 +263,34 @@ fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Sen
 }
 
 impl<'a> ErrorMeter<'a> {
-    /// A meter of `mesh` (triangulated: `triangles` are its faces) with `error_samples`
-    /// random samples each way, besides the vertices and the points along thin triangles'
-    /// long edges.
+    /// A meter of `mesh` (triangulated: `triangles` are its faces), sampling both sides as
+    /// `scode info --against` does with `opts` (its samples and seed; the edge spacing is
+    /// the tolerance's, [`edge_spacing_for_tolerance`]): the input's vertices, random and
+    /// edge points ([`reference_samples`]), the decoded surface's vertices, random points
+    /// at the same density per unit of the input's area ([`TriangleSamples`]) and edge
+    /// points. Its measurement of a file's control mesh is then the one `scode info
+    /// --against` makes of the file, with edge points at least as dense.
     pub fn new(
         mesh: &'a ControlMesh,
         triangles: &[[u32; 3]],
         input_surface: &'a TriangleSurface,
         chord: &'a [f64],
         own_faces: OwnFaces<'a>,
-        error_samples: usize,
+        opts: &DistanceOptions,
         tol: f64,
     ) -> Self {
-        let mut input_samples = sample_surface(
-            &mesh.positions,
-            triangles,
-            SampleCount::Total(error_samples),
-            true,
-            0x5C0D_E000_0000_0001,
-        );
-        let input_area_samples = input_samples.len();
-        let mut area = vec![0.0f64; mesh.groups.len()];
+        let edge_spacing = edge_spacing_for_tolerance(tol, mesh.diagonal());
+        let (input_samples, input_area_samples) =
+            reference_samples(&mesh.positions, triangles, opts, edge_spacing);
         let mut group_boxes = vec![(DVec3::INFINITY, DVec3::NEG_INFINITY); mesh.groups.len()];
         for (t, g) in triangles.iter().zip(&mesh.face_groups) {
             let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-            if let Some(x) = area.get_mut(*g as usize) {
-                *x += 0.5 * (b - a).cross(c - a).length();
-            }
             if let Some((lo, hi)) = group_boxes.get_mut(*g as usize) {
                 *lo = lo.min(a).min(b).min(c);
                 *hi = hi.max(a).max(b).max(c);
             }
         }
-        let total: f64 = area.iter().sum();
-        let (lo, hi) = group_boxes
-            .iter()
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), b| {
-                (l.min(b.0), h.max(b.1))
-            });
-        let diagonal = (hi - lo).length();
-        // The input's thin triangles' edge points, as the check of the written file takes them.
-        let edge_spacing = edge_spacing_for_tolerance(tol, diagonal);
-        let edges = EdgeSamples::new(&mesh.positions, triangles, edge_spacing);
-        input_samples.extend((0..edges.len()).map(|i| edges.get(i)));
-        let group_samples = area
-            .iter()
-            .map(|&a| {
-                if total > 0.0 && a.is_finite() {
-                    (error_samples as f64 * a / total).ceil() as usize
-                } else {
-                    0
-                }
-            })
-            .collect();
+        let density = sample_density(opts, surface_area(&mesh.positions, triangles));
         let input_order = space_filling_order(input_samples.iter().map(|s| s.point));
         ErrorMeter {
             mesh,
@@ -341,72 +300,12 @@ impl<'a> ErrorMeter<'a> {
             input_surface,
             chord,
             own_faces,
-            group_samples,
+            density,
+            seed: opts.seed,
             group_boxes,
             tol,
             edge_spacing,
             cache: Default::default(),
-            misses: Misses::default(),
-        }
-    }
-
-    /// The meter that also measures, every time, the decoded point nearest each of
-    /// `misses.a_to_b` against the input and each of `misses.b_to_a` (input points) against
-    /// the decoded surface (see [`super::encoder::FitOptions::misses`]).
-    pub fn with_misses(mut self, misses: &Misses) -> Self {
-        self.misses = misses.clone();
-        self
-    }
-
-    /// Adds the earlier misses' measurements to `m` (every group of `groups` measured).
-    fn measure_misses(&self, groups: &[Option<GroupDecoded>], m: &mut Measurement) {
-        let nearest_decoded = |p: DVec3| -> Option<(f64, DVec3, usize)> {
-            let mut best: Option<(f64, DVec3, usize)> = None;
-            for (g, gd) in groups.iter().enumerate() {
-                let Some(gd) = gd else { continue };
-                let bound = best.map_or(f64::INFINITY, |b| b.0);
-                let Some(s) = gd.surface.as_ref().filter(|_| gd.box_distance(p) <= bound) else {
-                    continue;
-                };
-                let hit = if bound.is_finite() {
-                    s.closest_point_within(p, bound)
-                } else {
-                    Some(s.closest_point(p))
-                };
-                if let Some(h) = hit.filter(|h| h.distance < bound) {
-                    best = Some((h.distance, h.point, g));
-                }
-            }
-            best
-        };
-        let mut note = |e: f64, d: f64, p: DVec3, g: usize, dir: &'static str| {
-            let err = &mut m.error;
-            err.max = err.max.max(d);
-            err.max_excess = err.max_excess.max(e);
-            if let Some(ge) = m.group_excess.get_mut(g) {
-                if e > ge.0 {
-                    *ge = (e, p, dir);
-                }
-                if e > self.tol {
-                    m.bad_points[g].push(p);
-                }
-            }
-        };
-        for &p in &self.misses.a_to_b {
-            let Some((_, q, g)) = nearest_decoded(p) else {
-                continue;
-            };
-            let hit = self.input_surface.closest_point(q);
-            let e = self.out_excess(q, g, hit.triangle, hit.distance);
-            note(e, hit.distance, q, g, "decoded->input");
-        }
-        for &p in &self.misses.b_to_a {
-            let Some((d, _, _)) = nearest_decoded(p) else {
-                continue;
-            };
-            let t = self.input_surface.closest_point(p).triangle as usize;
-            let g = self.mesh.face_groups[t] as usize;
-            note(d - self.chord[t], d, p, g, "input->decoded");
         }
     }
 
@@ -531,7 +430,8 @@ impl<'a> ErrorMeter<'a> {
             let Some(surface) = subdivide(run)? else {
                 continue;
             };
-            let indexed = map_ordered(run, |&g| index_group(&surface, g));
+            let owners = first_groups(&surface);
+            let indexed = map_ordered(run, |&g| index_group(&surface, &owners, g));
             fresh.extend(indexed.into_iter().collect::<Result<Vec<_>>>()?);
         }
         let Some(in_hits) = self.input_to_decoded(&cache, &changed, &fresh, over) else {
@@ -543,7 +443,6 @@ impl<'a> ErrorMeter<'a> {
             cache.groups[g] = Some(gd);
         }
         let mut measurement = self.summarise(&in_hits, &mut cache);
-        self.measure_misses(&cache.groups, &mut measurement);
         measurement.changed_groups = changed.len();
         cache.in_hits = in_hits;
         cache.level = level;
@@ -568,17 +467,16 @@ impl<'a> ErrorMeter<'a> {
             let g = run[0].0 as usize;
             if changed.binary_search(&g).is_ok() {
                 let Some(surface) = surface else { continue };
-                let local = localise(surface, g);
+                let local = localise(surface, g, None);
                 if local.triangles.is_empty() {
                     continue;
                 }
-                let random = self.group_samples.get(g).copied().unwrap_or(0);
                 let samples = GroupSamples::new(
                     &local.positions,
                     &local.triangles,
-                    random,
+                    self.density,
+                    self.seed,
                     self.edge_spacing,
-                    g,
                 );
                 let points = run
                     .iter()
@@ -735,13 +633,18 @@ impl<'a> ErrorMeter<'a> {
 
     /// Measures the samples of changed group `g` against the input.
     fn measure_decoded(&self, g: usize, gd: &mut GroupDecoded) {
-        let random = self.group_samples.get(g).copied().unwrap_or(0);
-        let Some(samples) = GroupSamples::of(gd.surface.as_ref(), random, self.edge_spacing, g)
-        else {
+        let Some(s) = &gd.surface else {
             return;
         };
-        let measured = closest_points_in_order(
-            &samples.query_order(),
+        let samples = GroupSamples::new(
+            s.positions(),
+            s.triangles(),
+            self.density,
+            self.seed,
+            self.edge_spacing,
+        );
+        let measured = closest_points_near_with(
+            samples.len(),
             |i| samples.point(i),
             self.input_surface,
             2.0 * self.tol,
@@ -786,9 +689,12 @@ impl<'a> ErrorMeter<'a> {
         let (_, rms_in, mean_in) = stats(&mut in_hits[..area_in].iter().map(|h| h.distance));
         let max_in = in_hits.iter().map(|h| h.distance).fold(0.0f64, f64::max);
         let (_, rms_out, mean_out) = stats(&mut groups.iter().flat_map(|g| {
+            let mut shared = g.shared.iter().copied().peekable();
             g.samples[..g.area_samples.min(g.samples.len())]
                 .iter()
-                .map(|s| s[1])
+                .enumerate()
+                .filter(move |&(i, _)| shared.next_if_eq(&(i as u32)).is_none())
+                .map(|(_, s)| s[1])
         }));
         let max_out = groups
             .iter()
@@ -868,16 +774,40 @@ struct LocalTriangles {
     triangles: Vec<[u32; 3]>,
     lo: DVec3,
     hi: DVec3,
+    /// The local vertices a group before this one also holds (with `owners`), increasing.
+    shared: Vec<u32>,
 }
 
-/// Group `g`'s decoded triangles over its own vertices.
-fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
+/// By vertex of `surface`, the first group holding it (`u32::MAX`: none): a vertex on the
+/// boundary of two faces counts in the mean and RMS of the first one alone, as `scode info
+/// --against` counts each decoded vertex once. Every triangle around a vertex of a face is
+/// in the surface of its run ([`Supports::submesh`] keeps the faces around the face's
+/// control vertices), so a face's vertices get the same owners in any run.
+fn first_groups(surface: &UniformSurface) -> Vec<u32> {
+    let mut owners = vec![u32::MAX; surface.positions().len()];
+    for g in 0..surface.group_count() {
+        surface.visit_group_triangles(g, |block| {
+            for &v in block.iter().flatten() {
+                if owners[v as usize] == u32::MAX {
+                    owners[v as usize] = g as u32;
+                }
+            }
+            true
+        });
+    }
+    owners
+}
+
+/// Group `g`'s decoded triangles over its own vertices, and, with `owners`
+/// ([`first_groups`]), which of them an earlier group holds.
+fn localise(surface: &UniformSurface, g: usize, owners: Option<&[u32]>) -> LocalTriangles {
     let all = surface.positions();
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     let mut local: std::collections::HashMap<u32, u32, rustc_hash::FxBuildHasher> =
         Default::default();
     let mut positions = Vec::new();
+    let mut shared = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     surface.visit_group_triangles(g, |block| {
         triangles.extend(block.iter().map(|t| {
@@ -886,8 +816,12 @@ fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
                     let p = all[v as usize];
                     lo = lo.min(p);
                     hi = hi.max(p);
+                    let id = positions.len() as u32;
+                    if owners.is_some_and(|o| o.get(v as usize).is_some_and(|&f| f < g as u32)) {
+                        shared.push(id);
+                    }
                     positions.push(p);
-                    (positions.len() - 1) as u32
+                    id
                 })
             })
         }));
@@ -898,17 +832,19 @@ fn localise(surface: &UniformSurface, g: usize) -> LocalTriangles {
         triangles,
         lo,
         hi,
+        shared,
     }
 }
 
 /// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
-fn index_group(surface: &UniformSurface, g: usize) -> Result<GroupDecoded> {
+fn index_group(surface: &UniformSurface, owners: &[u32], g: usize) -> Result<GroupDecoded> {
     let LocalTriangles {
         mut positions,
         mut triangles,
         lo,
         hi,
-    } = localise(surface, g);
+        shared,
+    } = localise(surface, g, Some(owners));
     // Kept until the face changes: without the slack of growing by pushes.
     positions.shrink_to_fit();
     triangles.shrink_to_fit();
@@ -925,6 +861,7 @@ fn index_group(surface: &UniformSurface, g: usize) -> Result<GroupDecoded> {
         surface,
         lo,
         hi,
+        shared,
         samples: Vec::new(),
         area_samples: 0,
         worst: None,
@@ -944,6 +881,13 @@ mod tests {
         (tris, surface, chord)
     }
 
+    fn sampling() -> DistanceOptions {
+        DistanceOptions {
+            samples: crate::metrics::SampleCount::Total(3000),
+            ..Default::default()
+        }
+    }
+
     fn no_own_faces() -> OwnFaces<'static> {
         OwnFaces {
             surfaces: &[],
@@ -953,51 +897,23 @@ mod tests {
         }
     }
 
-    /// The points an earlier check found off are measured too: an input point 0.3 above
-    /// the top face (where no sample of the meter's own is) counts against the top face's
-    /// group, and a point near the decoded surface is measured at the decoded point nearest
-    /// it, which changes nothing here.
-    #[test]
-    fn earlier_misses_are_measured_every_time() {
-        let input = grid_cube(6);
-        let (tris, surface, chord) = meter_parts(&input);
-        let decoded = grid_cube(2);
-        let plain = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
-        let before = plain.measure(&decoded, 3).unwrap();
-        // The decoded cube is smooth (no sharp edges): its corners are rounded off.
-        assert!(before.error.max < 0.25, "{:?}", before.error);
-        let above = DVec3::new(0.5, 0.5, 1.3);
-        let misses = Misses {
-            a_to_b: vec![DVec3::new(0.5, 0.5, 0.98)],
-            b_to_a: vec![above],
-        };
-        let meter = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01)
-            .with_misses(&misses);
-        for _ in 0..2 {
-            let m = meter.measure(&decoded, 3).unwrap();
-            let top = decoded.face_groups[decoded
-                .faces()
-                .position(|f| f.iter().all(|&v| decoded.positions[v as usize].z == 1.0))
-                .unwrap()] as usize;
-            let (e, p, dir) = m.group_excess[top];
-            assert_eq!((p, dir), (above, "input->decoded"));
-            // 0.3 above the top face's decoded surface, which passes z = 1 at its middle.
-            assert!((0.29..0.4).contains(&e), "{e}");
-            assert_eq!(m.error.max_excess, e);
-            assert!(m.bad_points[top].contains(&above));
-            // The decoded point nearest the decoded-side miss is measured: no larger than
-            // what the meter finds anyway, so the rest is as before.
-            assert_eq!(m.group_excess[..top], before.group_excess[..top]);
-        }
-    }
-
     /// A measurement that reuses what the previous one kept gives exactly what a fresh
     /// meter gives, whether one face changed or all of them.
     #[test]
     fn kept_results_give_the_same_measurement_as_a_fresh_meter() {
         let input = grid_cube(6);
         let (tris, surface, chord) = meter_parts(&input);
-        let meter = || ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
+        let meter = || {
+            ErrorMeter::new(
+                &input,
+                &tris,
+                &surface,
+                &chord,
+                no_own_faces(),
+                &sampling(),
+                0.01,
+            )
+        };
         // Sharp CAD-face boundaries, as every fitted control mesh has them.
         let mut first = grid_cube(2);
         first.sharpen_group_boundaries();
@@ -1039,7 +955,15 @@ mod tests {
     fn a_renumbered_control_mesh_keeps_every_measurement() {
         let input = grid_cube(6);
         let (tris, surface, chord) = meter_parts(&input);
-        let meter = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01);
+        let meter = ErrorMeter::new(
+            &input,
+            &tris,
+            &surface,
+            &chord,
+            no_own_faces(),
+            &sampling(),
+            0.01,
+        );
         let mut first = grid_cube(2);
         first.sharpen_group_boundaries();
         for p in &mut first.positions {
@@ -1051,9 +975,17 @@ mod tests {
         assert_eq!(m1.changed_groups, 0);
         assert_eq!(m1.error, m0.error);
         // A fresh measurement of the renumbered mesh samples it elsewhere, on the same surface.
-        let fresh = ErrorMeter::new(&input, &tris, &surface, &chord, no_own_faces(), 3000, 0.01)
-            .measure(&other, 3)
-            .unwrap();
+        let fresh = ErrorMeter::new(
+            &input,
+            &tris,
+            &surface,
+            &chord,
+            no_own_faces(),
+            &sampling(),
+            0.01,
+        )
+        .measure(&other, 3)
+        .unwrap();
         assert!((fresh.error.max - m0.error.max).abs() < 0.05 * m0.error.max);
     }
 

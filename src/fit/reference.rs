@@ -9,7 +9,7 @@ use super::exact::ExactSurface;
 use super::measure::ErrorMeter;
 use crate::error::Result;
 use crate::mesh::{ControlMesh, PatchKind};
-use crate::metrics::TriangleSurface;
+use crate::metrics::{DistanceOptions, TriangleSurface};
 
 /// A triangle mesh of the model's faces with a closest-point structure per face: what the
 /// fit projects onto and the measurement charges each face's decoded points against.
@@ -90,7 +90,7 @@ impl Allowances {
         &'a self,
         facets: &'a Facets,
         exact: &'a [Option<ExactSurface>],
-        samples: usize,
+        sampling: &DistanceOptions,
         tol: f64,
     ) -> ErrorMeter<'a> {
         ErrorMeter::new(
@@ -104,7 +104,7 @@ impl Allowances {
                 max_allowance: &self.group_max_chord,
                 exact,
             },
-            samples,
+            sampling,
             tol,
         )
     }

@@ -13,11 +13,11 @@
 
 use glam::DVec3;
 
-use super::distance::samples_of;
-use super::distance::{blocked_surface, closest_points_in_order, closest_points_near_with};
+use super::distance::{blocked_surface, closest_points_near_with};
 use super::distance::{edge_spacing, one_sided_of};
+use super::distance::{reference_samples, sample_density, surface_area};
 use super::distance::{DistanceOptions, DistanceReport, Misses, OneSided};
-use super::sampling::{space_filling_order, EdgeSamples, RandomSamples, SampleCount};
+use super::sampling::{space_filling_order, EdgeSamples, TriangleSamples};
 use super::surface::{box_distance, TriangleSurface};
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
@@ -35,7 +35,6 @@ const KNOWN_POINTS: usize = 8;
 /// What one pass over a group's triangles keeps: enough to split the samples and to find
 /// which groups a point can be near.
 struct GroupOutline {
-    area: f64,
     lo: DVec3,
     hi: DVec3,
     /// Some level-n vertices of the group: points of the surface.
@@ -51,9 +50,10 @@ impl GroupOutline {
 }
 
 /// [`super::hausdorff_with_misses`] with the surface of `a` as A: the vertices of its
-/// triangles (when `opts.include_vertices`), `opts.samples` area-weighted random points,
-/// split between the groups by area, and the points of each group's long edges (an edge
-/// between two groups from both), against `b`'s samples made as `hausdorff` makes them.
+/// triangles (when `opts.include_vertices`), each group's area-weighted random points
+/// ([`TriangleSamples`], the same points as the whole surface's) and the points of its long
+/// edges (an edge between two groups from both), against `b`'s samples made as `hausdorff`
+/// makes them.
 /// `near` is a distance most samples are expected within; it only sets how the work is
 /// split, never the result.
 pub fn hausdorff_by_group(
@@ -78,7 +78,9 @@ pub fn hausdorff_by_group(
     };
     let spacing = edge_spacing(opts, diagonal);
     let sb = blocked_surface(b)?;
-    let (pb, nb) = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
+    let density = sample_density(opts, surface_area(sb.positions(), sb.triangles()));
+    let (pb, nb) = reference_samples(sb.positions(), sb.triangles(), opts, spacing);
+    let pb: Vec<DVec3> = pb.iter().map(|s| s.point).collect();
     let near = if near > 0.0 && near.is_finite() {
         near
     } else {
@@ -109,15 +111,14 @@ pub fn hausdorff_by_group(
     );
     // Each group's triangles made once: its random and edge points against B, and B's
     // points near its box against it.
-    let counts = split_samples(opts.samples, &outlines);
     let grid = PointGrid::new(&pb);
     let parts = map_heavy(outlines.len(), |g| {
         let mut tris = Vec::new();
         a.group_triangles(g, &mut tris);
         let samples = GroupPoints {
             triangles: &tris,
-            count: counts[g],
-            seed: opts.seed ^ ((g as u64) << 20),
+            density,
+            seed: opts.seed,
             spacing,
         };
         let own = samples.distances(positions, &sb, near);
@@ -135,7 +136,7 @@ pub fn hausdorff_by_group(
         ab.add(positions[ids[i] as usize], d, beyond, true);
     }
     let mut best = vec![f64::INFINITY; pb.len()];
-    for ((own, hits), &count) in parts.into_iter().zip(&counts) {
+    for ((own, count), hits) in parts {
         for (k, &(p, d)) in own.iter().enumerate() {
             ab.add(p, d, beyond, k < count);
         }
@@ -203,17 +204,15 @@ impl Summary {
     }
 }
 
-/// Group `g`'s area, box, vertices and a few of its points.
+/// Group `g`'s box, vertices and a few of its points.
 fn outline(a: &UniformSurface, g: usize) -> GroupOutline {
     let positions = a.positions();
     let mut tris = Vec::new();
     a.group_triangles(g, &mut tris);
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    let mut area = 0.0;
     let mut vertices: Vec<u32> = Vec::with_capacity(tris.len());
     for t in &tris {
         let [p, q, r] = t.map(|v| positions[v as usize]);
-        area += 0.5 * (q - p).cross(r - p).length();
         (lo, hi) = (lo.min(p).min(q).min(r), hi.max(p).max(q).max(r));
         vertices.extend_from_slice(t);
     }
@@ -226,7 +225,6 @@ fn outline(a: &UniformSurface, g: usize) -> GroupOutline {
         .map(|&v| positions[v as usize])
         .collect();
     GroupOutline {
-        area,
         lo,
         hi,
         known,
@@ -234,68 +232,32 @@ fn outline(a: &UniformSurface, g: usize) -> GroupOutline {
     }
 }
 
-/// `count` split between the groups by area (largest remainders first, ties to the lower
-/// group), or `PerArea` applied to each group.
-fn split_samples(count: SampleCount, outlines: &[GroupOutline]) -> Vec<usize> {
-    let total: f64 = outlines.iter().map(|o| o.area).sum();
-    match count {
-        SampleCount::PerArea(d) => outlines
-            .iter()
-            .map(|o| (d * o.area).floor().max(0.0) as usize)
-            .collect(),
-        SampleCount::Total(n) => {
-            if !(total > 0.0 && total.is_finite()) {
-                return vec![0; outlines.len()];
-            }
-            let shares: Vec<f64> = outlines.iter().map(|o| n as f64 * o.area / total).collect();
-            let mut counts: Vec<usize> = shares.iter().map(|s| s.floor() as usize).collect();
-            let left = n.saturating_sub(counts.iter().sum());
-            let mut order: Vec<usize> = (0..outlines.len()).collect();
-            order.sort_by(|&i, &j| {
-                let (ri, rj) = (shares[i] - shares[i].floor(), shares[j] - shares[j].floor());
-                rj.total_cmp(&ri).then(i.cmp(&j))
-            });
-            for &g in order.iter().take(left) {
-                counts[g] += 1;
-            }
-            counts
-        }
-    }
-}
-
-/// One group's own samples besides its vertices: `count` random points by area, then the
-/// points along its thin triangles' long edges at `spacing`.
+/// One group's own samples besides its vertices: random points by area at `density`
+/// ([`TriangleSamples`]), then the points along its thin triangles' long edges at `spacing`.
 struct GroupPoints<'t> {
     triangles: &'t [[u32; 3]],
-    count: usize,
+    density: f64,
     seed: u64,
     spacing: f64,
 }
 
 impl GroupPoints<'_> {
-    /// The points, and their distances to `input`.
+    /// The points and their distances to `input`, and how many are random points.
     fn distances(
         &self,
         positions: &[DVec3],
         input: &TriangleSurface,
         near: f64,
-    ) -> Vec<(DVec3, f64)> {
-        let random = RandomSamples::new(
-            positions,
-            self.triangles,
-            SampleCount::Total(self.count),
-            self.seed,
-        );
+    ) -> (Vec<(DVec3, f64)>, usize) {
+        let random = TriangleSamples::new(positions, self.triangles, self.density, self.seed);
         let edges = EdgeSamples::new(positions, self.triangles, self.spacing);
         let point = |i: usize| match i.checked_sub(random.len()) {
             None => random.get(i).point,
             Some(e) => edges.get(e).point,
         };
-        // Random points are visited by triangle, so that each query is bounded by the
-        // previous one's hit.
-        let mut order = random.by_triangle();
-        order.extend(random.len() as u32..(random.len() + edges.len()) as u32);
-        closest_points_in_order(&order, point, input, near, |_, p, h| (p, h.distance))
+        let count = random.len() + edges.len();
+        let d = closest_points_near_with(count, point, input, near, |_, p, h| (p, h.distance));
+        (d, random.len())
     }
 }
 

@@ -2,7 +2,7 @@
 
 use glam::DVec3;
 
-use super::sampling::{sample_surface, EdgeSamples, SampleCount};
+use super::sampling::{sample_surface, EdgeSamples, SampleCount, SurfaceSample, TriangleSamples};
 use super::surface::{fan_triangulate, ClosestPoint, TriangleSurface};
 use crate::error::Result;
 use crate::mesh::{ControlMesh, Tolerance};
@@ -10,7 +10,9 @@ use crate::mesh::{ControlMesh, Tolerance};
 /// How densely to sample each mesh when measuring distances.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DistanceOptions {
-    /// Random area-weighted samples per mesh.
+    /// Random area-weighted samples: on the reference (B) this many; on the measured
+    /// surface (A) as many per unit of B's area ([`sample_density`]: a decoded surface close
+    /// to B gets about as many).
     pub samples: SampleCount,
     /// Also measure from every mesh vertex (catches errors at corners and creases).
     pub include_vertices: bool,
@@ -192,31 +194,6 @@ pub fn closest_points_near_with<R: Copy + Default + Send>(
     out
 }
 
-/// [`closest_points_near_with`] for the points `point(i)` visited in the order `order` (a
-/// permutation of `0..order.len()`), the results indexed by `i`: an order in which
-/// consecutive points are near each other makes each query's bound (the previous hit) tight.
-/// The answers are those of any other order.
-pub fn closest_points_in_order<R: Copy + Default + Send>(
-    order: &[u32],
-    point: impl Fn(usize) -> DVec3 + Sync,
-    surface: &TriangleSurface,
-    radius: f64,
-    keep: impl Fn(usize, DVec3, &ClosestPoint) -> R + Sync,
-) -> Vec<R> {
-    let visited = closest_points_near_with(
-        order.len(),
-        |k| point(order[k] as usize),
-        surface,
-        radius,
-        |k, p, h| keep(order[k] as usize, p, h),
-    );
-    let mut out = vec![R::default(); order.len()];
-    for (&i, r) in order.iter().zip(visited) {
-        out[i as usize] = r;
-    }
-    out
-}
-
 /// Distances from each of `points` to `surface`, in the order of `points`.
 pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
     closest_points(points, surface)
@@ -291,8 +268,10 @@ pub fn hausdorff_with_misses(
         _ => 0.0,
     };
     let spacing = edge_spacing(opts, diagonal);
-    let (pa, na) = samples_of(&sa, opts, opts.seed, spacing);
-    let (pb, nb) = samples_of(&sb, opts, opts.seed ^ 0xB, spacing);
+    let density = sample_density(opts, surface_area(sb.positions(), sb.triangles()));
+    let (pa, na) = measured_samples(&sa, opts, density, spacing);
+    let (pb, nb) = reference_samples(sb.positions(), sb.triangles(), opts, spacing);
+    let pb: Vec<DVec3> = pb.iter().map(|s| s.point).collect();
     let (da, db) = (point_distances(&pa, &sb), point_distances(&pb, &sa));
     let (ab, ba) = (one_sided_of(&pa, &da, na), one_sided_of(&pb, &db, nb));
     let beyond_of = |p: &[DVec3], d: &[f64]| -> Vec<DVec3> {
@@ -326,27 +305,77 @@ pub(super) fn edge_spacing(opts: &DistanceOptions, diagonal: f64) -> f64 {
     opts.edge_spacing.map_or(0.0, |t| t.resolve(diagonal))
 }
 
-/// The sample points of `s`: its vertices (with `opts.include_vertices`), its random points,
-/// then the points of its edges at `spacing` (none for 0); and how many come before the
-/// edge points.
-pub(super) fn samples_of(
-    s: &TriangleSurface,
+/// The samples of the reference B of a measurement (the input mesh, for a decoded file):
+/// its vertices (with `opts.include_vertices`), `opts.samples` area-weighted random points,
+/// then the points of its thin triangles' long edges at `spacing` (none for 0); and how many
+/// come before the edge points (the mean and RMS are theirs). The encoder measures the same
+/// samples of its input as `scode info --against` does.
+pub fn reference_samples(
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
     opts: &DistanceOptions,
-    seed: u64,
     spacing: f64,
-) -> (Vec<DVec3>, usize) {
-    let mut points: Vec<DVec3> = sample_surface(
-        s.positions(),
-        s.triangles(),
+) -> (Vec<SurfaceSample>, usize) {
+    let mut samples = sample_surface(
+        positions,
+        triangles,
         opts.samples,
         opts.include_vertices,
-        seed,
+        opts.seed ^ 0xB,
+    );
+    let area = samples.len();
+    let edges = EdgeSamples::new(positions, triangles, spacing);
+    samples.extend((0..edges.len()).map(|i| edges.get(i)));
+    (samples, area)
+}
+
+/// Points per unit area of the random samples of the measured surface A: `opts.samples` over
+/// the reference's `reference_area` (fixed for a reference, so a face of A keeps its points
+/// while the rest of A changes; see [`TriangleSamples`]).
+pub fn sample_density(opts: &DistanceOptions, reference_area: f64) -> f64 {
+    match opts.samples {
+        SampleCount::Total(n) if reference_area > 0.0 => n as f64 / reference_area,
+        SampleCount::Total(_) => 0.0,
+        SampleCount::PerArea(d) => d,
+    }
+}
+
+/// The total area of `triangles` over `positions`, summed in order.
+pub fn surface_area(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| positions[v as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum()
+}
+
+/// The sample points of the measured surface A (`s`): its vertices (with
+/// `opts.include_vertices`), its random points at `density` ([`TriangleSamples`]), then the
+/// points of its thin triangles' long edges at `spacing`; and how many come before the
+/// edge points.
+fn measured_samples(
+    s: &TriangleSurface,
+    opts: &DistanceOptions,
+    density: f64,
+    spacing: f64,
+) -> (Vec<DVec3>, usize) {
+    let (positions, triangles) = (s.positions(), s.triangles());
+    let mut points: Vec<DVec3> = sample_surface(
+        positions,
+        triangles,
+        SampleCount::Total(0),
+        opts.include_vertices,
+        0,
     )
     .into_iter()
     .map(|s| s.point)
     .collect();
+    let random = TriangleSamples::new(positions, triangles, density, opts.seed);
+    points.extend((0..random.len()).map(|i| random.get(i).point));
     let area = points.len();
-    let edges = EdgeSamples::new(s.positions(), s.triangles(), spacing);
+    let edges = EdgeSamples::new(positions, triangles, spacing);
     points.extend((0..edges.len()).map(|i| edges.get(i).point));
     (points, area)
 }

@@ -13,15 +13,17 @@ mod surface;
 
 pub use by_group::hausdorff_by_group;
 pub use distance::{
-    closest_points, closest_points_in_order, closest_points_near, closest_points_near_with,
-    edge_spacing_for_tolerance, hausdorff, hausdorff_with_misses, one_sided_distances,
-    point_distances, DistanceOptions, DistanceReport, Misses, OneSided, DEFAULT_EDGE_SPACING,
+    closest_points, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
+    hausdorff, hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions,
+    DistanceReport, Misses, OneSided, DEFAULT_EDGE_SPACING,
 };
+pub(crate) use distance::{reference_samples, sample_density, surface_area};
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
 pub use sampling::{
     sample_surface, space_filling_order, EdgeSamples, RandomSamples, SampleCount, SurfaceSample,
+    TriangleSamples,
 };
 pub(crate) use surface::box_distance;
 pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
@@ -210,20 +212,32 @@ mod tests {
         }
     }
 
-    /// The order by triangle is a permutation of the samples whose triangles never decrease.
+    /// A triangle's random points depend on the triangle alone: listed among other
+    /// triangles, in another order, with its corners rotated, it gets the same points; and
+    /// the points of many triangles number about the density times their area.
     #[test]
-    fn random_samples_by_triangle_order_by_triangle() {
-        let (pos, tris) = random_mesh(3, 8);
-        let samples = RandomSamples::new(&pos, &tris, SampleCount::Total(500), 0x5EED);
-        let order = samples.by_triangle();
-        let mut seen = order.clone();
-        seen.sort_unstable();
-        assert_eq!(seen, (0..500).collect::<Vec<u32>>());
-        let t: Vec<u32> = order
-            .iter()
-            .map(|&i| samples.get(i as usize).triangle)
-            .collect();
-        assert!(t.windows(2).all(|w| w[0] <= w[1]), "{t:?}");
+    fn triangle_samples_are_the_triangles_own() {
+        let (pos, tris) = random_mesh(5, 10);
+        let density = 2000.0;
+        let all = TriangleSamples::new(&pos, &tris, density, 9);
+        let area = surface_area(&pos, &tris);
+        let n = all.len() as f64;
+        assert!((n - density * area).abs() < 0.05 * density * area, "{n}");
+        let points_of = |samples: &TriangleSamples, t: u32| -> Vec<[u64; 3]> {
+            let mut p: Vec<[u64; 3]> = (0..samples.len())
+                .map(|i| samples.get(i))
+                .filter(|s| s.triangle == t)
+                .map(|s| s.point.to_array().map(f64::to_bits))
+                .collect();
+            p.sort_unstable();
+            p
+        };
+        for t in [0u32, 7, 50, tris.len() as u32 - 1] {
+            let tri = tris[t as usize];
+            let alone = [[tri[1], tri[2], tri[0]]];
+            let rotated = TriangleSamples::new(&pos, &alone, density, 9);
+            assert_eq!(points_of(&rotated, 0), points_of(&all, t), "triangle {t}");
+        }
     }
 
     /// The space-filling order is a permutation that keeps neighbours together: on a grid
@@ -395,8 +409,22 @@ mod tests {
                 .map(|s| s.point)
                 .collect()
         };
-        let pa = points(&a, opts.seed);
         let pb = points(&b, opts.seed ^ 0xB);
+        // A's random points: as many per unit of B's area, each triangle's its own.
+        let (sa, sb) = (
+            TriangleSurface::from_control_mesh(&a).unwrap(),
+            TriangleSurface::from_control_mesh(&b).unwrap(),
+        );
+        let density = sample_density(&opts, surface_area(sb.positions(), sb.triangles()));
+        let mut pa: Vec<DVec3> = (0..a.vertex_count()).map(|v| a.positions[v]).collect();
+        let random = TriangleSamples::new(sa.positions(), sa.triangles(), density, opts.seed);
+        pa.extend((0..random.len()).map(|i| random.get(i).point));
+        let expected = density * surface_area(sa.positions(), sa.triangles());
+        let got = random.len() as f64;
+        assert!(
+            (got - expected).abs() < 0.05 * expected,
+            "{got} vs {expected}"
+        );
         assert_eq!(pa.len(), r.samples_a);
         assert_eq!(pb.len(), r.samples_b);
         let (max_ab, rms_ab) = brute_one_sided(&pa, &b);

@@ -146,17 +146,6 @@ impl<'a> RandomSamples<'a> {
         self.count == 0
     }
 
-    /// The sample indices ordered by the triangle each lies in (then by index): on a
-    /// surface whose consecutive triangles are neighbours, consecutive samples of this order
-    /// are near each other, which bounds each closest-point query by the previous hit.
-    pub fn by_triangle(&self) -> Vec<u32> {
-        let mut keyed: Vec<(u32, u32)> = (0..self.count)
-            .map(|i| (self.triangle_of(i), i as u32))
-            .collect();
-        keyed.sort_unstable();
-        keyed.into_iter().map(|x| x.1).collect()
-    }
-
     /// The triangle of sample `i` (as [`RandomSamples::get`] chooses it).
     fn triangle_of(&self, i: usize) -> u32 {
         let total = self.cumulative.last().copied().unwrap_or(0.0);
@@ -181,6 +170,103 @@ impl<'a> RandomSamples<'a> {
             point: a * bc[0] + b * bc[1] + c * bc[2],
             triangle: t as u32,
             barycentric: bc,
+        }
+    }
+}
+
+/// Area-weighted random points of a set of triangles in which each triangle's points are a
+/// function of that triangle alone: how many (the expected number is `density` times its
+/// area) and where are drawn from a generator seeded by `seed` and the bits of its corners,
+/// taken in coordinate order. So the same triangle gets the same points wherever it is
+/// listed, in whatever order and with its corners in whatever rotation: a surface measured
+/// face by face, a face measured again after the rest of the model changed, and a decoded
+/// file whose faces were stored in another order all sample the same points. The
+/// measurements of decoded surfaces use them (the encoder's, which keeps per-face results,
+/// and `scode info --against`'s, which must find the same figures).
+pub struct TriangleSamples<'a> {
+    positions: &'a [DVec3],
+    triangles: &'a [[u32; 3]],
+    /// Per sample: its triangle and its number in that triangle, triangle by triangle.
+    samples: Vec<(u32, u32)>,
+    seed: u64,
+}
+
+impl<'a> TriangleSamples<'a> {
+    /// The points of `triangles` over `positions` at `density` points per unit area (none
+    /// for a density that is not positive and finite).
+    pub fn new(positions: &'a [DVec3], triangles: &'a [[u32; 3]], density: f64, seed: u64) -> Self {
+        let mut samples = Vec::new();
+        if density > 0.0 && density.is_finite() {
+            for (t, tri) in triangles.iter().enumerate() {
+                let (corners, mut rng) = Self::corners(positions, tri, seed);
+                let [a, b, c] = corners.map(|k| positions[tri[k] as usize]);
+                let expected = density * 0.5 * (b - a).cross(c - a).length();
+                if !(expected > 0.0 && expected.is_finite()) {
+                    continue;
+                }
+                let n = expected.floor() + f64::from(u8::from(rng.next_f64() < expected.fract()));
+                let n = n.min(f64::from(u32::MAX)) as u32;
+                samples.extend((0..n).map(|k| (t as u32, k)));
+            }
+        }
+        TriangleSamples {
+            positions,
+            triangles,
+            samples,
+            seed,
+        }
+    }
+
+    /// The corners of `tri` (0..3) in coordinate order (ties by corner), and the
+    /// triangle's generator: seeded by `seed` and the corners' bits in that order.
+    fn corners(positions: &[DVec3], tri: &[u32; 3], seed: u64) -> ([usize; 3], SplitMix64) {
+        let p = tri.map(|v| positions[v as usize].to_array());
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&i, &j| {
+            (0..3)
+                .map(|k| p[i][k].total_cmp(&p[j][k]))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(i.cmp(&j))
+        });
+        let mut h = seed;
+        for &i in &order {
+            for x in p[i] {
+                h = SplitMix64::new(h ^ x.to_bits()).next_u64();
+            }
+        }
+        (order, SplitMix64::new(h))
+    }
+
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Sample `i` (< [`TriangleSamples::len`]): a point uniformly inside its triangle
+    /// (square-root warp), the `k`-th of the triangle's generator after its count.
+    pub fn get(&self, i: usize) -> SurfaceSample {
+        let (t, k) = self.samples[i];
+        let tri = &self.triangles[t as usize];
+        let (corners, rng) = Self::corners(self.positions, tri, self.seed);
+        let SplitMix64(state) = rng;
+        let mut rng = SplitMix64::after(state, 1 + 2 * u64::from(k));
+        let (r1, r2) = (rng.next_f64(), rng.next_f64());
+        let s = r1.sqrt();
+        let weights = [1.0 - s, s * (1.0 - r2), s * r2];
+        let mut barycentric = [0.0; 3];
+        let mut point = DVec3::ZERO;
+        for (w, &c) in weights.iter().zip(&corners) {
+            barycentric[c] = *w;
+            point += *w * self.positions[tri[c] as usize];
+        }
+        SurfaceSample {
+            point,
+            triangle: t,
+            barycentric,
         }
     }
 }

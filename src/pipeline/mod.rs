@@ -6,7 +6,7 @@ use std::path::Path;
 
 use crate::codec::{self, Content, EncodeOptions};
 use crate::error::Result;
-use crate::fit::encoder::{fit_model, FitOptions, FitReport, Reference, SurfaceHint};
+use crate::fit::encoder::{fit_model, FitOptions, FitReport, SurfaceHint};
 use crate::io::faces_json::{self, SurfaceType};
 use crate::mesh::ControlMesh;
 use glam::DVec3;
@@ -18,7 +18,7 @@ pub use crate::surface::{
     DEFAULT_RELATIVE_TOLERANCE, TOLERANCE_STEPS,
 };
 pub use check::measure_file_against_input;
-use check::{check_as_info_does, thinned, trusted_limits, MAX_MISSES, MISS_REFITS};
+use check::trusted_limits;
 pub use search::{
     encode_fitted, Effort, LOCAL_REFINEMENT_MAX_TRIANGLES, PLAIN_PLANES_MAX_TRIANGLES,
     TRAVERSAL_STARTS,
@@ -224,52 +224,22 @@ pub(crate) fn encode_fitted_once(
             mesh.groups = groups;
             Ok((mesh, bytes.len()))
         };
-    let mut refits = Vec::new();
-    loop {
-        let outcome = fit_model(input, hints, &fit_opts, &mut reconstruct)?;
-        let final_opts = encode_opts(outcome.default_level, outcome.coarser_quarter_bits);
-        let bytes = codec::encode(&outcome.control, &final_opts)
-            .map_err(|e| crate::fit::encoder::with_faces_involved(e, &outcome.control))?;
-        let mut report = outcome.report;
-        let bytes = search::smallest_traversal_start(
-            &outcome.control,
-            &final_opts,
-            opts.effort.traversal_starts(),
-            bytes,
-            &mut report,
-        );
-        if report.reference != Reference::InputMesh {
-            return Ok((bytes, report));
-        }
-        let fit_within = report.within_tolerance;
-        let misses = check_as_info_does(&bytes, input, &mut report)?;
-        let refit = fit_within
-            && !report.within_tolerance
-            && refits.len() < MISS_REFITS
-            && (!misses.a_to_b.is_empty() || !misses.b_to_a.is_empty());
-        if !refit {
-            report.notes.splice(0..0, refits);
-            return Ok((bytes, report));
-        }
-        // The fit found the file within the tolerance where the check did not: fit again,
-        // measuring where the check found it off as well.
-        let cell = 0.5 * tol;
-        let (decoded, inputs) = (
-            thinned(&misses.a_to_b, cell, MAX_MISSES),
-            thinned(&misses.b_to_a, cell, MAX_MISSES),
-        );
-        refits.push(format!(
-            "fitted again: measured as `scode info --against` does, {} decoded and {} input \
-             samples were beyond the tolerance where the fit's own were not (the next fit \
-             measures {} and {} of them too)",
-            misses.a_to_b.len(),
-            misses.b_to_a.len(),
-            decoded.len(),
-            inputs.len()
-        ));
-        fit_opts.misses.a_to_b.extend(decoded);
-        fit_opts.misses.b_to_a.extend(inputs);
-    }
+    // The fit's last measurement is of this file's control mesh at its default level,
+    // sampled as `scode info --against` samples it (see `ErrorMeter::new`): its figures
+    // are the file's.
+    let outcome = fit_model(input, hints, &fit_opts, &mut reconstruct)?;
+    let final_opts = encode_opts(outcome.default_level, outcome.coarser_quarter_bits);
+    let bytes = codec::encode(&outcome.control, &final_opts)
+        .map_err(|e| crate::fit::encoder::with_faces_involved(e, &outcome.control))?;
+    let mut report = outcome.report;
+    let bytes = search::smallest_traversal_start(
+        &outcome.control,
+        &final_opts,
+        opts.effort.traversal_starts(),
+        bytes,
+        &mut report,
+    );
+    Ok((bytes, report))
 }
 
 /// The same control mesh with its face list rotated to begin at face `start` (positions,

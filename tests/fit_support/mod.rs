@@ -5,7 +5,9 @@ use std::path::Path;
 
 use scode::codec::{self, Content, EncodeOptions, Limits};
 use scode::metrics::{hausdorff, DistanceOptions, SampleCount};
-use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
+use scode::pipeline::{
+    encode_fitted, measure_file_against_input, sidecar_hints, ModelEncodeOptions,
+};
 use scode::subdiv::{subdivide, SubdivOptions};
 
 /// Every edge of the decoded triangle mesh has exactly two faces (the inputs are closed).
@@ -75,6 +77,32 @@ pub fn check_model(path: &Path, min_ratio: f64) {
         "{name}: rms {:.3e} vs tolerance {tol:.3e}",
         dist.rms
     );
+    // The encoder's figures are the file's as `scode info --against` measures it: the
+    // same vertices and random points; edge points at the tolerance's spacing rather than
+    // the default's, so the max may differ by what one finds between the other's, and the
+    // mean and RMS by a vertex counted on two faces where the fit split it.
+    let (info, _, _) = measure_file_against_input(
+        &bytes,
+        &input,
+        &Limits::default(),
+        &DistanceOptions::default(),
+        tol,
+        f64::INFINITY,
+    )
+    .unwrap();
+    let e = &report.error;
+    assert!(
+        (e.max - info.max).abs() <= 0.02 * tol,
+        "{name}: encoder max {:.4e}, info --against {:.4e}",
+        e.max,
+        info.max
+    );
+    for (what, fit, file) in [("rms", e.rms, info.rms), ("mean", e.mean, info.mean)] {
+        assert!(
+            (fit - file).abs() <= 1e-2 * file,
+            "{name}: encoder {what} {fit:.5e}, info --against {file:.5e}"
+        );
+    }
     let raw = codec::encode(&input, &EncodeOptions::default()).unwrap();
     println!(
         "{name}: fitted {} B vs raw {} B, {} control vertices, max {:.3e} rms {:.3e} (tol {tol:.3e})",
