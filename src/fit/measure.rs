@@ -131,12 +131,19 @@ impl<'a> GroupSamples<'a> {
     }
 }
 
-/// An input sample's nearest decoded point: its distance, its group and the point.
+/// An input sample's distance to the decoded surface and the group holding its nearest
+/// point.
 #[derive(Clone, Copy)]
 struct InHit {
     distance: f64,
     group: u32,
-    point: DVec3,
+}
+
+impl InHit {
+    const NONE: InHit = InHit {
+        distance: f64::INFINITY,
+        group: u32::MAX,
+    };
 }
 
 /// What the previous full measurement kept for the next one.
@@ -330,15 +337,16 @@ impl<'a> ErrorMeter<'a> {
 
     /// The decoded point nearest input sample `p`, searching the groups of `order` (the
     /// sample's input group's [`search_orders`] entry) while their lower bound is below the
-    /// best distance so far; `best` is a point of the decoded surface already reached, if
-    /// any: it is the answer unless a nearer one is found.
+    /// best distance so far; `best` is a distance to a point of the decoded surface already
+    /// reached, if any: it is the answer unless a nearer point is found, whose position is
+    /// then returned too.
     fn nearest_decoded(
         p: DVec3,
         groups: &[&GroupDecoded],
         order: &[(f64, u32)],
         best: Option<InHit>,
-    ) -> Option<InHit> {
-        let mut best = best;
+    ) -> (Option<InHit>, Option<DVec3>) {
+        let (mut best, mut point) = (best, None);
         for &(bound, g) in order {
             let limit = best.map_or(f64::INFINITY, |b| b.distance);
             if bound > limit {
@@ -358,11 +366,11 @@ impl<'a> ErrorMeter<'a> {
                 best = Some(InHit {
                     distance: h.distance,
                     group: g,
-                    point: h.point,
                 });
+                point = Some(h.point);
             }
         }
-        best
+        (best, point)
     }
 
     /// Like [`ErrorMeter::measure`], but with `over = Some(max_cap)` first measures the
@@ -530,14 +538,15 @@ impl<'a> ErrorMeter<'a> {
         let all: Vec<usize> = (0..groups.len()).collect();
         let order_all = self.search_orders(&groups, &all);
         let order_changed = self.search_orders(&groups, changed);
-        // Sample `i`'s nearest point, given a point of the surface `prev` (the previous
-        // sample's nearest) whose distance bounds the search.
-        let in_hit = |i: usize, prev: Option<InHit>| -> InHit {
+        // Sample `i`'s distance, given a point of the surface and its group `prev` (the
+        // nearest point of an earlier sample) whose distance bounds the search; and the
+        // nearest point when the search found it.
+        let in_hit = |i: usize, prev: Option<(DVec3, u32)>| -> (InHit, Option<DVec3>) {
             let s = &self.input_samples[i];
             let own = self.mesh.face_groups[s.triangle as usize] as usize;
-            let prev = prev.map(|q| InHit {
-                distance: (s.point - q.point).length(),
-                ..q
+            let prev = prev.map(|(q, group)| InHit {
+                distance: (s.point - q).length(),
+                group,
             });
             let nearer = |a: Option<InHit>, b: InHit| match a {
                 Some(a) if a.distance <= b.distance => a,
@@ -552,15 +561,11 @@ impl<'a> ErrorMeter<'a> {
                 }
                 _ => Self::nearest_decoded(s.point, &groups, &order_all[own], prev),
             };
-            hit.unwrap_or(InHit {
-                distance: f64::INFINITY,
-                group: u32::MAX,
-                point: DVec3::NAN,
-            })
+            (hit.0.unwrap_or(InHit::NONE), hit.1)
         };
         if let Some(max_cap) = over {
             let fails = |i: usize| {
-                let d = in_hit(i, None).distance;
+                let d = in_hit(i, None).0.distance;
                 d - self.chord[self.input_samples[i].triangle as usize] > self.tol || d > max_cap
             };
             if cache.probe_in.iter().any(|&i| fails(i)) {
@@ -569,24 +574,19 @@ impl<'a> ErrorMeter<'a> {
         }
         let chunks: Vec<&[u32]> = self.input_order.chunks(IN_CHUNK).collect();
         let visited = map_ordered(&chunks, |chunk| {
-            let mut prev: Option<InHit> = None;
+            let mut prev: Option<(DVec3, u32)> = None;
             chunk
                 .iter()
                 .map(|&i| {
-                    let hit = in_hit(i as usize, prev);
-                    prev = Some(hit).filter(|h| h.point.is_finite());
+                    let (hit, point) = in_hit(i as usize, prev);
+                    if let Some(q) = point.filter(|q| q.is_finite()) {
+                        prev = Some((q, hit.group));
+                    }
                     hit
                 })
                 .collect::<Vec<InHit>>()
         });
-        let mut hits = vec![
-            InHit {
-                distance: f64::INFINITY,
-                group: u32::MAX,
-                point: DVec3::NAN,
-            };
-            n_in
-        ];
+        let mut hits = vec![InHit::NONE; n_in];
         for (&i, hit) in self.input_order.iter().zip(visited.into_iter().flatten()) {
             hits[i as usize] = hit;
         }

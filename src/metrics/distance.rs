@@ -38,7 +38,7 @@ pub fn edge_spacing_for_tolerance(tol: f64, diagonal: f64) -> f64 {
 impl Default for DistanceOptions {
     fn default() -> Self {
         DistanceOptions {
-            samples: SampleCount::Total(100_000),
+            samples: SampleCount::Total(60_000),
             include_vertices: true,
             seed: 0x5C0D_E5C0_DE5C_0DE5,
             edge_spacing: Some(DEFAULT_EDGE_SPACING),
