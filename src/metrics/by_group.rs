@@ -1,6 +1,6 @@
 //! The sampled symmetric distance between a subdivided surface handed out group by group
-//! ([`UniformSurface`]) and a mesh: what `scode info --against`, `scode report` and the
-//! encoder's check of its own file measure.
+//! ([`UniformSurface`]) and a mesh: what `scode info --against` and `scode report` measure
+//! (and the encoder's measurement samples alike).
 //!
 //! At a file's default level a CAD model has tens of millions of triangles, and a
 //! closest-point index over all of them takes gigabytes. Every group (CAD face) is indexed
