@@ -240,6 +240,18 @@ mod tests {
         }
     }
 
+    /// A surface far larger than its density was meant for gets a bounded number of points.
+    #[test]
+    fn triangle_samples_are_bounded() {
+        let pos = vec![DVec3::ZERO, DVec3::X * 1e6, DVec3::Y * 1e6];
+        let samples = TriangleSamples::new(&pos, &[[0, 1, 2]], 1.0, 1);
+        assert!(
+            samples.len() <= 1 << 22 && samples.len() > 1 << 21,
+            "{}",
+            samples.len()
+        );
+    }
+
     /// The space-filling order is a permutation that keeps neighbours together: on a grid
     /// given in a scrambled order, consecutive points of the order are a few cells apart
     /// on average, where the scrambled order jumps across the grid.

@@ -174,6 +174,9 @@ impl<'a> RandomSamples<'a> {
     }
 }
 
+/// The most points [`TriangleSamples`] makes of one set of triangles.
+const MAX_TRIANGLE_SAMPLES: usize = 1 << 22;
+
 /// Area-weighted random points of a set of triangles in which each triangle's points are a
 /// function of that triangle alone: how many (the expected number is `density` times its
 /// area) and where are drawn from a generator seeded by `seed` and the bits of its corners,
@@ -196,6 +199,16 @@ impl<'a> TriangleSamples<'a> {
     /// for a density that is not positive and finite).
     pub fn new(positions: &'a [DVec3], triangles: &'a [[u32; 3]], density: f64, seed: u64) -> Self {
         let mut samples = Vec::new();
+        // A surface far larger than the one the density was set for (a file measured
+        // against an unrelated mesh) gets at most `MAX_TRIANGLE_SAMPLES` points.
+        let area: f64 = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| positions[v as usize]);
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum();
+        let density = density.min(MAX_TRIANGLE_SAMPLES as f64 / area);
         if density > 0.0 && density.is_finite() {
             for (t, tri) in triangles.iter().enumerate() {
                 let (corners, mut rng) = Self::corners(positions, tri, seed);
