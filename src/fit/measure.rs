@@ -158,8 +158,9 @@ struct MeasureCache {
     /// of the control mesh `groups` were measured on.
     level: u8,
     supports: Vec<Option<u64>>,
-    /// Input->decoded, per input sample: the nearest decoded point. While its group is
-    /// unchanged the distance is still reachable, so only changed groups can bring it down.
+    /// Input->decoded, per input sample: its distance and the group of its nearest decoded
+    /// point. While that group is unchanged the distance is still reachable, so only changed
+    /// groups can bring it down.
     in_hits: Vec<InHit>,
     /// Input samples that were worst last time, and decoded samples (group, index), probed
     /// first by [`ErrorMeter::measure_unless_over`].
