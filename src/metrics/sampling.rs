@@ -198,18 +198,12 @@ impl<'a> TriangleSamples<'a> {
     /// The points of `triangles` over `positions` at `density` points per unit area (none
     /// for a density that is not positive and finite).
     pub fn new(positions: &'a [DVec3], triangles: &'a [[u32; 3]], density: f64, seed: u64) -> Self {
-        let mut samples = Vec::new();
-        // A surface far larger than the one the density was set for (a file measured
-        // against an unrelated mesh) gets at most `MAX_TRIANGLE_SAMPLES` points.
-        let area: f64 = triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|v| positions[v as usize]);
-                0.5 * (b - a).cross(c - a).length()
-            })
-            .sum();
-        let density = density.min(MAX_TRIANGLE_SAMPLES as f64 / area);
-        if density > 0.0 && density.is_finite() {
+        // Each triangle's samples at `density`; `None` once they pass `cap`.
+        let draw = |density: f64, cap: f64| -> Option<Vec<(u32, u32)>> {
+            let mut samples = Vec::new();
+            if !(density > 0.0 && density.is_finite()) {
+                return Some(samples);
+            }
             for (t, tri) in triangles.iter().enumerate() {
                 let (corners, mut rng) = Self::corners(positions, tri, seed);
                 let [a, b, c] = corners.map(|k| positions[tri[k] as usize]);
@@ -218,10 +212,26 @@ impl<'a> TriangleSamples<'a> {
                     continue;
                 }
                 let n = expected.floor() + f64::from(u8::from(rng.next_f64() < expected.fract()));
-                let n = n.min(f64::from(u32::MAX)) as u32;
-                samples.extend((0..n).map(|k| (t as u32, k)));
+                if samples.len() as f64 + n > cap {
+                    return None;
+                }
+                samples.extend((0..n as u32).map(|k| (t as u32, k)));
             }
-        }
+            Some(samples)
+        };
+        // A surface far larger than the one the density was set for (a file measured
+        // against an unrelated mesh) is drawn again at the density that makes about
+        // `MAX_TRIANGLE_SAMPLES` points on the whole.
+        let samples = draw(density, MAX_TRIANGLE_SAMPLES as f64).unwrap_or_else(|| {
+            let area: f64 = triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|v| positions[v as usize]);
+                    0.5 * (b - a).cross(c - a).length()
+                })
+                .sum();
+            draw(MAX_TRIANGLE_SAMPLES as f64 / area, f64::INFINITY).unwrap_or_default()
+        });
         TriangleSamples {
             positions,
             triangles,
