@@ -324,6 +324,27 @@ impl<'a> ErrorMeter<'a> {
             .expect("no probe without a bound"))
     }
 
+    /// By group of `groups`: an estimate of how far the last measured decoded triangles
+    /// stray from the limit surface between their corners (their chord error; 0 for a face
+    /// without triangles). Across each edge two triangles of a face turn by the angle `θ`
+    /// between their normals over their mean height `h` above the edge: a surface that bends
+    /// by `θ` over `h` stands off a chord of length `h` by about `h θ / 8` (a circular arc).
+    /// The largest over the face's edges.
+    pub fn chord_errors(&self, groups: &[usize]) -> Vec<f64> {
+        let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        groups
+            .iter()
+            .map(|&g| {
+                cache
+                    .groups
+                    .get(g)
+                    .and_then(Option::as_ref)
+                    .and_then(|gd| gd.surface.as_ref())
+                    .map_or(0.0, |s| chord_error(s.positions(), s.triangles()))
+            })
+            .collect()
+    }
+
     /// The excess of a decoded point of group `g` whose nearest input triangle is `hit`
     /// at `distance`.
     fn out_excess(&self, p: DVec3, g: usize, hit: u32, distance: f64) -> f64 {
@@ -838,6 +859,38 @@ fn localise(surface: &UniformSurface, g: usize, owners: Option<&[u32]>) -> Local
 }
 
 /// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
+/// The chord error estimate of [`ErrorMeter::chord_errors`] for one face's triangles.
+fn chord_error(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
+    let corners = |t: &[u32; 3]| t.map(|v| positions[v as usize]);
+    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(3 * triangles.len());
+    for (k, t) in triangles.iter().enumerate() {
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            edges.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), k as u32));
+        }
+    }
+    edges.sort_unstable();
+    let mut worst = 0.0f64;
+    for pair in edges.windows(2) {
+        if pair[0].0 != pair[1].0 {
+            continue;
+        }
+        let key = pair[0].0;
+        let edge = positions[(key >> 32) as usize].distance(positions[key as u32 as usize]);
+        // Twice the area and the unit normal.
+        let [(a2, na), (b2, nb)] = [pair[0].1, pair[1].1].map(|k| {
+            let c = corners(&triangles[k as usize]);
+            let n = (c[1] - c[0]).cross(c[2] - c[0]);
+            (n.length(), n.normalize_or_zero())
+        });
+        let (angle, height) = (na.angle_between(nb), (a2 + b2) / (2.0 * edge));
+        if angle.is_finite() && height.is_finite() {
+            worst = worst.max(height * angle / 8.0);
+        }
+    }
+    worst
+}
+
 fn index_group(surface: &UniformSurface, owners: &[u32], g: usize) -> Result<GroupDecoded> {
     let LocalTriangles {
         mut positions,
@@ -901,6 +954,44 @@ mod tests {
             exact: &[],
         };
         ErrorMeter::new(input, tris, surface, chord, own_faces, &sampling, 0.01)
+    }
+
+    /// The chord error estimate of a cylinder cut into `n` strips around is the sagitta of
+    /// one strip, `R (1 - cos(π / n))`, within a few percent; a plane has none.
+    #[test]
+    fn chord_error_is_the_sagitta_of_a_cylinder_and_zero_on_a_plane() {
+        let (radius, n, rows) = (2.0, 24u32, 6u32);
+        let mut positions = Vec::new();
+        for r in 0..=rows {
+            for k in 0..n {
+                let a = std::f64::consts::TAU * f64::from(k) / f64::from(n);
+                positions.push(DVec3::new(
+                    radius * a.cos(),
+                    radius * a.sin(),
+                    f64::from(r) * 0.3,
+                ));
+            }
+        }
+        let id = |r: u32, k: u32| r * n + k % n;
+        let mut triangles = Vec::new();
+        for r in 0..rows {
+            for k in 0..n {
+                triangles.push([id(r, k), id(r, k + 1), id(r + 1, k + 1)]);
+                triangles.push([id(r, k), id(r + 1, k + 1), id(r + 1, k)]);
+            }
+        }
+        let sagitta = radius * (1.0 - (std::f64::consts::PI / f64::from(n)).cos());
+        let estimate = chord_error(&positions, &triangles);
+        assert!(
+            (estimate / sagitta - 1.0).abs() < 0.05,
+            "estimate {estimate}, sagitta {sagitta}"
+        );
+        let flat: Vec<DVec3> = positions
+            .iter()
+            .map(|p| DVec3::new(p.x, p.y, 0.0))
+            .collect();
+        let plane = [[0, 1, n + 1], [0, n + 1, n]];
+        assert_eq!(chord_error(&flat, &plane), 0.0);
     }
 
     /// A measurement that reuses what the previous one kept gives exactly what a fresh

@@ -22,10 +22,15 @@ use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind};
 
 /// When a round's worst excess on closed patches stays above this fraction of the previous
-/// round's, adding control points has stopped paying and the fit moves to decode level 5
-/// (once). A lower ratio moves models to level 5 that level 4 fits as well, at four times the
+/// round's, adding control points has stopped paying, and the fit moves to decode level 5
+/// (once) if that face's failure is level 4's chord error (see `Rounds::finer_level_meets`).
+/// A lower ratio moves models to level 5 that level 4 fits as well, at four times the
 /// triangles to measure.
 const STALL_RATIO: f64 = 0.85;
+
+/// The share of level 4's chord error that level 5 keeps on a smooth surface (triangles
+/// half the size stray a quarter as far from the surface between their corners).
+const FINER_CHORD_SHARE: f64 = 0.25;
 
 /// Rounds in a row whose worst excess is no better than [`NO_GAIN_RATIO`] of the best so far
 /// after which the fit stops refining: a face refined down to the input's own vertices, or
@@ -170,19 +175,21 @@ impl Rounds<'_> {
                 Next::Refine => {}
             }
             note_failures(&self.faces.mesh, &plan.groups, &measured, tol, report);
-            // When adding control points to closed patches stops paying, the rest may be the
-            // piecewise-linear chord error of level 4: go to level 5 (4x the triangles) once.
+            // When adding control points to closed patches stops paying and what the worst
+            // of them misses by is the piecewise-linear chord error of level 4, go to level
+            // 5 (4x the triangles) once.
             // Boundary patches are left out: a failing one refines its chains, then becomes
             // closed, and a finer level does not help it.
-            let worst_closed = (0..plan.groups.len())
+            let (worst_closed, worst_group) = (0..plan.groups.len())
                 .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
-                .map(|g| measured.group_excess[g].0)
-                .fold(0.0, f64::max);
+                .map(|g| (measured.group_excess[g].0, g))
+                .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a });
             let level_before = levels_tried;
             if opts.default_level.is_none()
                 && levels_tried.is_none()
                 && worst_closed > tol
                 && prev_worst.is_some_and(|p| worst_closed > STALL_RATIO * p)
+                && self.finer_level_meets(worst_closed, worst_group)
             {
                 levels_tried = Some(5);
             }
@@ -224,6 +231,17 @@ impl Rounds<'_> {
         let mut candidates = vec![converged];
         candidates.extend(relaxed_best);
         Ok(candidates)
+    }
+
+    /// Whether decode level 5 is expected to bring the last measured group `g`, whose
+    /// excess at level 4 is `excess`, within the tolerance. Level 5 halves the triangles'
+    /// size, so on a smooth surface it leaves a quarter of level 4's chord error
+    /// ([`ErrorMeter::chord_errors`]); what is not chord error it does not change, so it
+    /// pays only where the chord error is most of the excess over the tolerance. Refining
+    /// the control mesh, which also shortens the triangles, does the rest.
+    fn finer_level_meets(&self, excess: f64, g: usize) -> bool {
+        let chord = self.meter.chord_errors(&[g])[0];
+        excess - (1.0 - FINER_CHORD_SHARE) * chord <= self.tol
     }
 
     /// Builds, fits and measures the plan's model at decode level `level`.
