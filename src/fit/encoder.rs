@@ -65,8 +65,9 @@ pub struct FitOptions {
     /// coarser grid step can keep the max within it while the mean grows). A fit whose mean
     /// is over it even at the default step is reported out of tolerance.
     pub mean_tolerance: Option<Tolerance>,
-    /// Decode level the tolerance is checked at; default: 4, raised to 5 when that is what
-    /// it takes.
+    /// Decode level the tolerance is checked at (the level stored as the file's default);
+    /// default: the coarsest of 3, 4 and 5 the fit finds it takes (a finer level where the
+    /// chord error between a face's decoded triangles' corners is what it misses by).
     pub default_level: Option<u8>,
     /// Segmentation of ungrouped meshes: dihedral angle of sharp edges.
     pub sharp_angle_deg: f64,

@@ -21,15 +21,23 @@ use super::solve::fit_geometry;
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind};
 
+/// The decode level the fit starts at, and the finest it goes to. A model is stored for the
+/// coarsest level that meets its tolerance: each level has four times the triangles of the
+/// one before, for the fit to measure and for a decoder to make. Most CAD faces are met at
+/// the first level with a few more control points; a face the fit cannot get within the
+/// tolerance for the chord error between its decoded triangles' corners needs a finer one.
+const FIRST_LEVEL: u8 = 3;
+const LAST_LEVEL: u8 = 5;
+
 /// When a round's worst excess on closed patches stays above this fraction of the previous
-/// round's, adding control points has stopped paying, and the fit moves to decode level 5
-/// (once) if that face's failure is level 4's chord error (see `Rounds::finer_level_meets`).
-/// A lower ratio moves models to level 5 that level 4 fits as well, at four times the
-/// triangles to measure.
+/// round's, adding control points has stopped paying, and the fit moves one decode level
+/// finer if that face's failure is the chord error of its level (see
+/// `Rounds::finer_level_meets`). A lower ratio moves models to finer levels that the coarser
+/// one fits as well, at four times the triangles to measure.
 const STALL_RATIO: f64 = 0.85;
 
-/// The share of level 4's chord error that level 5 keeps on a smooth surface (triangles
-/// half the size stray a quarter as far from the surface between their corners).
+/// The share of a level's chord error that the next level keeps on a smooth surface
+/// (triangles half the size stray a quarter as far from the surface between their corners).
 const FINER_CHORD_SHARE: f64 = 0.25;
 
 /// Rounds in a row whose worst excess is no better than [`NO_GAIN_RATIO`] of the best so far
@@ -79,7 +87,6 @@ pub(super) struct Rounds<'a> {
 struct Round {
     built: Built,
     measured: Measurement,
-    level: u8,
     /// Size of the model's file at the default quantisation.
     bytes: usize,
 }
@@ -106,7 +113,9 @@ impl Rounds<'_> {
         let (opts, tol) = (self.opts, self.tol);
         let mut best: Option<Candidate> = None;
         let mut relaxed_best: Option<Candidate> = None;
-        let mut levels_tried = opts.default_level;
+        // The decode level of the next round, and whether it can still get finer.
+        let mut level = opts.default_level.unwrap_or(FIRST_LEVEL);
+        let fixed_level = opts.default_level.is_some();
         let mut prev_worst: Option<f64> = None;
         // Set once the model is within tolerance and refined patches are being coarsened again.
         let mut relaxing: Option<Relaxation> = None;
@@ -116,11 +125,9 @@ impl Rounds<'_> {
         let (mut nearest, mut no_gain) = (f64::INFINITY, 0);
         for round in 0..opts.max_rounds.max(1) {
             report.rounds = round + 1;
-            let level = levels_tried.unwrap_or(4);
             let Round {
                 built,
                 measured,
-                level,
                 bytes,
             } = self.round(plan, level, &mut decimator, reconstruct, report)?;
             let err = measured.error;
@@ -176,22 +183,21 @@ impl Rounds<'_> {
             }
             note_failures(&self.faces.mesh, &plan.groups, &measured, tol, report);
             // When adding control points to closed patches stops paying and what the worst
-            // of them misses by is the piecewise-linear chord error of level 4, go to level
-            // 5 (4x the triangles) once.
-            // Boundary patches are left out: a failing one refines its chains, then becomes
+            // of them misses by is the piecewise-linear chord error of the level, go a level
+            // finer (4x the triangles). Boundary patches are left out: a failing one refines its chains, then becomes
             // closed, and a finer level does not help it.
             let (worst_closed, worst_group) = (0..plan.groups.len())
                 .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
                 .map(|g| (measured.group_excess[g].0, g))
                 .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a });
-            let level_before = levels_tried;
-            if opts.default_level.is_none()
-                && levels_tried.is_none()
+            let level_before = level;
+            if !fixed_level
+                && level < LAST_LEVEL
                 && worst_closed > tol
                 && prev_worst.is_some_and(|p| worst_closed > STALL_RATIO * p)
                 && self.finer_level_meets(worst_closed, worst_group)
             {
-                levels_tried = Some(5);
+                level += 1;
             }
             prev_worst = Some(worst_closed);
             // Chains are refined only near where their groups fail (a plane with a hundred
@@ -215,13 +221,13 @@ impl Rounds<'_> {
                 &measured,
                 reach,
                 opts.local_refinement,
-                level_before.is_some(),
+                fixed_level || level_before == LAST_LEVEL,
                 tol,
                 plan,
                 report,
             );
             // A patch refitted as a closed one, or a finer decode level, is a new start.
-            if closed_count(plan) > closed_before || levels_tried != level_before {
+            if closed_count(plan) > closed_before || level != level_before {
                 no_gain = 0;
             }
         }
@@ -233,9 +239,9 @@ impl Rounds<'_> {
         Ok(candidates)
     }
 
-    /// Whether decode level 5 is expected to bring the last measured group `g`, whose
-    /// excess at level 4 is `excess`, within the tolerance. Level 5 halves the triangles'
-    /// size, so on a smooth surface it leaves a quarter of level 4's chord error
+    /// Whether the next decode level is expected to bring the last measured group `g`,
+    /// whose excess is `excess`, within the tolerance. The next level halves the triangles'
+    /// size, so on a smooth surface it leaves a quarter of this level's chord error
     /// ([`ErrorMeter::chord_errors`]); what is not chord error it does not change, so it
     /// pays only where the chord error is most of the excess over the tolerance. Refining
     /// the control mesh, which also shortens the triangles, does the rest.
@@ -312,7 +318,6 @@ impl Rounds<'_> {
         Ok(Round {
             built,
             measured,
-            level,
             bytes,
         })
     }
