@@ -184,8 +184,8 @@ impl Rounds<'_> {
             note_failures(&self.faces.mesh, &plan.groups, &measured, tol, report);
             // When adding control points to closed patches stops paying and what the worst
             // of them misses by is the piecewise-linear chord error of the level, go a level
-            // finer (4x the triangles). Boundary patches are left out: a failing one refines its chains, then becomes
-            // closed, and a finer level does not help it.
+            // finer (4x the triangles). Boundary patches are left out: a failing one refines
+            // its chains, then becomes closed, and a finer level does not help it.
             let (worst_closed, worst_group) = (0..plan.groups.len())
                 .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
                 .map(|g| (measured.group_excess[g].0, g))

@@ -103,8 +103,11 @@ pub fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
         "{file}: decoded surface is {:.3e} from the fine tessellation (tolerance {tol:.3e})",
         c.max_vertices
     );
+    // The RMS is well below the largest distance unless the surface is off as a whole; a
+    // model stored for its coarsest decode level keeps that level's chord error between
+    // its triangles' corners, about a quarter of the tolerance on curved faces.
     assert!(
-        c.rms_vertices <= 0.25 * tol,
+        c.rms_vertices <= tol / 3.0,
         "{file}: rms {:.3e}",
         c.rms_vertices
     );
