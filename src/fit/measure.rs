@@ -858,7 +858,6 @@ fn localise(surface: &UniformSurface, g: usize, owners: Option<&[u32]>) -> Local
     }
 }
 
-/// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
 /// The chord error estimate of [`ErrorMeter::chord_errors`] for one face's triangles.
 fn chord_error(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
     let corners = |t: &[u32; 3]| t.map(|v| positions[v as usize]);
@@ -891,6 +890,7 @@ fn chord_error(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
     worst
 }
 
+/// The closest-point index of group `g`'s decoded triangles ([`localise`]); no samples yet.
 fn index_group(surface: &UniformSurface, owners: &[u32], g: usize) -> Result<GroupDecoded> {
     let LocalTriangles {
         mut positions,
