@@ -305,11 +305,13 @@ fn check_subdivision(
 
 /// The decode to a tolerance of a control mesh whose default level is `default_level`.
 ///
-/// The finest level shown is the file's default level: the encoder chose it so that the
-/// surface meets the file's tolerance. A tighter tolerance gets one more level per factor 4
-/// (a triangle's distance from a smooth surface shrinks with its size squared, 4 times per
-/// level), estimated against the control mesh's diagonal; the measurement then picks the
-/// levels actually shown.
+/// The finest level shown is one beyond the file's default level. The encoder chose the
+/// default level as the coarsest whose triangles meet the file's tolerance of its input;
+/// this decode is measured against the limit surface instead, which those triangles stand
+/// off by their chord error, and one level more leaves a quarter of it. A tighter tolerance
+/// gets one more level per factor 4 (a triangle's distance from a smooth surface shrinks
+/// with its size squared, 4 times per level), estimated against the control mesh's
+/// diagonal; the measurement then picks the levels actually shown.
 fn decode_to_tolerance(
     decoded: codec::Decoded,
     held: u64,
@@ -328,7 +330,7 @@ fn decode_to_tolerance(
     let asked = tolerance.resolve(diagonal);
     // `subdivide_to_tolerance` shows at most level MAX_LEVEL - 1.
     let deepest = crate::subdiv::MAX_LEVEL - 1;
-    let mut max_level = default_level.min(deepest);
+    let mut max_level = (default_level + 1).min(deepest);
     if asked > 0.0 && asked < file_t {
         let extra = (file_t / asked).log(4.0).ceil();
         max_level = (f64::from(max_level) + extra).min(f64::from(deepest)) as u32;

@@ -369,7 +369,8 @@ pub struct DecodeArgs {
     /// triangle gets the coarsest level whose measured distance from the limit surface
     /// (against the limit points two levels finer, plus the shrinking remainder beyond
     /// them) is within it. Looser than the file's: fewer triangles, e.g. for a preview;
-    /// tighter: more, up to one level beyond the file's default level per factor 4.
+    /// tighter: more (the finest level allowed is one beyond the file's default level, and
+    /// one more per factor 4 of a tighter tolerance).
     /// Default: the tolerance the file was encoded for.
     #[arg(long, value_name = "T", conflicts_with = "level")]
     pub tolerance: Option<f64>,

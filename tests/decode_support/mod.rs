@@ -33,9 +33,8 @@ pub fn open_and_overused_edges(mesh: &ControlMesh) -> (usize, usize) {
 /// decode` does by default (to the file's tolerance) and checks the issue's conditions: at
 /// most 1.5 times the input's triangles, within the tolerance of the uniform level-6 decode
 /// both ways (the crate's metrics, from the vertices and area samples of each surface to the
-/// other), no open edge where the uniform decode has none, every group kept. `allowance`:
-/// how many tolerances from level 6 the output may be (1 but for a known excess).
-pub fn check_decode_to_tolerance(path: &Path, allowance: f64) {
+/// other), no open edge where the uniform decode has none, every group kept.
+pub fn check_decode_to_tolerance(path: &Path) {
     let name = path.file_name().unwrap().to_string_lossy().to_string();
     let (input, _) = scode::io::read_mesh(path).unwrap();
     let hints = sidecar_hints(path, &input)
@@ -111,9 +110,9 @@ pub fn check_decode_to_tolerance(path: &Path, allowance: f64) {
         input.face_count()
     );
     assert!(
-        d.max <= allowance * tol,
+        d.max <= tol,
         "{name}: {:.4e} from level 6 (output to it {:.4e}, it to the output {:.4e}) beyond \
-         {allowance} times the tolerance {tol:.4e}",
+         the tolerance {tol:.4e}",
         d.max,
         d.max_a_to_b,
         d.max_b_to_a
