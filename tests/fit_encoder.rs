@@ -174,7 +174,6 @@ fn measured_as_info_does(bytes: &[u8], input: &scode::ControlMesh) -> DistanceRe
         &Limits::default(),
         &Default::default(),
         near,
-        f64::MAX,
     )
     .unwrap()
     .0

@@ -820,13 +820,12 @@ pub fn info(args: &InfoArgs) -> Result<()> {
         let (input, _) = io::read_mesh(reference)?;
         // Samples mostly lie within the default tolerance (it only splits the work).
         let near = scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * input.diagonal();
-        let (r, _, level) = scode::pipeline::measure_file_against_input(
+        let (r, level) = scode::pipeline::measure_file_against_input(
             &bytes,
             &input,
             &limits,
             &Default::default(),
             near,
-            f64::INFINITY,
         )?;
         let d = r.diagonal.max(f64::MIN_POSITIVE);
         println!(

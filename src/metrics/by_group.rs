@@ -15,8 +15,9 @@ use glam::DVec3;
 
 use super::distance::{blocked_surface, closest_points_near_with};
 use super::distance::{edge_spacing, one_sided_of};
-use super::distance::{reference_samples, sample_density, surface_area};
-use super::distance::{DistanceOptions, DistanceReport, Misses, OneSided};
+use super::distance::{reference_samples, sample_density};
+use super::distance::{DistanceOptions, DistanceReport, OneSided};
+use super::sampling::surface_area;
 use super::sampling::{space_filling_order, EdgeSamples, TriangleSamples};
 use super::surface::{box_distance, TriangleSurface};
 use crate::error::{Error, Result};
@@ -49,7 +50,7 @@ impl GroupOutline {
     }
 }
 
-/// [`super::hausdorff_with_misses`] with the surface of `a` as A: the vertices of its
+/// [`super::hausdorff`] with the surface of `a` as A: the vertices of its
 /// triangles (when `opts.include_vertices`), each group's area-weighted random points
 /// ([`TriangleSamples`], the same points as the whole surface's) and the points of its long
 /// edges (an edge between two groups from both), against `b`'s samples made as `hausdorff`
@@ -61,8 +62,7 @@ pub fn hausdorff_by_group(
     b: &ControlMesh,
     opts: &DistanceOptions,
     near: f64,
-    beyond: f64,
-) -> Result<(DistanceReport, Misses)> {
+) -> Result<DistanceReport> {
     let positions = a.positions();
     let outlines = map_heavy(a.group_count(), |g| outline(a, g));
     if outlines.iter().all(|o| o.vertices.is_empty()) {
@@ -133,12 +133,12 @@ pub fn hausdorff_by_group(
     });
     let mut ab = Summary::default();
     for (i, &d) in vertex_d.iter().enumerate() {
-        ab.add(positions[ids[i] as usize], d, beyond, true);
+        ab.add(positions[ids[i] as usize], d, true);
     }
     let mut best = vec![f64::INFINITY; pb.len()];
     for ((own, count), hits) in parts {
         for (k, &(p, d)) in own.iter().enumerate() {
-            ab.add(p, d, beyond, k < count);
+            ab.add(p, d, k < count);
         }
         for (i, d) in hits {
             best[i as usize] = best[i as usize].min(d);
@@ -148,19 +148,7 @@ pub fn hausdorff_by_group(
     // B to A: the points farther than `near` from every group.
     far_to_groups(a, &outlines, &pb, near, &mut best);
     let ba = one_sided_of(&pb, &best, nb);
-    let b_misses: Vec<DVec3> = pb
-        .iter()
-        .zip(&best)
-        .filter(|(_, &d)| d > beyond)
-        .map(|(&p, _)| p)
-        .collect();
-
-    let report = DistanceReport::from_sides(&ab.one_sided(), &ba, diagonal);
-    let misses = Misses {
-        a_to_b: ab.misses,
-        b_to_a: b_misses,
-    };
-    Ok((report, misses))
+    Ok(DistanceReport::from_sides(&ab.one_sided(), &ba, diagonal))
 }
 
 /// Running statistics of one side's distances, in sample order (as `one_sided_of`: the
@@ -172,11 +160,10 @@ struct Summary {
     area: usize,
     max: f64,
     argmax: DVec3,
-    misses: Vec<DVec3>,
 }
 
 impl Summary {
-    fn add(&mut self, p: DVec3, d: f64, beyond: f64, area: bool) {
+    fn add(&mut self, p: DVec3, d: f64, area: bool) {
         if d > self.max || self.count == 0 {
             self.max = d;
             self.argmax = p;
@@ -186,9 +173,6 @@ impl Summary {
             self.area += 1;
             self.sums[0] += d;
             self.sums[1] += d * d;
-        }
-        if d > beyond {
-            self.misses.push(p);
         }
     }
 
@@ -441,7 +425,7 @@ impl PointGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::hausdorff_with_misses;
+    use crate::metrics::hausdorff;
     use crate::subdiv::{subdivide, SubdivOptions, DEFAULT_MAX_FACES};
 
     /// A closed two-group patch (an octahedron, its top and bottom halves), subdivided.
@@ -488,11 +472,12 @@ mod tests {
         }
         let opts = DistanceOptions::default();
         for near in [1e-3, 0.05, 10.0] {
-            let (r, m) = hausdorff_by_group(&by_group, &input, &opts, near, 0.08).unwrap();
-            let (w, wm) = hausdorff_with_misses(&whole, &input, &opts, 0.08).unwrap();
+            let r = hausdorff_by_group(&by_group, &input, &opts, near).unwrap();
+            let w = hausdorff(&whole, &input, &opts).unwrap();
             assert_eq!(r.max_b_to_a, w.max_b_to_a, "near {near}");
             assert_eq!(r.rms_b_to_a, w.rms_b_to_a, "near {near}");
-            assert_eq!(m.b_to_a, wm.b_to_a, "near {near}");
+            assert_eq!(r.mean_b_to_a, w.mean_b_to_a, "near {near}");
+            assert_eq!(r.worst_b_to_a, w.worst_b_to_a, "near {near}");
             // Each group's outline edges are its own boundary: sampled from both sides.
             assert!(r.samples_a >= w.samples_a && r.samples_a < w.samples_a + w.samples_a / 50);
             assert!((r.max_a_to_b - w.max_a_to_b).abs() <= 1e-3 * w.max_a_to_b);
@@ -508,10 +493,10 @@ mod tests {
         let mut input = control.clone();
         input.positions[4].z = 3.0;
         let opts = DistanceOptions::default();
-        let first = hausdorff_by_group(&surface, &input, &opts, 1e-6, 0.5).unwrap();
+        let first = hausdorff_by_group(&surface, &input, &opts, 1e-6).unwrap();
         for near in [1e-2, 1.0, f64::INFINITY] {
             assert_eq!(
-                hausdorff_by_group(&surface, &input, &opts, near, 0.5).unwrap(),
+                hausdorff_by_group(&surface, &input, &opts, near).unwrap(),
                 first
             );
         }
@@ -521,7 +506,7 @@ mod tests {
                 .num_threads(1)
                 .build()
                 .unwrap()
-                .install(|| hausdorff_by_group(&surface, &input, &opts, 1e-2, 0.5).unwrap());
+                .install(|| hausdorff_by_group(&surface, &input, &opts, 1e-2).unwrap());
             assert_eq!(one, first);
         }
     }

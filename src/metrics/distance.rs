@@ -2,7 +2,9 @@
 
 use glam::DVec3;
 
-use super::sampling::{sample_surface, EdgeSamples, SampleCount, SurfaceSample, TriangleSamples};
+use super::sampling::{
+    sample_surface, surface_area, EdgeSamples, SampleCount, SurfaceSample, TriangleSamples,
+};
 use super::surface::{fan_triangulate, ClosestPoint, TriangleSurface};
 use crate::error::Result;
 use crate::mesh::{ControlMesh, Tolerance};
@@ -241,26 +243,6 @@ pub fn hausdorff(
     b: &ControlMesh,
     opts: &DistanceOptions,
 ) -> Result<DistanceReport> {
-    Ok(hausdorff_with_misses(a, b, opts, f64::INFINITY)?.0)
-}
-
-/// The samples of each side farther than some distance from the other surface.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Misses {
-    /// Samples of A farther than the distance from B, in sample order.
-    pub a_to_b: Vec<DVec3>,
-    /// Samples of B farther than the distance from A.
-    pub b_to_a: Vec<DVec3>,
-}
-
-/// [`hausdorff`], and the samples of each side farther than `beyond` from the other (the
-/// same samples: where a check with this report fails).
-pub fn hausdorff_with_misses(
-    a: &ControlMesh,
-    b: &ControlMesh,
-    opts: &DistanceOptions,
-    beyond: f64,
-) -> Result<(DistanceReport, Misses)> {
     let sa = blocked_surface(a)?;
     let sb = blocked_surface(b)?;
     let diagonal = match (a.bounding_box(), b.bounding_box()) {
@@ -274,18 +256,7 @@ pub fn hausdorff_with_misses(
     let pb: Vec<DVec3> = pb.iter().map(|s| s.point).collect();
     let (da, db) = (point_distances(&pa, &sb), point_distances(&pb, &sa));
     let (ab, ba) = (one_sided_of(&pa, &da, na), one_sided_of(&pb, &db, nb));
-    let beyond_of = |p: &[DVec3], d: &[f64]| -> Vec<DVec3> {
-        p.iter()
-            .zip(d)
-            .filter(|(_, &x)| x > beyond)
-            .map(|(&q, _)| q)
-            .collect()
-    };
-    let misses = Misses {
-        a_to_b: beyond_of(&pa, &da),
-        b_to_a: beyond_of(&pb, &db),
-    };
-    Ok((DistanceReport::from_sides(&ab, &ba, diagonal), misses))
+    Ok(DistanceReport::from_sides(&ab, &ba, diagonal))
 }
 
 /// Triangles of one leaf of [`blocked_surface`]'s index.
@@ -338,17 +309,6 @@ pub fn sample_density(opts: &DistanceOptions, reference_area: f64) -> f64 {
         SampleCount::Total(_) => 0.0,
         SampleCount::PerArea(d) => d,
     }
-}
-
-/// The total area of `triangles` over `positions`, summed in order.
-pub fn surface_area(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
-    triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|v| positions[v as usize]);
-            0.5 * (b - a).cross(c - a).length()
-        })
-        .sum()
 }
 
 /// The sample points of the measured surface A (`s`): its vertices (with

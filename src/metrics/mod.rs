@@ -14,11 +14,12 @@ mod surface;
 pub use by_group::hausdorff_by_group;
 pub use distance::{
     closest_points, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
-    hausdorff, hausdorff_with_misses, one_sided_distances, point_distances, DistanceOptions,
-    DistanceReport, Misses, OneSided, DEFAULT_EDGE_SPACING,
+    hausdorff, one_sided_distances, point_distances, DistanceOptions, DistanceReport, OneSided,
+    DEFAULT_EDGE_SPACING,
 };
-pub(crate) use distance::{reference_samples, sample_density, surface_area};
+pub(crate) use distance::{reference_samples, sample_density};
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
+pub(crate) use sampling::surface_area;
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
 pub use sampling::{

@@ -174,6 +174,17 @@ impl<'a> RandomSamples<'a> {
     }
 }
 
+/// The total area of `triangles` over `positions`, summed in order.
+pub fn surface_area(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| positions[v as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum()
+}
+
 /// The most points [`TriangleSamples`] makes of one set of triangles.
 const MAX_TRIANGLE_SAMPLES: usize = 1 << 22;
 
@@ -223,13 +234,7 @@ impl<'a> TriangleSamples<'a> {
         // against an unrelated mesh) is drawn again at the density that makes about
         // `MAX_TRIANGLE_SAMPLES` points on the whole.
         let samples = draw(density, MAX_TRIANGLE_SAMPLES as f64).unwrap_or_else(|| {
-            let area: f64 = triangles
-                .iter()
-                .map(|t| {
-                    let [a, b, c] = t.map(|v| positions[v as usize]);
-                    0.5 * (b - a).cross(c - a).length()
-                })
-                .sum();
+            let area = surface_area(positions, triangles);
             draw(MAX_TRIANGLE_SAMPLES as f64 / area, f64::INFINITY).unwrap_or_default()
         });
         TriangleSamples {

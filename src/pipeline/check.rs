@@ -5,14 +5,13 @@ use crate::codec::Limits;
 use crate::error::Result;
 use crate::mesh::ControlMesh;
 use crate::metrics::DistanceOptions;
-use crate::metrics::{hausdorff_by_group, hausdorff_with_misses};
-use crate::metrics::{DistanceReport, Misses};
+use crate::metrics::{hausdorff, hausdorff_by_group, DistanceReport};
 use crate::surface::{decode_default_surface, DefaultSurface};
 
 /// The file `bytes` against `input`: the surface of its default level (a raw-mode file: its
 /// stored mesh) as A, the input as B, sampled as `opts` says (`scode info --against` and
-/// `scode report`: [`DistanceOptions::default`]); the level measured (0 for raw mode) and
-/// the samples farther than `beyond` from the other side. `near` is a distance most samples
+/// `scode report`: [`DistanceOptions::default`]) and the level measured (0 for raw mode).
+/// `near` is a distance most samples
 /// are expected within (the tolerance, when there is one): it only splits the work. A
 /// control mesh is measured group by group ([`hausdorff_by_group`]), so memory holds the
 /// level's positions, not its triangles.
@@ -22,16 +21,11 @@ pub fn measure_file_against_input(
     limits: &Limits,
     opts: &DistanceOptions,
     near: f64,
-    beyond: f64,
-) -> Result<(DistanceReport, Misses, u32)> {
+) -> Result<(DistanceReport, u32)> {
     match decode_default_surface(bytes, limits)? {
-        DefaultSurface::Stored(mesh) => {
-            let (r, m) = hausdorff_with_misses(&mesh, input, opts, beyond)?;
-            Ok((r, m, 0))
-        }
+        DefaultSurface::Stored(mesh) => Ok((hausdorff(&mesh, input, opts)?, 0)),
         DefaultSurface::ByGroup { surface, level } => {
-            let (r, m) = hausdorff_by_group(&surface, input, opts, near, beyond)?;
-            Ok((r, m, level))
+            Ok((hausdorff_by_group(&surface, input, opts, near)?, level))
         }
     }
 }

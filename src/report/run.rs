@@ -587,13 +587,12 @@ pub(super) fn run_scode_point(
         Ruler::Input(input) => {
             drop(surface);
             let near = crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * input.diagonal();
-            let (distance, _, _) = crate::pipeline::measure_file_against_input(
+            let (distance, _) = crate::pipeline::measure_file_against_input(
                 &bytes,
                 input,
                 &Limits::default(),
                 &Default::default(),
                 near,
-                f64::INFINITY,
             )
             .map_err(|e| format!("cannot measure: {e}"))?;
             RateDistortion::new(bytes.len() as u64, input, &distance)

@@ -81,13 +81,12 @@ pub fn check_model(path: &Path, min_ratio: f64) {
     // same vertices and random points; edge points at the tolerance's spacing rather than
     // the default's, so the max may differ by what one finds between the other's, and the
     // mean and RMS by a vertex counted on two faces where the fit split it.
-    let (info, _, _) = measure_file_against_input(
+    let (info, _) = measure_file_against_input(
         &bytes,
         &input,
         &Limits::default(),
         &DistanceOptions::default(),
         tol,
-        f64::INFINITY,
     )
     .unwrap();
     let e = &report.error;
