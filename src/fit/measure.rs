@@ -33,7 +33,7 @@ use super::allowance::OwnFaces;
 use super::encoder::FitError;
 use super::map_ordered;
 use crate::error::Result;
-use crate::mesh::ControlMesh;
+use crate::mesh::{edge_key, ControlMesh};
 use crate::metrics::{
     box_distance, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
     reference_samples, sample_density, space_filling_order, surface_area, DistanceOptions,
@@ -861,11 +861,10 @@ fn localise(surface: &UniformSurface, g: usize, owners: Option<&[u32]>) -> Local
 /// The chord error estimate of [`ErrorMeter::chord_errors`] for one face's triangles.
 fn chord_error(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
     let corners = |t: &[u32; 3]| t.map(|v| positions[v as usize]);
-    let mut edges: Vec<(u64, u32)> = Vec::with_capacity(3 * triangles.len());
+    let mut edges: Vec<((u32, u32), u32)> = Vec::with_capacity(3 * triangles.len());
     for (k, t) in triangles.iter().enumerate() {
         for i in 0..3 {
-            let (a, b) = (t[i], t[(i + 1) % 3]);
-            edges.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), k as u32));
+            edges.push((edge_key(t[i], t[(i + 1) % 3]), k as u32));
         }
     }
     edges.sort_unstable();
@@ -874,8 +873,8 @@ fn chord_error(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
         if pair[0].0 != pair[1].0 {
             continue;
         }
-        let key = pair[0].0;
-        let edge = positions[(key >> 32) as usize].distance(positions[key as u32 as usize]);
+        let (a, b) = pair[0].0;
+        let edge = positions[a as usize].distance(positions[b as usize]);
         // Twice the area and the unit normal.
         let [(a2, na), (b2, nb)] = [pair[0].1, pair[1].1].map(|k| {
             let c = corners(&triangles[k as usize]);
