@@ -1,4 +1,4 @@
-"""Batch conversion on Ray: every STEP/OBJ/PLY/STL/glb file under INPUT to .scode.
+"""Batch conversion on Ray: every STEP/OBJ/PLY/STL/OFF/glb file under INPUT to .scode.
 
     python -m scode.batch INPUT OUTPUT [--address ADDRESS] [--timeout S] [--memory BYTES]
 
@@ -41,6 +41,7 @@ EXTENSIONS = {
     ".obj": "obj",
     ".ply": "ply",
     ".stl": "stl",
+    ".off": "off",
     ".glb": "glb",
 }
 
@@ -314,7 +315,7 @@ def run(args) -> int:
 def parse_args(argv: Optional[Iterable[str]] = None):
     p = argparse.ArgumentParser(
         prog="python -m scode.batch",
-        description="Convert every STEP/OBJ/PLY/STL/glb file under INPUT to .scode on Ray, "
+        description="Convert every STEP/OBJ/PLY/STL/OFF/glb file under INPUT to .scode on Ray, "
         "with a Parquet manifest in OUTPUT/manifest.",
     )
     p.add_argument("input", help="folder (searched recursively) or one model file")
