@@ -183,6 +183,13 @@ pub struct EncodeOptions {
     /// coarse tessellations of smooth parts, whose facets a smooth surface cannot come nearer
     /// to than their sagitta. Default false. STEP input is always measured against its B-rep.
     pub chord_allowance: bool,
+    /// The bytes of a mesh input's face sidecar (`<name>.faces.json`: each CAD face's
+    /// surface type, the face of group `face_<tag>` under its tag): groups on planes,
+    /// cylinders and cones are then fitted as such instead of by the shape of their
+    /// triangles, which fits some faces a guess cannot (the `scode` command reads the
+    /// sidecar next to its input by itself). Ignored for STEP input, which has its own
+    /// surface types, and in raw mode. Default `None`.
+    pub faces_json: Option<Vec<u8>>,
     /// Default [`Effort::Default`].
     pub effort: Effort,
     /// Store the group names (default true).
@@ -198,6 +205,7 @@ impl Default for EncodeOptions {
         EncodeOptions {
             tolerance: Tolerance::DEFAULT,
             chord_allowance: false,
+            faces_json: None,
             effort: Effort::Default,
             store_group_names: true,
             raw_bits: None,
@@ -300,7 +308,15 @@ pub fn encode(input: Input<'_>, opts: &EncodeOptions) -> Result<Encoded> {
         }
         (None, Some((bytes, fit))) => (bytes, Some(fit)),
         (None, None) => {
-            let (bytes, fit) = encode_fitted(&mesh, &[], &model_opts)?;
+            let hints = match &opts.faces_json {
+                Some(json) => crate::pipeline::sidecar_hints_from_bytes(
+                    json,
+                    Path::new("<faces.json>"),
+                    &mesh,
+                )?,
+                None => Vec::new(),
+            };
+            let (bytes, fit) = encode_fitted(&mesh, &hints, &model_opts)?;
             (bytes, Some(fit))
         }
     };

@@ -16,8 +16,10 @@ kind: :class:`FormatError`, :class:`LimitsError`, :class:`InputError`,
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
-from typing import List, Optional, Sequence
+from pathlib import Path
+from typing import List, Optional, Sequence, Union
 
 import numpy as np
 
@@ -46,6 +48,7 @@ __all__ = [
     "encode_mesh",
     "encode_step",
     "info",
+    "sidecar_path",
 ]
 
 
@@ -201,13 +204,16 @@ def encode_file(
     raw_bits: Optional[int] = None,
     store_names: bool = True,
     chord_allowance: bool = False,
+    faces_json: Optional[bytes] = None,
 ) -> Encoded:
     """Encodes a model file held in memory.
 
     ``format``: "step" (or "stp"), "obj", "ply", "stl", "off" or "glb". A STEP file's B-rep
     faces are tessellated and fitted with their surface types (lengths in millimetres); a
     mesh file's groups (OBJ ``g``, glTF primitives or ``_FEATURE_ID_0``) are its CAD faces.
-    Other arguments as for :func:`encode`.
+    ``faces_json``: the bytes of a mesh's face sidecar (``<name>.faces.json``, each face's
+    surface type; see :func:`sidecar_path`), so that its plane, cylinder and cone faces are
+    fitted as such. Other arguments as for :func:`encode`.
     """
     return _encoded(
         _scode.encode_file(
@@ -219,8 +225,23 @@ def encode_file(
             raw_bits,
             bool(store_names),
             bool(chord_allowance),
+            None if faces_json is None else bytes(faces_json),
         )
     )
+
+
+def sidecar_path(mesh_path: Union[str, "os.PathLike[str]"]) -> Optional[Path]:
+    """The face sidecar of a mesh file, if it exists, by the rule the ``scode`` command
+    uses: ``X_coarse.obj`` and ``X_fine.obj`` -> ``X.faces.json`` beside them, else
+    ``X.faces.json`` for ``X.obj``."""
+    mesh_path = Path(mesh_path)
+    stem = mesh_path.stem
+    bases = [stem[: -len(s)] for s in ("_coarse", "_fine") if stem.endswith(s)][:1] + [stem]
+    for base in bases:
+        candidate = mesh_path.with_name(f"{base}.faces.json")
+        if candidate.is_file():
+            return candidate
+    return None
 
 
 def encode_step(

@@ -22,6 +22,7 @@ def encode_mesh(
     raw_bits: Optional[int],
     store_names: bool,
     chord_allowance: bool = False,
+    faces_json: Optional[bytes] = None,
 ) -> Dict[str, Any]: ...
 def encode_file(
     data: bytes,

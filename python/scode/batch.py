@@ -9,7 +9,9 @@ it fails), so a model that loops or blows up costs its own row and nothing else.
 at all) and the manifest ``OUTPUT/manifest/*.parquet``, one row per model: source, bytes in,
 bytes out, max error, tolerance, encode seconds, status (``ok``, ``tolerance_missed``,
 ``failed``, ``timeout``, ``out_of_memory``), error message, skipped STEP faces, finish time.
-Rows are written in parts as tasks finish, so an interrupted run keeps what it finished.
+Rows are written in parts as tasks finish, so an interrupted run keeps what it finished. A
+mesh's face sidecar (``X.faces.json``, see :func:`scode.sidecar_path`) gives its faces'
+surface types, as for the ``scode`` command.
 
 A rerun skips every model the manifest already has a row for (same size, and for converted
 models the .scode still there); ``--retry-failed`` converts the failures again. Read the
@@ -192,12 +194,15 @@ def worker(input_path: str, output_path: str, options_json: str) -> int:
     out = {"status": "failed"}
     t0 = time.perf_counter()
     try:
+        # A mesh's face sidecar, as the scode command reads it: its surface types.
+        sidecar = scode.sidecar_path(src) if fmt != "step" else None
         enc = scode.encode_file(
             src.read_bytes(),
             fmt,
             opts["tolerance"],
             opts["relative"],
             effort=opts["effort"],
+            faces_json=sidecar.read_bytes() if sidecar else None,
         )
     except scode.ScodeError as e:
         out["error"] = f"{type(e).__name__}: {e}"

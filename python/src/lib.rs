@@ -184,7 +184,7 @@ fn encode_mesh<'py>(
 /// Encodes a file in memory: `format` is "step" (or "stp") or a mesh format ("obj", "ply",
 /// "stl", "off", "glb").
 #[pyfunction]
-#[pyo3(signature = (data, format, tolerance, relative, effort, raw_bits, store_names, chord_allowance=false))]
+#[pyo3(signature = (data, format, tolerance, relative, effort, raw_bits, store_names, chord_allowance=false, faces_json=None))]
 #[allow(clippy::too_many_arguments)]
 fn encode_file<'py>(
     py: Python<'py>,
@@ -196,8 +196,9 @@ fn encode_file<'py>(
     raw_bits: Option<u8>,
     store_names: bool,
     chord_allowance: bool,
+    faces_json: Option<Vec<u8>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let opts = encode_options(
+    let mut opts = encode_options(
         tolerance,
         relative,
         effort,
@@ -205,6 +206,7 @@ fn encode_file<'py>(
         store_names,
         chord_allowance,
     )?;
+    opts.faces_json = faces_json;
     let format = format.to_ascii_lowercase();
     let input = if format == "step" || format == "stp" {
         scode::Input::Step(data)

@@ -172,6 +172,19 @@ def test_encode_step_and_file():
     assert scode.info(enc.data)["groups"] == 10
 
 
+def test_face_sidecar_gives_surface_types():
+    # Without its sidecar's surface types this part misses the tolerance (some cylinder
+    # faces are not recognised from their triangles); with them it meets it, as the scode
+    # command does, which reads the sidecar next to the mesh.
+    path = corpus_dir() / "tess" / "trj6_b1-ec-214_fine.obj"
+    sidecar = scode.sidecar_path(path)
+    assert sidecar == corpus_dir() / "tess" / "trj6_b1-ec-214.faces.json"
+    enc = scode.encode_file(path.read_bytes(), "obj", faces_json=sidecar.read_bytes())
+    assert enc.within_tolerance
+    with pytest.raises(scode.InputError, match="faces.json"):
+        scode.encode_file(path.read_bytes(), "obj", faces_json=b"{ not json")
+
+
 def test_ungrouped_mesh_is_segmented():
     v, f, _, _ = read_obj(corpus_dir() / "tess" / "block_fillet3_coarse.obj")
     mesh = scode.decode(scode.encode(v, f))

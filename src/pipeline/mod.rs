@@ -141,11 +141,25 @@ pub fn sidecar_hints(
         return Ok(None);
     };
     let faces = faces_json::read_faces_json(&side)?;
-    let hints = faces_json::face_info_for_groups(mesh, &faces)
+    Ok(Some((side.clone(), hints_for_faces(mesh, &faces))))
+}
+
+/// Per-group surface hints from the bytes of a `faces.json` sidecar (named `name` in
+/// errors), matched by group name: groups without a face of their name get none.
+pub fn sidecar_hints_from_bytes(
+    bytes: &[u8],
+    name: &Path,
+    mesh: &ControlMesh,
+) -> Result<Vec<SurfaceHint>> {
+    let faces = faces_json::parse_faces_json(bytes, name)?;
+    Ok(hints_for_faces(mesh, &faces))
+}
+
+fn hints_for_faces(mesh: &ControlMesh, faces: &[faces_json::FaceInfo]) -> Vec<SurfaceHint> {
+    faces_json::face_info_for_groups(mesh, faces)
         .iter()
         .map(|fi| fi.map_or(SurfaceHint::Unknown, |f| hint_for(&f.surface)))
-        .collect();
-    Ok(Some((side, hints)))
+        .collect()
 }
 
 /// Bits per coordinate so that the Euclidean quantisation error `sqrt(3)/2 * R/(2^b - 1)`
