@@ -12,7 +12,7 @@ use scode::{ControlMesh, Tolerance};
 
 use super::exit::CliError;
 use super::{DecodeArgs, EncodeArgs, InfoArgs, ReportArgs, SegmentArgs, SubdivideArgs, Writes};
-use scode::fit::encoder::{Reference, SurfaceHint};
+use scode::fit::encoder::{FitReport, Reference, SurfaceHint};
 use scode::io::step;
 use scode::pipeline::{
     decode_surface, encode_fitted, encode_step, sidecar_hints, Detail, ModelEncodeOptions,
@@ -284,50 +284,10 @@ fn check_skipped(args: &EncodeArgs, model: &step::StepModel) -> Result<()> {
 
 pub fn encode(args: &EncodeArgs) -> Result<()> {
     let output = args.output.checked(&args.input, Writes::Scode)?;
-    if args.raw && (args.tolerance.is_some() || args.mean_tolerance.is_some()) {
-        return Err(CliError::Usage(
-            "--tolerance and --mean-tolerance apply to fitting; with --raw use --bits to set \
-             the precision"
-                .into(),
-        )
-        .into());
-    }
-    if args.raw && args.chord_allowance {
-        return Err(CliError::Usage(
-            "--chord-allowance applies to fitting (it changes what the tolerance is measured \
-             against); --raw stores the input as it is"
-                .into(),
-        )
-        .into());
-    }
+    check_raw_flags(args)?;
     let t0 = Instant::now();
-    let mut model_opts = ModelEncodeOptions {
-        quantization_bits: args.bits,
-        store_group_names: !args.no_names,
-        effort: args.effort,
-        ..Default::default()
-    };
-    model_opts.fit.tolerance = args.tolerance();
-    model_opts.fit.mean_tolerance = args.mean_tolerance();
-    model_opts.fit.chord_allowance = args.chord_allowance;
-    let is_step = step::is_step_path(&args.input);
-    // A STEP file is read and fitted in one call (at `--effort max`, several tessellations).
-    let (mesh, step_fit) = if is_step && !args.raw {
-        let bar = spinner(&format!("reading and fitting {}", args.input.display()));
-        let result = encode_step(&args.input, &model_opts);
-        bar.finish_and_clear();
-        let (model, bytes, fit) =
-            result.with_context(|| format!("cannot encode {}", args.input.display()))?;
-        print_step_summary(&args.input, &model, args.verbose);
-        check_skipped(args, &model)?;
-        (model.mesh, Some((bytes, fit)))
-    } else if is_step {
-        (read_step_input(args)?, None)
-    } else {
-        let (mesh, report) = io::read_mesh(&args.input)?;
-        print_read_report(&args.input, &report);
-        (mesh, None)
-    };
+    let model_opts = model_encode_options(args);
+    let (mesh, step_fit) = read_encode_input(args, &model_opts)?;
     let t_read = t0.elapsed();
     let t1 = Instant::now();
     // What the fit missed, reported once the file is written.
@@ -344,115 +304,12 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     } else {
         let (bytes, fit) = match step_fit {
             Some(done) => done,
-            None => {
-                let hints = match sidecar_hints(&args.input, &mesh)? {
-                    Some((side, hints)) if !args.no_sidecar => {
-                        println!("using surface types from {}", side.display());
-                        hints
-                    }
-                    _ => Vec::new(),
-                };
-                let bar = spinner(&format!("fitting {}", args.input.display()));
-                let result = encode_fitted(&mesh, &hints, &model_opts);
-                bar.finish_and_clear();
-                result.with_context(|| format!("cannot fit {}", args.input.display()))?
-            }
+            None => fit_mesh(args, &mesh, &model_opts)?,
         };
-        let kinds: Vec<String> = fit
-            .patch_kinds
-            .iter()
-            .map(|(k, n)| format!("{n} {k}"))
-            .collect();
-        println!(
-            "fitted {} faces ({}) with {} control vertices and {} control faces{}",
-            fit.patch_kinds.values().sum::<usize>(),
-            kinds.join(", "),
-            fit.control_vertices,
-            fit.control_faces,
-            if fit.segmented {
-                " (segmented: the input had no groups)"
-            } else {
-                ""
-            }
-        );
-        if fit.faceted_groups > 0 {
-            let (faces, their, them) = match fit.faceted_groups {
-                1 => ("1 face is".to_string(), "its", "it"),
-                n => (format!("{n} faces are"), "their", "them"),
-            };
-            println!(
-                "{faces} stored as {their} input facets: no smooth patch came within the \
-                 tolerance of {them}{}",
-                if fit.reference == Reference::InputMesh {
-                    " (on coarse facets, --chord-allowance holds the tolerance beyond their \
-                     chord error and fits smooth patches, in fewer bytes)"
-                } else {
-                    ""
-                }
-            );
-        }
-        let d = fit.diagonal.max(f64::MIN_POSITIVE);
-        println!(
-            "decoded surface at level {} vs {}: max {:.4e} ({:.2e} of the diagonal), rms {:.4e}, mean {:.4e}; \
-             tolerance {:.4e} {}",
-            fit.default_level,
-            fit.reference.describe(),
-            fit.error.max,
-            fit.error.max / d,
-            fit.error.rms,
-            fit.error.mean,
-            fit.tolerance,
-            if fit.error.max_excess <= fit.tolerance {
-                "met".to_string()
-            } else {
-                missed.push(format!(
-                    "the max distance to {} is {:.2}x the tolerance{}",
-                    fit.reference.describe(),
-                    fit.error.max_excess / fit.tolerance,
-                    if fit.reference == Reference::InputMesh {
-                        " (--chord-allowance holds the tolerance beyond the input's chord \
-                         error)"
-                    } else {
-                        ""
-                    }
-                ));
-                format!(
-                    "NOT met: {:.2}x the tolerance after {} rounds",
-                    fit.error.max_excess / fit.tolerance,
-                    fit.rounds
-                )
-            }
-        );
-        if let Some(mt) = fit.mean_tolerance {
-            println!(
-                "mean tolerance {mt:.4e} {}",
-                if fit.error.mean <= mt {
-                    "met".to_string()
-                } else {
-                    missed.push(format!(
-                        "the mean distance is {:.2}x the mean tolerance",
-                        fit.error.mean / mt
-                    ));
-                    format!(
-                        "NOT met: the mean is {:.2}x it (lower --tolerance)",
-                        fit.error.mean / mt
-                    )
-                }
-            );
-        }
+        print_fit_summary(&fit);
+        print_fit_error(&fit, &mut missed);
         if args.verbose {
-            for note in &fit.notes {
-                println!("  {note}");
-            }
-            let mut totals: std::collections::BTreeMap<&str, f64> = Default::default();
-            for (stage, secs) in &fit.timings {
-                *totals.entry(stage).or_default() += secs;
-            }
-            let t: Vec<String> = totals
-                .iter()
-                .map(|(k, v)| format!("{k} {:.1} ms", v * 1e3))
-                .collect();
-            println!("  fit timings: {}", t.join(", "));
+            print_fit_details(&fit);
         }
         bytes
     };
@@ -485,6 +342,198 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         .into());
     }
     Ok(())
+}
+
+/// The usage errors of fitting options given with `--raw`.
+fn check_raw_flags(args: &EncodeArgs) -> Result<()> {
+    if args.raw && (args.tolerance.is_some() || args.mean_tolerance.is_some()) {
+        return Err(CliError::Usage(
+            "--tolerance and --mean-tolerance apply to fitting; with --raw use --bits to set \
+             the precision"
+                .into(),
+        )
+        .into());
+    }
+    if args.raw && args.chord_allowance {
+        return Err(CliError::Usage(
+            "--chord-allowance applies to fitting (it changes what the tolerance is measured \
+             against); --raw stores the input as it is"
+                .into(),
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// The fitting pipeline's options from the command line.
+fn model_encode_options(args: &EncodeArgs) -> ModelEncodeOptions {
+    let mut model_opts = ModelEncodeOptions {
+        quantization_bits: args.bits,
+        store_group_names: !args.no_names,
+        effort: args.effort,
+        ..Default::default()
+    };
+    model_opts.fit.tolerance = args.tolerance();
+    model_opts.fit.mean_tolerance = args.mean_tolerance();
+    model_opts.fit.chord_allowance = args.chord_allowance;
+    model_opts
+}
+
+/// An encoded file and the fit's report on it.
+type FittedFile = (Vec<u8>, FitReport);
+
+/// Reads the input and prints what was read. A STEP file to fit is read and fitted in one
+/// call (at `--effort max`, several tessellations): then the encoded bytes and the fit's
+/// report come with the mesh.
+fn read_encode_input(
+    args: &EncodeArgs,
+    model_opts: &ModelEncodeOptions,
+) -> Result<(ControlMesh, Option<FittedFile>)> {
+    let is_step = step::is_step_path(&args.input);
+    Ok(if is_step && !args.raw {
+        let bar = spinner(&format!("reading and fitting {}", args.input.display()));
+        let result = encode_step(&args.input, model_opts);
+        bar.finish_and_clear();
+        let (model, bytes, fit) =
+            result.with_context(|| format!("cannot encode {}", args.input.display()))?;
+        print_step_summary(&args.input, &model, args.verbose);
+        check_skipped(args, &model)?;
+        (model.mesh, Some((bytes, fit)))
+    } else if is_step {
+        (read_step_input(args)?, None)
+    } else {
+        let (mesh, report) = io::read_mesh(&args.input)?;
+        print_read_report(&args.input, &report);
+        (mesh, None)
+    })
+}
+
+/// Fits a mesh input, with the surface types of its `.faces.json` sidecar unless
+/// `--no-sidecar`.
+fn fit_mesh(
+    args: &EncodeArgs,
+    mesh: &ControlMesh,
+    model_opts: &ModelEncodeOptions,
+) -> Result<FittedFile> {
+    let hints = match sidecar_hints(&args.input, mesh)? {
+        Some((side, hints)) if !args.no_sidecar => {
+            println!("using surface types from {}", side.display());
+            hints
+        }
+        _ => Vec::new(),
+    };
+    let bar = spinner(&format!("fitting {}", args.input.display()));
+    let result = encode_fitted(mesh, &hints, model_opts);
+    bar.finish_and_clear();
+    result.with_context(|| format!("cannot fit {}", args.input.display()))
+}
+
+/// Prints what the fit made: faces by patch kind, control mesh size, and the faces stored
+/// as their input facets.
+fn print_fit_summary(fit: &FitReport) {
+    let kinds: Vec<String> = fit
+        .patch_kinds
+        .iter()
+        .map(|(k, n)| format!("{n} {k}"))
+        .collect();
+    println!(
+        "fitted {} faces ({}) with {} control vertices and {} control faces{}",
+        fit.patch_kinds.values().sum::<usize>(),
+        kinds.join(", "),
+        fit.control_vertices,
+        fit.control_faces,
+        if fit.segmented {
+            " (segmented: the input had no groups)"
+        } else {
+            ""
+        }
+    );
+    if fit.faceted_groups > 0 {
+        let (faces, their, them) = match fit.faceted_groups {
+            1 => ("1 face is".to_string(), "its", "it"),
+            n => (format!("{n} faces are"), "their", "them"),
+        };
+        println!(
+            "{faces} stored as {their} input facets: no smooth patch came within the \
+             tolerance of {them}{}",
+            if fit.reference == Reference::InputMesh {
+                " (on coarse facets, --chord-allowance holds the tolerance beyond their \
+                 chord error and fits smooth patches, in fewer bytes)"
+            } else {
+                ""
+            }
+        );
+    }
+}
+
+/// Prints the decoded surface's error against the tolerance (and the mean tolerance, when
+/// given); each one missed is added to `missed`.
+fn print_fit_error(fit: &FitReport, missed: &mut Vec<String>) {
+    let d = fit.diagonal.max(f64::MIN_POSITIVE);
+    println!(
+        "decoded surface at level {} vs {}: max {:.4e} ({:.2e} of the diagonal), rms {:.4e}, mean {:.4e}; \
+         tolerance {:.4e} {}",
+        fit.default_level,
+        fit.reference.describe(),
+        fit.error.max,
+        fit.error.max / d,
+        fit.error.rms,
+        fit.error.mean,
+        fit.tolerance,
+        if fit.error.max_excess <= fit.tolerance {
+            "met".to_string()
+        } else {
+            missed.push(format!(
+                "the max distance to {} is {:.2}x the tolerance{}",
+                fit.reference.describe(),
+                fit.error.max_excess / fit.tolerance,
+                if fit.reference == Reference::InputMesh {
+                    " (--chord-allowance holds the tolerance beyond the input's chord \
+                     error)"
+                } else {
+                    ""
+                }
+            ));
+            format!(
+                "NOT met: {:.2}x the tolerance after {} rounds",
+                fit.error.max_excess / fit.tolerance,
+                fit.rounds
+            )
+        }
+    );
+    if let Some(mt) = fit.mean_tolerance {
+        println!(
+            "mean tolerance {mt:.4e} {}",
+            if fit.error.mean <= mt {
+                "met".to_string()
+            } else {
+                missed.push(format!(
+                    "the mean distance is {:.2}x the mean tolerance",
+                    fit.error.mean / mt
+                ));
+                format!(
+                    "NOT met: the mean is {:.2}x it (lower --tolerance)",
+                    fit.error.mean / mt
+                )
+            }
+        );
+    }
+}
+
+/// Prints the fit's notes and its time per stage (`--verbose`).
+fn print_fit_details(fit: &FitReport) {
+    for note in &fit.notes {
+        println!("  {note}");
+    }
+    let mut totals: std::collections::BTreeMap<&str, f64> = Default::default();
+    for (stage, secs) in &fit.timings {
+        *totals.entry(stage).or_default() += secs;
+    }
+    let t: Vec<String> = totals
+        .iter()
+        .map(|(k, v)| format!("{k} {:.1} ms", v * 1e3))
+        .collect();
+    println!("  fit timings: {}", t.join(", "));
 }
 
 pub fn decode(args: &DecodeArgs) -> Result<()> {

@@ -289,13 +289,91 @@ pub(crate) fn rebuild(labels: &[Label], budget: &mut Budget) -> Result<Rebuilt> 
     }
     let nl = labels.len() as u64;
     budget.charge(REBUILD_MEMORY, 8 * nl)?;
+    let ComponentScan {
+        face_of_label,
+        mut label_edge,
+        faces: nfaces,
+        components: ncomps,
+        max_depth,
+    } = scan_components(labels)?;
+
+    let nh = 2 * (labels.len() - ncomps);
+    let nh64 = nh as u64;
+    // next, twin and face (kept), the active boundary's two links and the stack (scratch),
+    // the faces (kept).
+    let scratch = 4 * nl + 8 * nh64 + STACK_ENTRY_BYTES * max_depth;
+    budget.charge(
+        REBUILD_MEMORY,
+        12 * nh64
+            + 8 * nh64
+            + STACK_ENTRY_BYTES * max_depth
+            + FACE_RECORD_BYTES * u64::from(nfaces),
+    )?;
+    let mut unzip = Unzip::with_capacity(nh, max_depth, nfaces);
+    let mut s = 0;
+    while s < labels.len() {
+        let e = label_edge[s] as usize;
+        label_edge[s] = NONE;
+        unzip.undo_component(labels, &face_of_label, &mut label_edge, s..e, budget)?;
+        s = e;
+    }
+    let Unzip {
+        next,
+        twin,
+        face,
+        faces,
+        ..
+    } = unzip;
+    drop(face_of_label);
+    budget.release(scratch);
+    if let Some(h) = next.iter().position(|&n| n == NONE) {
+        return Err(bad("labels", format!("half-edge {h} ends up in no face")));
+    }
+    // prev and the vertex of every half-edge (kept), the union-find and its numbering
+    // (scratch).
+    budget.charge(REBUILD_MEMORY, 16 * nh64)?;
+    let mut prev = vec![NONE; nh];
+    for h in 0..nh {
+        prev[next[h] as usize] = h as u32;
+    }
+    let vertices = number_vertices(&next, &twin, &faces, budget)?;
+    budget.release(8 * nh64);
+    Ok(Rebuilt {
+        next,
+        prev,
+        twin,
+        face,
+        vertex: vertices.vertex,
+        faces,
+        label_edge,
+        vertex_count: vertices.count as usize,
+        vertex_out: vertices.out,
+        bytes: rebuilt_bytes(nl, nh64, u64::from(nfaces), vertices.roots as u64),
+    })
+}
+
+/// What [`scan_components`] finds in the labels before anything is rebuilt.
+struct ComponentScan {
+    /// Face number of every F and H label (`NONE` for the other labels).
+    face_of_label: Vec<u32>,
+    /// At a component's first label, the end of its component (one past its last label);
+    /// `NONE` elsewhere.
+    label_edge: Vec<u32>,
+    /// Number of faces (F and H labels).
+    faces: u32,
+    /// Number of connected components.
+    components: usize,
+    /// Bound on the stack of suspended boundaries within one component.
+    max_depth: u64,
+}
+
+/// Forward pass over the labels: splits them into components by counting open boundaries,
+/// numbers the faces, and bounds the stack of suspended boundaries (an E or M label of a
+/// component adds at most one entry). Fails when a component does not start with F or the
+/// last one is not closed by E.
+fn scan_components(labels: &[Label]) -> Result<ComponentScan> {
     let mut face_of_label = vec![NONE; labels.len()];
-    // The edge each label owns; until the boundaries are undone, at a component's first
-    // label, the end of its component.
     let mut label_edge = vec![NONE; labels.len()];
-    // Forward pass: split into components by counting open boundaries, number faces, and
-    // bound the stack of suspended boundaries (an E or M label of a component adds at most
-    // one entry).
     let (mut open, mut start, mut nfaces, mut ncomps) = (0u64, 0usize, 0u32, 0usize);
     let (mut depth, mut max_depth) = (0u64, 0u64);
     for (j, lab) in labels.iter().enumerate() {
@@ -332,270 +410,342 @@ pub(crate) fn rebuild(labels: &[Label], budget: &mut Budget) -> Result<Rebuilt> 
     if open != 0 {
         return Err(bad("labels", "the last component does not end with E"));
     }
+    Ok(ComponentScan {
+        face_of_label,
+        label_edge,
+        faces: nfaces,
+        components: ncomps,
+        max_depth,
+    })
+}
 
-    let nh = 2 * (labels.len() - ncomps);
-    let nh64 = nh as u64;
-    // next, twin and face (kept), the active boundary's two links and the stack (scratch),
-    // the faces (kept).
-    let scratch = 4 * nl + 8 * nh64 + STACK_ENTRY_BYTES * max_depth;
-    budget.charge(
-        REBUILD_MEMORY,
-        12 * nh64
-            + 8 * nh64
-            + STACK_ENTRY_BYTES * max_depth
-            + FACE_RECORD_BYTES * u64::from(nfaces),
-    )?;
-    let mut next: Vec<u32> = Vec::with_capacity(nh);
-    let mut twin: Vec<u32> = Vec::with_capacity(nh);
-    let mut face: Vec<u32> = Vec::with_capacity(nh);
-    let mut a_next: Vec<u32> = Vec::with_capacity(nh);
-    let mut a_prev: Vec<u32> = Vec::with_capacity(nh);
-    let mut stack: Vec<(u32, u64)> = Vec::with_capacity(max_depth as usize);
-    let mut faces = vec![
-        RebuiltFace {
-            first: NONE,
-            degree: 0,
-            hole: false,
-            start: false
-        };
-        nfaces as usize
-    ];
-    let new_pair = |next: &mut Vec<u32>,
-                    twin: &mut Vec<u32>,
-                    face: &mut Vec<u32>,
-                    a_next: &mut Vec<u32>,
-                    a_prev: &mut Vec<u32>|
-     -> Result<(u32, u32)> {
-        let g = next.len();
+/// The half-edge structure as the rebuild grows it, and the active boundary the labels of a
+/// component are undone on (read backwards from the component's last label).
+struct Unzip {
+    next: Vec<u32>,
+    twin: Vec<u32>,
+    face: Vec<u32>,
+    /// The active boundary: a cyclic list of half-edges, linked both ways.
+    a_next: Vec<u32>,
+    a_prev: Vec<u32>,
+    /// Suspended boundaries: each one's gate and length.
+    stack: Vec<(u32, u64)>,
+    faces: Vec<RebuiltFace>,
+    /// Gate of the active boundary (`NONE` while it is empty) and its length.
+    gate: u32,
+    len: u64,
+}
+
+impl Unzip {
+    /// Empty arrays with room for `half_edges` half-edges, a stack `max_depth` deep and
+    /// `faces` faces (all charged by the caller).
+    fn with_capacity(half_edges: usize, max_depth: u64, faces: u32) -> Self {
+        Unzip {
+            next: Vec::with_capacity(half_edges),
+            twin: Vec::with_capacity(half_edges),
+            face: Vec::with_capacity(half_edges),
+            a_next: Vec::with_capacity(half_edges),
+            a_prev: Vec::with_capacity(half_edges),
+            stack: Vec::with_capacity(max_depth as usize),
+            faces: vec![
+                RebuiltFace {
+                    first: NONE,
+                    degree: 0,
+                    hole: false,
+                    start: false
+                };
+                faces as usize
+            ],
+            gate: NONE,
+            len: 0,
+        }
+    }
+
+    /// Appends a pair of twin half-edges, unlinked, and returns them.
+    fn new_pair(&mut self) -> Result<(u32, u32)> {
+        let g = self.next.len();
         if g + 2 >= NONE as usize {
             return Err(bad("labels", "too many half-edges"));
         }
         for _ in 0..2 {
-            next.push(NONE);
-            face.push(NONE);
-            a_next.push(NONE);
-            a_prev.push(NONE);
+            self.next.push(NONE);
+            self.face.push(NONE);
+            self.a_next.push(NONE);
+            self.a_prev.push(NONE);
         }
-        twin.push(g as u32 + 1);
-        twin.push(g as u32);
+        self.twin.push(g as u32 + 1);
+        self.twin.push(g as u32);
         Ok((g as u32, g as u32 + 1))
-    };
+    }
 
-    let mut s = 0;
-    while s < labels.len() {
-        let e = label_edge[s] as usize;
-        label_edge[s] = NONE;
-        let mut gate = NONE;
-        let mut len = 0u64;
-        stack.clear();
-        for j in (s + 1..e).rev() {
+    /// Undoes the labels of the component `labels[component]`: its labels after the first
+    /// in reverse order, then its start face. Records in `label_edge` the half-edge each
+    /// label owns.
+    fn undo_component(
+        &mut self,
+        labels: &[Label],
+        face_of_label: &[u32],
+        label_edge: &mut [u32],
+        component: std::ops::Range<usize>,
+        budget: &mut Budget,
+    ) -> Result<()> {
+        let s = component.start;
+        self.gate = NONE;
+        self.len = 0;
+        self.stack.clear();
+        for j in (s + 1..component.end).rev() {
             let lab = labels[j];
             match lab {
-                Label::E => {
-                    if gate != NONE {
-                        stack.push((gate, len));
-                    }
-                    let (g, t) =
-                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    a_next[g as usize] = t;
-                    a_prev[t as usize] = g;
-                    a_next[t as usize] = g;
-                    a_prev[g as usize] = t;
-                    gate = g;
-                    len = 2;
-                    label_edge[j] = g;
-                }
-                Label::R | Label::L => {
-                    if gate == NONE {
-                        return Err(bad(
-                            "labels",
-                            format!("label {j} ({lab:?}) on an empty boundary"),
-                        ));
-                    }
-                    let (g, t) =
-                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    let (first, second) = if lab == Label::R { (g, t) } else { (t, g) };
-                    let n = a_next[gate as usize];
-                    a_next[gate as usize] = first;
-                    a_prev[first as usize] = gate;
-                    a_next[first as usize] = second;
-                    a_prev[second as usize] = first;
-                    a_next[second as usize] = n;
-                    a_prev[n as usize] = second;
-                    gate = g;
-                    len += 2;
-                    label_edge[j] = g;
-                }
-                Label::S => {
-                    let Some((gy, leny)) = stack.pop() else {
-                        return Err(bad(
-                            "labels",
-                            format!("label {j} (S) without a suspended boundary"),
-                        ));
-                    };
-                    if gate == NONE {
-                        return Err(bad("labels", format!("label {j} (S) on an empty boundary")));
-                    }
-                    let (g, t) =
-                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    let xf = a_next[gate as usize];
-                    let yf = a_next[gy as usize];
-                    a_next[g as usize] = xf;
-                    a_prev[xf as usize] = g;
-                    a_next[gate as usize] = t;
-                    a_prev[t as usize] = gate;
-                    a_next[t as usize] = yf;
-                    a_prev[yf as usize] = t;
-                    a_next[gy as usize] = g;
-                    a_prev[g as usize] = gy;
-                    gate = g;
-                    len += leny + 2;
-                    label_edge[j] = g;
-                }
-                Label::M { i, k, l } => {
-                    if gate == NONE
-                        || l < 2
-                        || k >= l
-                        || u64::from(l) > len.saturating_sub(1) + 1
-                        || len < u64::from(l)
-                        || i as usize > stack.len()
-                    {
-                        return Err(bad(
-                            "labels",
-                            format!("label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {len}, stack depth {})", stack.len()),
-                        ));
-                    }
-                    // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the
-                    // gate. The walks to Bpart's end and to B's gate go the shorter way round
-                    // and are charged first (their length is the file's to choose), and so is
-                    // inserting B i entries deep.
-                    let (l64, b_gate_at) = (u64::from(l), u64::from((l - k) % l));
-                    let (b_end_ahead, b_end_back) = (l64 - 1, len - l64 + 1);
-                    let b_gate_back = l64 - b_gate_at;
-                    budget.work(
-                        b_end_ahead.min(b_end_back) + b_gate_at.min(b_gate_back) + u64::from(i),
-                    )?;
-                    let (g, t) =
-                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    let blast = if b_end_ahead <= b_end_back {
-                        walk(&a_next, gate, b_end_ahead)
-                    } else {
-                        walk(&a_prev, gate, b_end_back)
-                    };
-                    let b1 = a_next[gate as usize];
-                    let a_first = a_next[blast as usize];
-                    // B = [t, b1 .. blast]
-                    a_next[t as usize] = b1;
-                    a_prev[b1 as usize] = t;
-                    a_next[blast as usize] = t;
-                    a_prev[t as usize] = blast;
-                    // A = [g, a_first .. gate]
-                    a_next[g as usize] = a_first;
-                    a_prev[a_first as usize] = g;
-                    a_next[gate as usize] = g;
-                    a_prev[g as usize] = gate;
-                    let bgate = if b_gate_at <= b_gate_back {
-                        walk(&a_next, t, b_gate_at)
-                    } else {
-                        walk(&a_prev, t, b_gate_back)
-                    };
-                    let at = stack.len() - i as usize;
-                    stack.insert(at, (bgate, u64::from(l)));
-                    gate = g;
-                    len = len - u64::from(l - 1) + 1;
-                    label_edge[j] = g;
-                }
-                Label::F(l) | Label::H(l) => {
-                    if gate == NONE || l < 3 || len < u64::from(l) {
-                        return Err(bad(
-                            "labels",
-                            format!("label {j} ({lab:?}) does not fit the boundary (length {len})"),
-                        ));
-                    }
-                    let f = face_of_label[j];
-                    let (g, t) =
-                        new_pair(&mut next, &mut twin, &mut face, &mut a_next, &mut a_prev)?;
-                    let mut u1 = gate;
-                    for _ in 0..l - 2 {
-                        u1 = a_prev[u1 as usize];
-                    }
-                    let (p, n) = (a_prev[u1 as usize], a_next[gate as usize]);
-                    // Face cycle t -> u1 -> ... -> gate -> t.
-                    next[t as usize] = u1;
-                    face[t as usize] = f;
-                    let mut x = u1;
-                    loop {
-                        face[x as usize] = f;
-                        if x == gate {
-                            next[x as usize] = t;
-                            break;
-                        }
-                        next[x as usize] = a_next[x as usize];
-                        x = a_next[x as usize];
-                    }
-                    a_next[p as usize] = g;
-                    a_prev[g as usize] = p;
-                    a_next[g as usize] = n;
-                    a_prev[n as usize] = g;
-                    faces[f as usize] = RebuiltFace {
-                        first: t,
-                        degree: l,
-                        hole: matches!(lab, Label::H(_)),
-                        start: false,
-                    };
-                    gate = g;
-                    len = len - u64::from(l - 1) + 1;
-                    label_edge[j] = g;
-                }
+                Label::E => self.undo_e()?,
+                Label::R | Label::L => self.undo_neighbour_zip(j, lab)?,
+                Label::S => self.undo_s(j)?,
+                Label::M { i, k, l } => self.undo_m(j, i, k, l, budget)?,
+                Label::F(l) | Label::H(l) => self.undo_face(j, lab, l, face_of_label[j])?,
             }
+            label_edge[j] = self.gate;
         }
-        let Label::F(l0) = labels[s] else {
-            unreachable!("component start checked above")
-        };
-        if !stack.is_empty() || len != u64::from(l0) || l0 < 3 {
+        self.close_start_face(labels, s, face_of_label[s])
+    }
+
+    /// E: the active boundary (if any) is suspended and a new one of two half-edges starts.
+    fn undo_e(&mut self) -> Result<()> {
+        let (gate, len) = (self.gate, self.len);
+        if gate != NONE {
+            self.stack.push((gate, len));
+        }
+        let (g, t) = self.new_pair()?;
+        let (a_next, a_prev) = (&mut self.a_next, &mut self.a_prev);
+        a_next[g as usize] = t;
+        a_prev[t as usize] = g;
+        a_next[t as usize] = g;
+        a_prev[g as usize] = t;
+        self.gate = g;
+        self.len = 2;
+        Ok(())
+    }
+
+    /// R or L (label `j`): a pair is inserted after the gate, the new gate first (R) or
+    /// second (L).
+    fn undo_neighbour_zip(&mut self, j: usize, lab: Label) -> Result<()> {
+        let gate = self.gate;
+        if gate == NONE {
             return Err(bad(
                 "labels",
-                format!("component starting at label {s}: boundary of length {len} (stack {}) does not match the start face F{l0}", stack.len()),
+                format!("label {j} ({lab:?}) on an empty boundary"),
             ));
         }
-        let f = face_of_label[s];
-        let mut x = gate;
-        for _ in 0..l0 {
+        let (g, t) = self.new_pair()?;
+        let (first, second) = if lab == Label::R { (g, t) } else { (t, g) };
+        let (a_next, a_prev) = (&mut self.a_next, &mut self.a_prev);
+        let n = a_next[gate as usize];
+        a_next[gate as usize] = first;
+        a_prev[first as usize] = gate;
+        a_next[first as usize] = second;
+        a_prev[second as usize] = first;
+        a_next[second as usize] = n;
+        a_prev[n as usize] = second;
+        self.gate = g;
+        self.len += 2;
+        Ok(())
+    }
+
+    /// S (label `j`): the top suspended boundary is joined to the active one by a pair.
+    fn undo_s(&mut self, j: usize) -> Result<()> {
+        let Some((gy, leny)) = self.stack.pop() else {
+            return Err(bad(
+                "labels",
+                format!("label {j} (S) without a suspended boundary"),
+            ));
+        };
+        let gate = self.gate;
+        if gate == NONE {
+            return Err(bad("labels", format!("label {j} (S) on an empty boundary")));
+        }
+        let (g, t) = self.new_pair()?;
+        let (a_next, a_prev) = (&mut self.a_next, &mut self.a_prev);
+        let xf = a_next[gate as usize];
+        let yf = a_next[gy as usize];
+        a_next[g as usize] = xf;
+        a_prev[xf as usize] = g;
+        a_next[gate as usize] = t;
+        a_prev[t as usize] = gate;
+        a_next[t as usize] = yf;
+        a_prev[yf as usize] = t;
+        a_next[gy as usize] = g;
+        a_prev[g as usize] = gy;
+        self.gate = g;
+        self.len += leny + 2;
+        Ok(())
+    }
+
+    /// M(i, k, l) (label `j`): the active boundary is cut in two by a pair; the part of
+    /// length `l` after the gate is suspended `i` entries deep, with its gate `k` back.
+    fn undo_m(&mut self, j: usize, i: u32, k: u32, l: u32, budget: &mut Budget) -> Result<()> {
+        let (gate, len) = (self.gate, self.len);
+        if gate == NONE
+            || l < 2
+            || k >= l
+            || u64::from(l) > len.saturating_sub(1) + 1
+            || len < u64::from(l)
+            || i as usize > self.stack.len()
+        {
+            return Err(bad(
+                "labels",
+                format!("label {j} M(i={i}, k={k}, l={l}) does not fit the boundary (length {len}, stack depth {})", self.stack.len()),
+            ));
+        }
+        // Bpart: the l-1 elements after the gate; Apart: the rest, ending at the
+        // gate. The walks to Bpart's end and to B's gate go the shorter way round
+        // and are charged first (their length is the file's to choose), and so is
+        // inserting B i entries deep.
+        let (l64, b_gate_at) = (u64::from(l), u64::from((l - k) % l));
+        let (b_end_ahead, b_end_back) = (l64 - 1, len - l64 + 1);
+        let b_gate_back = l64 - b_gate_at;
+        budget.work(b_end_ahead.min(b_end_back) + b_gate_at.min(b_gate_back) + u64::from(i))?;
+        let (g, t) = self.new_pair()?;
+        let (a_next, a_prev) = (&mut self.a_next, &mut self.a_prev);
+        let blast = if b_end_ahead <= b_end_back {
+            walk(a_next, gate, b_end_ahead)
+        } else {
+            walk(a_prev, gate, b_end_back)
+        };
+        let b1 = a_next[gate as usize];
+        let a_first = a_next[blast as usize];
+        // B = [t, b1 .. blast]
+        a_next[t as usize] = b1;
+        a_prev[b1 as usize] = t;
+        a_next[blast as usize] = t;
+        a_prev[t as usize] = blast;
+        // A = [g, a_first .. gate]
+        a_next[g as usize] = a_first;
+        a_prev[a_first as usize] = g;
+        a_next[gate as usize] = g;
+        a_prev[g as usize] = gate;
+        let bgate = if b_gate_at <= b_gate_back {
+            walk(a_next, t, b_gate_at)
+        } else {
+            walk(a_prev, t, b_gate_back)
+        };
+        let at = self.stack.len() - i as usize;
+        self.stack.insert(at, (bgate, u64::from(l)));
+        self.gate = g;
+        self.len = len - u64::from(l - 1) + 1;
+        Ok(())
+    }
+
+    /// F(l) or H(l) (label `j`, face `f`): the face (or hole) of degree `l` ending at the
+    /// gate is closed by a pair; its other half-edge replaces the face on the boundary.
+    fn undo_face(&mut self, j: usize, lab: Label, l: u32, f: u32) -> Result<()> {
+        let (gate, len) = (self.gate, self.len);
+        if gate == NONE || l < 3 || len < u64::from(l) {
+            return Err(bad(
+                "labels",
+                format!("label {j} ({lab:?}) does not fit the boundary (length {len})"),
+            ));
+        }
+        let (g, t) = self.new_pair()?;
+        let (a_next, a_prev) = (&mut self.a_next, &mut self.a_prev);
+        let (next, face) = (&mut self.next, &mut self.face);
+        let mut u1 = gate;
+        for _ in 0..l - 2 {
+            u1 = a_prev[u1 as usize];
+        }
+        let (p, n) = (a_prev[u1 as usize], a_next[gate as usize]);
+        // Face cycle t -> u1 -> ... -> gate -> t.
+        next[t as usize] = u1;
+        face[t as usize] = f;
+        let mut x = u1;
+        loop {
             face[x as usize] = f;
+            if x == gate {
+                next[x as usize] = t;
+                break;
+            }
             next[x as usize] = a_next[x as usize];
             x = a_next[x as usize];
         }
-        faces[f as usize] = RebuiltFace {
-            first: gate,
+        a_next[p as usize] = g;
+        a_prev[g as usize] = p;
+        a_next[g as usize] = n;
+        a_prev[n as usize] = g;
+        self.faces[f as usize] = RebuiltFace {
+            first: t,
+            degree: l,
+            hole: matches!(lab, Label::H(_)),
+            start: false,
+        };
+        self.gate = g;
+        self.len = len - u64::from(l - 1) + 1;
+        Ok(())
+    }
+
+    /// The component's first label, F(l0) (label `s`, face `f`): what is left of the active
+    /// boundary must be exactly that face, which it becomes.
+    fn close_start_face(&mut self, labels: &[Label], s: usize, f: u32) -> Result<()> {
+        let Label::F(l0) = labels[s] else {
+            unreachable!("component start checked above")
+        };
+        let len = self.len;
+        if !self.stack.is_empty() || len != u64::from(l0) || l0 < 3 {
+            return Err(bad(
+                "labels",
+                format!("component starting at label {s}: boundary of length {len} (stack {}) does not match the start face F{l0}", self.stack.len()),
+            ));
+        }
+        let mut x = self.gate;
+        for _ in 0..l0 {
+            self.face[x as usize] = f;
+            self.next[x as usize] = self.a_next[x as usize];
+            x = self.a_next[x as usize];
+        }
+        self.faces[f as usize] = RebuiltFace {
+            first: self.gate,
             degree: l0,
             hole: false,
             start: true,
         };
-        s = e;
+        Ok(())
     }
-    drop((face_of_label, a_next, a_prev, stack));
-    budget.release(scratch);
-    if let Some(h) = next.iter().position(|&n| n == NONE) {
-        return Err(bad("labels", format!("half-edge {h} ends up in no face")));
+}
+
+/// The vertices of a rebuilt structure (see [`number_vertices`]).
+struct VertexNumbering {
+    /// Tail vertex of every half-edge.
+    vertex: Vec<u32>,
+    count: u32,
+    /// One outgoing half-edge per vertex.
+    out: Vec<u32>,
+    /// Number of union-find classes (an upper bound on the vertices, charged before `out`
+    /// is allocated).
+    roots: usize,
+}
+
+/// Root of `x`'s class in the union-find `p`, halving the path on the way.
+fn find_root(p: &mut [u32], mut x: u32) -> u32 {
+    while p[x as usize] != x {
+        p[x as usize] = p[p[x as usize] as usize];
+        x = p[x as usize];
     }
-    // prev and the vertex of every half-edge (kept), the union-find and its numbering
-    // (scratch).
-    budget.charge(REBUILD_MEMORY, 16 * nh64)?;
-    let mut prev = vec![NONE; nh];
-    for h in 0..nh {
-        prev[next[h] as usize] = h as u32;
-    }
-    // Vertices: union-find over half-edge tails; next(h) and twin(h) both start at head(h).
+    x
+}
+
+/// Vertices: union-find over half-edge tails (next(h) and twin(h) both start at head(h)),
+/// numbered by first appearance walking the mesh faces in order. The caller has charged the
+/// union-find and `vertex`; the outgoing half-edges are charged here. Fails when a vertex
+/// lies on hole faces only.
+fn number_vertices(
+    next: &[u32],
+    twin: &[u32],
+    faces: &[RebuiltFace],
+    budget: &mut Budget,
+) -> Result<VertexNumbering> {
+    let nh = next.len();
     let mut parent: Vec<u32> = (0..nh as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
     for h in 0..nh {
-        let (a, b) = (find(&mut parent, next[h]), find(&mut parent, twin[h]));
+        let (a, b) = (
+            find_root(&mut parent, next[h]),
+            find_root(&mut parent, twin[h]),
+        );
         if a != b {
             parent[a.max(b) as usize] = a.min(b);
         }
@@ -610,7 +760,7 @@ pub(crate) fn rebuild(labels: &[Label], budget: &mut Budget) -> Result<Rebuilt> 
     for rf in faces.iter().filter(|f| !f.hole) {
         let mut h = rf.first;
         for _ in 0..rf.degree {
-            let r = find(&mut parent, h) as usize;
+            let r = find_root(&mut parent, h) as usize;
             if id_of_root[r] == NONE {
                 id_of_root[r] = vertex_count;
                 vertex_count += 1;
@@ -620,25 +770,17 @@ pub(crate) fn rebuild(labels: &[Label], budget: &mut Budget) -> Result<Rebuilt> 
         }
     }
     for (h, vh) in vertex.iter_mut().enumerate() {
-        let r = find(&mut parent, h as u32) as usize;
+        let r = find_root(&mut parent, h as u32) as usize;
         if id_of_root[r] == NONE {
             return Err(bad("labels", "a vertex lies on hole faces only"));
         }
         *vh = id_of_root[r];
     }
-    drop((parent, id_of_root));
-    budget.release(8 * nh64);
-    Ok(Rebuilt {
-        next,
-        prev,
-        twin,
-        face,
+    Ok(VertexNumbering {
         vertex,
-        faces,
-        label_edge,
-        vertex_count: vertex_count as usize,
-        vertex_out,
-        bytes: rebuilt_bytes(nl, nh64, u64::from(nfaces), roots as u64),
+        count: vertex_count,
+        out: vertex_out,
+        roots,
     })
 }
 

@@ -588,181 +588,189 @@ pub fn walk(
     q: &mut [[i32; 3]],
     coder: &mut impl ResidualCoder,
 ) -> Result<()> {
-    let max_q = ((1u32 << bits) - 1) as i32;
-    let nt = rb.vertex_count;
-    let mut known = vec![false; q.len()];
-    let mut level = vec![0u8; nt];
-    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); MAX_LEVEL + 1];
-    let mut planes = vec![PlaneState::default(); plane_groups];
-    let mut plane_stamp = vec![NONE; plane_groups];
-    let mut prev_vertex: Option<u32> = None;
-    let mut last_class = 0u32;
-    let mut incident: Vec<u32> = Vec::new();
-    let mut out_edges: Vec<u32> = Vec::new();
-    let mut cands: Vec<[i64; 3]> = Vec::new();
-    let mut scratch: Vec<u32> = Vec::new();
-    let mut axes_near: Vec<u32> = Vec::new();
-    let mut next_seed = 0usize;
-    loop {
-        // Next vertex: top of the highest non-empty bucket (skipping stale entries), else the
-        // lowest undecoded vertex (a new component).
-        let mut pick = None;
-        'search: for lv in (1..=MAX_LEVEL).rev() {
-            while let Some(v) = buckets[lv].pop() {
-                if !known[v as usize] && usize::from(level[v as usize]) == lv {
-                    pick = Some(v);
-                    break 'search;
+    let mut vertex_walk = VertexWalk {
+        rb,
+        face_plane_group,
+        crease,
+        arcs,
+        max_q: ((1u32 << bits) - 1) as i32,
+        known: vec![false; q.len()],
+        level: vec![0u8; rb.vertex_count],
+        buckets: vec![Vec::new(); MAX_LEVEL + 1],
+        planes: vec![PlaneState::default(); plane_groups],
+        plane_stamp: vec![NONE; plane_groups],
+        prev_vertex: None,
+        last_class: 0,
+        incident: Vec::new(),
+        out_edges: Vec::new(),
+        cands: Vec::new(),
+        scratch: Vec::new(),
+        axes_near: Vec::new(),
+        next_seed: 0,
+    };
+    while let Some(v) = vertex_walk.next_vertex() {
+        vertex_walk.code_vertex(v, q, coder)?;
+    }
+    vertex_walk.code_isolated(q, coder)
+}
+
+/// The state of [`walk`]: its inputs, what is known so far, and scratch lists reused from
+/// vertex to vertex.
+struct VertexWalk<'a> {
+    rb: &'a Rebuilt,
+    face_plane_group: &'a [u32],
+    crease: Option<&'a [bool]>,
+    arcs: Option<&'a ArcAxes<'a>>,
+    /// Largest grid coordinate.
+    max_q: i32,
+    /// Whether each coded vertex has been visited.
+    known: Vec<bool>,
+    /// Number of visited neighbours of each traversal vertex, capped at `MAX_LEVEL`.
+    level: Vec<u8>,
+    /// Vertices by level (entries go stale when a vertex's level rises or it is visited).
+    buckets: Vec<Vec<u32>>,
+    /// The plane of each plane group so far, and the last vertex that looked it up.
+    planes: Vec<PlaneState>,
+    plane_stamp: Vec<u32>,
+    prev_vertex: Option<u32>,
+    /// Magnitude class of the last residual coded (for the contexts).
+    last_class: u32,
+    /// Plane groups around the current vertex.
+    incident: Vec<u32>,
+    /// Outgoing half-edges of the current vertex in rotation order.
+    out_edges: Vec<u32>,
+    /// Candidate predictions of the current vertex, each as twice its value.
+    cands: Vec<[i64; 3]>,
+    scratch: Vec<u32>,
+    axes_near: Vec<u32>,
+    /// Every traversal vertex below this has been visited.
+    next_seed: usize,
+}
+
+impl VertexWalk<'_> {
+    /// The next vertex to visit: the top of the highest non-empty level bucket (skipping
+    /// stale entries), else the lowest unvisited traversal vertex (a new component); `None`
+    /// once every traversal vertex is visited.
+    fn next_vertex(&mut self) -> Option<u32> {
+        for lv in (1..=MAX_LEVEL).rev() {
+            while let Some(v) = self.buckets[lv].pop() {
+                if !self.known[v as usize] && usize::from(self.level[v as usize]) == lv {
+                    return Some(v);
                 }
             }
         }
-        let v = match pick {
-            Some(v) => v,
-            None => {
-                while next_seed < nt && known[next_seed] {
-                    next_seed += 1;
-                }
-                if next_seed == nt {
-                    break;
-                }
-                next_seed as u32
-            }
-        };
-        rotation(rb, v, &mut out_edges);
-        let kn = |w: u32| known[w as usize];
-        let p = |w: u32| q[w as usize].map(i64::from);
+        let nt = self.rb.vertex_count;
+        while self.next_seed < nt && self.known[self.next_seed] {
+            self.next_seed += 1;
+        }
+        (self.next_seed < nt).then_some(self.next_seed as u32)
+    }
+
+    /// Predicts vertex `v`, codes its coordinates in `q` and marks it visited.
+    fn code_vertex(
+        &mut self,
+        v: u32,
+        q: &mut [[i32; 3]],
+        coder: &mut impl ResidualCoder,
+    ) -> Result<()> {
+        rotation(self.rb, v, &mut self.out_edges);
         // Predictions along a crease (version 2), else parallelogram-type predictions in
         // rotation order; each as twice its value.
-        cands.clear();
+        self.cands.clear();
         let mut arc = false;
-        if let Some(cr) = crease {
+        if let Some(cr) = self.crease {
             let mut steps = 0;
             arc = crease_candidates(
-                rb,
+                self.rb,
                 cr,
-                arcs,
+                self.arcs,
                 v,
-                &out_edges,
-                &known,
+                &self.out_edges,
+                &self.known,
                 q,
-                &mut scratch,
-                &mut axes_near,
-                &mut cands,
+                &mut self.scratch,
+                &mut self.axes_near,
+                &mut self.cands,
                 &mut steps,
             );
             coder.work(steps)?;
         }
-        let n_crease = cands.len();
-        let mut add2 = |pr2: [i64; 3]| {
-            if cands.len() < MAX_CANDIDATES {
-                cands.push(pr2);
-            }
+        let n_crease = self.cands.len();
+        if n_crease == 0 {
+            parallelogram_candidates(self.rb, &self.out_edges, &self.known, q, &mut self.cands);
+        }
+        let count = self.cands.len();
+        let (best, plane_axis) = self.planes_around(v);
+        let (pred, kind) = if count == 0 {
+            let (pred, kind) = self.fallback_prediction(q);
+            (pred.map(|c| c.clamp(0, i64::from(self.max_q)) as i32), kind)
+        } else {
+            (
+                self.averaged_prediction(q[v as usize], plane_axis, coder)?,
+                candidate_kind(count, n_crease, arc),
+            )
         };
-        for &h in out_edges.iter().filter(|_| n_crease == 0) {
-            let f = rb.face[h as usize] as usize;
-            let rf = rb.faces[f];
-            if rf.hole {
-                continue;
-            }
-            // The face's vertices k steps forward and back from v's corner: each walk is at
-            // most 3 steps, so a face of high degree costs no more per corner.
-            let ahead = |k: u32| {
-                let mut x = h;
-                for _ in 0..k {
-                    x = rb.next[x as usize];
+        let mut slot = q[v as usize];
+        self.code_coordinates(best, plane_axis, kind, pred, &mut slot, coder)?;
+        q[v as usize] = slot;
+        self.mark_visited(v, slot);
+        Ok(())
+    }
+
+    /// The prediction when there is no candidate, unclamped, and its context kind: the mean
+    /// of the visited neighbours (`KIND_NEIGHBOURS`), else the previous vertex or the grid's
+    /// centre (`KIND_START`).
+    fn fallback_prediction(&self, q: &[[i32; 3]]) -> ([i64; 3], usize) {
+        let rb = self.rb;
+        let p = |w: u32| q[w as usize].map(i64::from);
+        let mut sum = [0i64; 3];
+        let mut n = 0i64;
+        for &h in &self.out_edges {
+            let w = rb.vertex[rb.next[h as usize] as usize];
+            if self.known[w as usize] {
+                let pw = p(w);
+                for c in 0..3 {
+                    sum[c] += pw[c];
                 }
-                rb.vertex[x as usize]
-            };
-            let back = |k: u32| {
-                let mut x = h;
-                for _ in 0..k {
-                    x = rb.prev[x as usize];
-                }
-                rb.vertex[x as usize]
-            };
-            let d = rf.degree;
-            if d == 3 {
-                let (a, b) = (ahead(1), ahead(2));
-                if !(kn(a) && kn(b)) {
-                    continue;
-                }
-                let tw = rb.twin[rb.next[h as usize] as usize];
-                let kf = rb.faces[rb.face[tw as usize] as usize];
-                if kf.hole {
-                    continue;
-                }
-                let k2 = rb.vertex[rb.next[rb.next[tw as usize] as usize] as usize];
-                let kl = rb.vertex[rb.prev[tw as usize] as usize];
-                if !(kn(k2) && kn(kl)) {
-                    continue;
-                }
-                let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
-                add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
-            } else {
-                let (a, b, c3) = (ahead(1), ahead(2), ahead(3));
-                if kn(a) && kn(b) && kn(c3) {
-                    let (pa, pb, pc) = (p(a), p(b), p(c3));
-                    add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
-                }
-                if d >= 5 {
-                    let (a, b, c3) = (back(1), back(2), back(3));
-                    if kn(a) && kn(b) && kn(c3) {
-                        let (pa, pb, pc) = (p(a), p(b), p(c3));
-                        add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
-                    }
-                }
+                n += 1;
             }
         }
-        let count = cands.len();
-        let (pred, kind) = if count > 0 {
-            let kind = match n_crease {
-                0 => count.min(3),
-                _ if arc => KIND_ARC,
-                1 => KIND_CREASE_ONE,
-                _ => KIND_CREASE_MORE,
-            };
-            (Vec::new(), kind)
+        if n > 0 {
+            (
+                sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64),
+                KIND_NEIGHBOURS,
+            )
         } else {
-            let mut sum = [0i64; 3];
-            let mut n = 0i64;
-            for &h in &out_edges {
-                let w = rb.vertex[rb.next[h as usize] as usize];
-                if kn(w) {
-                    let pw = p(w);
-                    for c in 0..3 {
-                        sum[c] += pw[c];
-                    }
-                    n += 1;
-                }
-            }
-            if n > 0 {
-                (
-                    sum.map(|s| div_round(i128::from(s), i128::from(n)) as i64)
-                        .to_vec(),
-                    KIND_NEIGHBOURS,
-                )
-            } else {
-                let pr = match prev_vertex {
-                    Some(w) => p(w),
-                    None => [i64::from(max_q / 2); 3],
-                };
-                (pr.to_vec(), KIND_START)
-            }
-        };
-        // Plane groups around v (each once: a group is taken when its stamp is not yet v, so
-        // a vertex of high valence costs no more per edge) -> the plane with the largest
-        // defining triangle. (No sort needed: ties on the area are broken by the group id.)
-        incident.clear();
-        for &h in &out_edges {
-            let pg = face_plane_group
+            let pr = match self.prev_vertex {
+                Some(w) => p(w),
+                None => [i64::from(self.max_q / 2); 3],
+            };
+            (pr, KIND_START)
+        }
+    }
+
+    /// Collects the plane groups around `v` into `incident` (each once: a group is taken when
+    /// its stamp is not yet `v`, so a vertex of high valence costs no more per edge) and
+    /// returns the one whose plane has the largest defining triangle, with that plane's
+    /// dominant axis (predicted from the plane, not from the parallelograms). No sort needed:
+    /// ties on the area are broken by the group id.
+    fn planes_around(&mut self, v: u32) -> (Option<u32>, Option<usize>) {
+        let rb = self.rb;
+        self.incident.clear();
+        for &h in &self.out_edges {
+            let pg = self
+                .face_plane_group
                 .get(rb.face[h as usize] as usize)
                 .copied()
                 .unwrap_or(NONE);
-            if pg != NONE && plane_stamp[pg as usize] != v {
-                plane_stamp[pg as usize] = v;
-                incident.push(pg);
+            if pg != NONE && self.plane_stamp[pg as usize] != v {
+                self.plane_stamp[pg as usize] = v;
+                self.incident.push(pg);
             }
         }
-        let best = incident
+        let planes = &self.planes;
+        let best = self
+            .incident
             .iter()
             .filter(|&&g| planes[g as usize].n == 3)
             .max_by(|&&a, &&b| {
@@ -772,90 +780,109 @@ pub fn walk(
                     .then(b.cmp(&a))
             })
             .copied();
-        // The plane's dominant axis (predicted from the plane, not from the parallelograms).
         let plane_axis = best.map(|g| {
             let n = planes[g as usize].normal;
             (0..3)
                 .max_by(|&x, &y| n[x].abs().cmp(&n[y].abs()).then(y.cmp(&x)))
                 .unwrap_or(0)
         });
-        let pred: [i32; 3] = if count == 0 {
-            [pred[0], pred[1], pred[2]].map(|c| c.clamp(0, i64::from(max_q)) as i32)
-        } else {
-            // Subset of the parallelograms to average: all of them unless the encoder signals
-            // otherwise with one flag per candidate (spec §8.2); the last flag is implied when
-            // all earlier ones are 0.
-            let average = |mask: usize| -> [i32; 3] {
-                let mut sum = [0i64; 3];
-                let mut n = 0i64;
-                for (i, c) in cands.iter().enumerate() {
-                    if mask & (1 << i) != 0 {
-                        for k in 0..3 {
-                            sum[k] += c[k];
-                        }
-                        n += 1;
+        (best, plane_axis)
+    }
+
+    /// The prediction from the candidates: the average of a subset of them, all of them
+    /// unless the encoder signals otherwise with one flag per candidate (spec §8.2); the last
+    /// flag is implied when all earlier ones are 0. The encoder picks the subset whose
+    /// average is nearest `actual` off the plane's axis `plane_axis`.
+    fn averaged_prediction(
+        &self,
+        actual: [i32; 3],
+        plane_axis: Option<usize>,
+        coder: &mut impl ResidualCoder,
+    ) -> Result<[i32; 3]> {
+        let (cands, max_q) = (&self.cands, self.max_q);
+        let count = cands.len();
+        let average = |mask: usize| -> [i32; 3] {
+            let mut sum = [0i64; 3];
+            let mut n = 0i64;
+            for (i, c) in cands.iter().enumerate() {
+                if mask & (1 << i) != 0 {
+                    for k in 0..3 {
+                        sum[k] += c[k];
                     }
+                    n += 1;
                 }
-                sum.map(|s| {
-                    (div_round(i128::from(s), i128::from(2 * n)) as i64).clamp(0, i64::from(max_q))
-                        as i32
-                })
-            };
-            let full = (1usize << count) - 1;
-            let mut mask = full;
-            if count >= 2 {
-                if coder.encoding() {
-                    let actual = q[v as usize];
-                    let cost = |m: usize| -> u32 {
-                        let p = average(m);
-                        (0..3)
-                            .filter(|&k| Some(k) != plane_axis)
-                            .map(|k| (actual[k] - p[k]).unsigned_abs())
-                            .sum()
-                    };
-                    let mut best_cost = cost(full);
-                    for m in 1..full {
-                        let c = cost(m);
-                        if c < best_cost {
-                            best_cost = c;
-                            mask = m;
-                        }
-                    }
-                }
-                let base = (count.min(4) - 2) * 4;
-                let mut any = false;
-                for i in 0..count {
-                    if i + 1 == count && !any {
-                        mask |= 1 << i;
-                        break;
-                    }
-                    let mut bit = mask & (1 << i) != 0;
-                    coder.flag(base + i.min(3), &mut bit)?;
-                    if bit {
-                        mask |= 1 << i;
-                        any = true;
-                    } else {
-                        mask &= !(1 << i);
+            }
+            sum.map(|s| {
+                (div_round(i128::from(s), i128::from(2 * n)) as i64).clamp(0, i64::from(max_q))
+                    as i32
+            })
+        };
+        let full = (1usize << count) - 1;
+        let mut mask = full;
+        if count >= 2 {
+            if coder.encoding() {
+                let cost = |m: usize| -> u32 {
+                    let p = average(m);
+                    (0..3)
+                        .filter(|&k| Some(k) != plane_axis)
+                        .map(|k| (actual[k] - p[k]).unsigned_abs())
+                        .sum()
+                };
+                let mut best_cost = cost(full);
+                for m in 1..full {
+                    let c = cost(m);
+                    if c < best_cost {
+                        best_cost = c;
+                        mask = m;
                     }
                 }
             }
-            average(mask)
-        };
-        let mut slot = q[v as usize];
+            let base = (count.min(4) - 2) * 4;
+            let mut any = false;
+            for i in 0..count {
+                if i + 1 == count && !any {
+                    mask |= 1 << i;
+                    break;
+                }
+                let mut bit = mask & (1 << i) != 0;
+                coder.flag(base + i.min(3), &mut bit)?;
+                if bit {
+                    mask |= 1 << i;
+                    any = true;
+                } else {
+                    mask &= !(1 << i);
+                }
+            }
+        }
+        Ok(average(mask))
+    }
+
+    /// Codes the three coordinates in `slot` against `pred` with context kind `kind`. On the
+    /// plane of group `best`, the coordinate along its dominant axis `plane_axis` is coded
+    /// last, predicted from the plane through the other two.
+    fn code_coordinates(
+        &mut self,
+        best: Option<u32>,
+        plane_axis: Option<usize>,
+        kind: usize,
+        pred: [i32; 3],
+        slot: &mut [i32; 3],
+        coder: &mut impl ResidualCoder,
+    ) -> Result<()> {
         match best {
             None => {
                 for c in 0..3 {
-                    let ctx = kind * 3 + bucket(last_class);
-                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+                    let ctx = kind * 3 + bucket(self.last_class);
+                    self.last_class = coder.code(ctx, pred[c], &mut slot[c])?;
                 }
             }
             Some(g) => {
-                let pl = planes[g as usize];
+                let pl = self.planes[g as usize];
                 let n = pl.normal;
                 let k = plane_axis.unwrap_or(0);
                 for c in (0..3).filter(|&c| c != k) {
-                    let ctx = kind * 3 + bucket(last_class);
-                    last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+                    let ctx = kind * 3 + bucket(self.last_class);
+                    self.last_class = coder.code(ctx, pred[c], &mut slot[c])?;
                 }
                 let a = pl.pts[0];
                 let num: i128 = (0..3)
@@ -863,41 +890,138 @@ pub fn walk(
                     .map(|c| i128::from(n[c]) * (i128::from(slot[c]) - i128::from(a[c])))
                     .sum();
                 let pk = i128::from(a[k]) + div_round(-num, i128::from(n[k]));
-                let pk = pk.clamp(0, i128::from(max_q)) as i32;
-                let ctx = PLANE_CTX * 3 + bucket(last_class);
-                last_class = coder.code(ctx, pk, &mut slot[k])?;
+                let pk = pk.clamp(0, i128::from(self.max_q)) as i32;
+                let ctx = PLANE_CTX * 3 + bucket(self.last_class);
+                self.last_class = coder.code(ctx, pk, &mut slot[k])?;
             }
         }
-        q[v as usize] = slot;
-        known[v as usize] = true;
-        prev_vertex = Some(v);
+        Ok(())
+    }
+
+    /// Records `v` as visited at grid point `slot`: the planes of its plane groups take the
+    /// point, and its unvisited neighbours go up a level.
+    fn mark_visited(&mut self, v: u32, slot: [i32; 3]) {
+        let rb = self.rb;
+        self.known[v as usize] = true;
+        self.prev_vertex = Some(v);
         let pt = slot.map(i64::from);
-        for &g in &incident {
-            planes[g as usize].add(pt);
+        for &g in &self.incident {
+            self.planes[g as usize].add(pt);
         }
-        for &h in &out_edges {
+        for &h in &self.out_edges {
             let w = rb.vertex[rb.next[h as usize] as usize] as usize;
-            if !known[w] && usize::from(level[w]) < MAX_LEVEL {
-                level[w] += 1;
-                buckets[usize::from(level[w])].push(w as u32);
+            if !self.known[w] && usize::from(self.level[w]) < MAX_LEVEL {
+                self.level[w] += 1;
+                self.buckets[usize::from(self.level[w])].push(w as u32);
             }
         }
     }
-    // Isolated vertices: delta from the previous vertex.
-    for v in nt..q.len() {
-        let pred = match prev_vertex {
-            Some(w) => q[w as usize],
-            None => [max_q / 2; 3],
-        };
-        let mut slot = q[v];
-        for c in 0..3 {
-            let ctx = KIND_START * 3 + bucket(last_class);
-            last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+
+    /// Codes the isolated vertices (those after the traversal's): each as a delta from the
+    /// previous vertex.
+    fn code_isolated(&mut self, q: &mut [[i32; 3]], coder: &mut impl ResidualCoder) -> Result<()> {
+        for v in self.rb.vertex_count..q.len() {
+            let pred = match self.prev_vertex {
+                Some(w) => q[w as usize],
+                None => [self.max_q / 2; 3],
+            };
+            let mut slot = q[v];
+            for c in 0..3 {
+                let ctx = KIND_START * 3 + bucket(self.last_class);
+                self.last_class = coder.code(ctx, pred[c], &mut slot[c])?;
+            }
+            q[v] = slot;
+            self.prev_vertex = Some(v as u32);
         }
-        q[v] = slot;
-        prev_vertex = Some(v as u32);
+        Ok(())
     }
-    Ok(())
+}
+
+/// Context kind of a prediction from `count` candidates of which `n_crease` lie along a
+/// crease (`arc`: one of those follows a circle round an axis).
+fn candidate_kind(count: usize, n_crease: usize, arc: bool) -> usize {
+    match n_crease {
+        0 => count.min(3),
+        _ if arc => KIND_ARC,
+        1 => KIND_CREASE_ONE,
+        _ => KIND_CREASE_MORE,
+    }
+}
+
+/// Parallelogram-type predictions (spec §8.2) for the vertex whose outgoing half-edges are
+/// `out_edges`, in rotation order, each as twice its value, at most `MAX_CANDIDATES` in
+/// `cands`: in a triangle, across the edge opposite the vertex when the triangle beyond it
+/// is known; in a larger face, from the next three corners (and the previous three, from
+/// degree 5 on).
+fn parallelogram_candidates(
+    rb: &Rebuilt,
+    out_edges: &[u32],
+    known: &[bool],
+    q: &[[i32; 3]],
+    cands: &mut Vec<[i64; 3]>,
+) {
+    let kn = |w: u32| known[w as usize];
+    let p = |w: u32| q[w as usize].map(i64::from);
+    let mut add2 = |pr2: [i64; 3]| {
+        if cands.len() < MAX_CANDIDATES {
+            cands.push(pr2);
+        }
+    };
+    for &h in out_edges {
+        let f = rb.face[h as usize] as usize;
+        let rf = rb.faces[f];
+        if rf.hole {
+            continue;
+        }
+        // The face's vertices k steps forward and back from v's corner: each walk is at
+        // most 3 steps, so a face of high degree costs no more per corner.
+        let ahead = |k: u32| {
+            let mut x = h;
+            for _ in 0..k {
+                x = rb.next[x as usize];
+            }
+            rb.vertex[x as usize]
+        };
+        let back = |k: u32| {
+            let mut x = h;
+            for _ in 0..k {
+                x = rb.prev[x as usize];
+            }
+            rb.vertex[x as usize]
+        };
+        let d = rf.degree;
+        if d == 3 {
+            let (a, b) = (ahead(1), ahead(2));
+            if !(kn(a) && kn(b)) {
+                continue;
+            }
+            let tw = rb.twin[rb.next[h as usize] as usize];
+            let kf = rb.faces[rb.face[tw as usize] as usize];
+            if kf.hole {
+                continue;
+            }
+            let k2 = rb.vertex[rb.next[rb.next[tw as usize] as usize] as usize];
+            let kl = rb.vertex[rb.prev[tw as usize] as usize];
+            if !(kn(k2) && kn(kl)) {
+                continue;
+            }
+            let (pa, pb, p2, pl) = (p(a), p(b), p(k2), p(kl));
+            add2([0, 1, 2].map(|c| 2 * (pa[c] + pb[c]) - p2[c] - pl[c]));
+        } else {
+            let (a, b, c3) = (ahead(1), ahead(2), ahead(3));
+            if kn(a) && kn(b) && kn(c3) {
+                let (pa, pb, pc) = (p(a), p(b), p(c3));
+                add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+            }
+            if d >= 5 {
+                let (a, b, c3) = (back(1), back(2), back(3));
+                if kn(a) && kn(b) && kn(c3) {
+                    let (pa, pb, pc) = (p(a), p(b), p(c3));
+                    add2([0, 1, 2].map(|c| 2 * (pa[c] + pc[c] - pb[c])));
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

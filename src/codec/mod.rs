@@ -876,6 +876,111 @@ pub fn encode(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Vec<u8>> {
 /// re-merged by the decoder (`fixups` section); a non-manifold control mesh is an error.
 /// Every sharp edge must be an edge of the mesh.
 pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<u8>, EncodeMap)> {
+    check_encode_input(mesh, opts)?;
+    let bits = opts.quantization_bits;
+    let raw = opts.content == Content::RawMesh;
+    let (cut, source, he) = manifold_half_edges(mesh, raw)?;
+    let work = cut.as_ref().unwrap_or(mesh);
+    let tr = encode_traversal(&he);
+    let rb = rebuild(&tr.labels, &mut Budget::unlimited())
+        .map_err(|e| internal_error(&e.to_string()))?;
+    if rb.faces.len() != tr.faces.len() {
+        return Err(internal_error("face count mismatch"));
+    }
+
+    let coded = number_coded_vertices(&rb, &tr.faces, &he, work.vertex_count())?;
+    let orig_of_coded: Vec<u32> = coded.to_work.iter().map(|&w| source[w as usize]).collect();
+    let (rep_of_orig, merges) = merges_of_copies(&orig_of_coded, mesh.vertex_count());
+    let final_of_coded = final_numbering(coded.to_work.len(), &merges);
+    let groups = code_groups(mesh, &rb, &coded.face_source);
+    let group_count = mesh.groups.len() as u64;
+    let conn = connectivity_section(&tr.labels, &groups.syms, group_count);
+
+    // Patches section.
+    let quant = encode_quantizer(mesh, opts)?;
+    let (patches, group_axes) = patches::encode(&groups.coded_order, &quant)?;
+
+    // Creases section.
+    let edges = label_edges(&rb.label_edge);
+    let mut sharp = sharp_edge_flags(mesh, &rb, &edges, &orig_of_coded)?;
+    let mut corner: Vec<bool> = orig_of_coded
+        .iter()
+        .map(|o| mesh.corners.contains(o))
+        .collect();
+    let mut creases_enc = RangeEncoder::new();
+    let crease_he = code_creases(
+        &rb,
+        &edges,
+        &groups.face_group,
+        &mut sharp,
+        &mut corner,
+        &mut creases_enc,
+    )?;
+    let creases = creases_enc.finish();
+
+    // Geometry section.
+    let q: Vec<[i32; 3]> = coded
+        .to_work
+        .iter()
+        .map(|&w| quant.quantize(work.positions[w as usize]))
+        .collect();
+    let geometry = geometry_section(&rb, &groups, &group_axes, &crease_he, bits, q)?;
+
+    let store_names =
+        opts.store_group_names && groups.coded_order.iter().any(|g| !g.name.is_empty());
+    let header = HeaderFields {
+        content: opts.content,
+        bits,
+        isolated: coded.isolated,
+        merges: merges.len() as u64,
+        quant: &quant,
+        patches: patches.is_some(),
+        names: store_names,
+    }
+    .section(mesh);
+
+    let mut out = Vec::new();
+    out.extend_from_slice(&MAGIC);
+    out.push(FORMAT_VERSION_MAJOR);
+    out.push(FORMAT_VERSION_MINOR);
+    put_section(&mut out, SEC_HEADER, &header, false, true);
+    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
+    if let Some(p) = patches {
+        put_section(&mut out, SEC_PATCHES, &p, true, false);
+    }
+    put_section(&mut out, SEC_CREASES, &creases, true, false);
+    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
+    if !merges.is_empty() {
+        put_section(&mut out, SEC_FIXUPS, &fixups_section(&merges), true, false);
+    }
+    if store_names {
+        let payload = names_section(mesh, &groups.group_new);
+        put_section(&mut out, SEC_NAMES, &payload, true, false);
+    }
+
+    let vertex: Vec<u32> = (0..mesh.vertex_count())
+        .map(|v| final_of_coded[rep_of_orig[v] as usize])
+        .collect();
+    let face = mesh_face_numbering(mesh, &rb, &coded.face_source);
+    // With names stored, the decoder restores the input's group order.
+    let group = if store_names {
+        (0..mesh.groups.len() as u32).collect()
+    } else {
+        groups.group_new
+    };
+    Ok((
+        out,
+        EncodeMap {
+            vertex,
+            face,
+            group,
+        },
+    ))
+}
+
+/// The checks [`encode_with_map`] makes before any work: the options' ranges, and a valid
+/// mesh with a finite extent whose faces have groups.
+fn check_encode_input(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<()> {
     let bits = opts.quantization_bits;
     if !(4..=24).contains(&bits) {
         return Err(Error::Parameter(format!(
@@ -900,34 +1005,59 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     if mesh.face_count() > 0 && mesh.groups.is_empty() {
         return Err(Error::Mesh("faces but no groups".into()));
     }
-    let raw = opts.content == Content::RawMesh;
-    let (cut, source, he): (Option<ControlMesh>, Vec<u32>, HalfEdgeMesh) =
-        match HalfEdgeMesh::build(mesh) {
-            Ok(he) => (None, (0..mesh.vertex_count() as u32).collect(), he),
-            Err(e) if raw => {
-                let (c, s) = cut_non_manifold(mesh)?;
-                let he = HalfEdgeMesh::build(&c).map_err(|e2| {
-                    Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
-                })?;
-                (Some(c), s, he)
-            }
-            Err(e) => return Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
-        };
-    let work = cut.as_ref().unwrap_or(mesh);
-    let tr = encode_traversal(&he);
-    let internal = |what: &str| Error::Mesh(format!("internal encoder error: {what}"));
-    let rb = rebuild(&tr.labels, &mut Budget::unlimited()).map_err(|e| internal(&e.to_string()))?;
-    if rb.faces.len() != tr.faces.len() {
-        return Err(internal("face count mismatch"));
-    }
+    Ok(())
+}
 
-    // Map rebuilt (coded) vertices to work-mesh vertices.
-    let nw = work.vertex_count();
+/// The half-edge structure the encoder traverses. A non-manifold raw mesh (`raw`) is cut
+/// apart first: then also the cut mesh and the input vertex of each of its vertices, else
+/// `None` and the identity.
+fn manifold_half_edges(
+    mesh: &ControlMesh,
+    raw: bool,
+) -> Result<(Option<ControlMesh>, Vec<u32>, HalfEdgeMesh)> {
+    match HalfEdgeMesh::build(mesh) {
+        Ok(he) => Ok((None, (0..mesh.vertex_count() as u32).collect(), he)),
+        Err(e) if raw => {
+            let (c, s) = cut_non_manifold(mesh)?;
+            let he = HalfEdgeMesh::build(&c).map_err(|e2| {
+                Error::Mesh(format!("{e}; cutting the mesh apart did not help: {e2}"))
+            })?;
+            Ok((Some(c), s, he))
+        }
+        Err(e) => Err(Error::Mesh(format!("control mesh is not manifold: {e}"))),
+    }
+}
+
+/// An error for an encoder invariant that does not hold (a bug, not a bad input).
+fn internal_error(what: &str) -> Error {
+    Error::Mesh(format!("internal encoder error: {what}"))
+}
+
+/// How the rebuilt (coded) structure maps onto the mesh the encoder traversed.
+struct CodedVertices {
+    /// Traversed-mesh vertex of every coded vertex: the traversal's vertices in their coded
+    /// order, then those the traversal does not reach.
+    to_work: Vec<u32>,
+    /// Traversed-mesh face of every rebuilt face.
+    face_source: Vec<u32>,
+    /// Number of vertices the traversal does not reach.
+    isolated: u64,
+}
+
+/// Maps the rebuilt vertices and faces to those of `he` (mesh of `nw` vertices), whose
+/// traversal entered face `tr_faces[i]` for rebuilt face `i`; the vertices no face reaches
+/// are numbered after the others.
+fn number_coded_vertices(
+    rb: &Rebuilt,
+    tr_faces: &[(u32, u32)],
+    he: &HalfEdgeMesh,
+    nw: usize,
+) -> Result<CodedVertices> {
     let mut coded_to_work = vec![NONE; nw];
     let mut work_to_coded = vec![NONE; nw];
     let mut rebuilt_face_source = vec![NONE; rb.faces.len()];
     for (i, rf) in rb.faces.iter().enumerate() {
-        let (f, entry) = tr.faces[i];
+        let (f, entry) = tr_faces[i];
         rebuilt_face_source[i] = f;
         let (mut hr, mut ho) = (rf.first, entry);
         for _ in 0..rf.degree {
@@ -936,7 +1066,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
                 coded_to_work[c as usize] = w;
                 work_to_coded[w as usize] = c;
             } else if coded_to_work[c as usize] != w {
-                return Err(internal("vertex mapping mismatch"));
+                return Err(internal_error("vertex mapping mismatch"));
             }
             hr = rb.next[hr as usize];
             ho = he.next[ho as usize];
@@ -953,11 +1083,18 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             isolated += 1;
         }
     }
-    let coded_count = nw;
-    let orig_of_coded: Vec<u32> = coded_to_work.iter().map(|&w| source[w as usize]).collect();
+    Ok(CodedVertices {
+        to_work: coded_to_work,
+        face_source: rebuilt_face_source,
+        isolated,
+    })
+}
 
-    // Merges: every coded copy of an input vertex merges into the lowest coded copy.
-    let mut rep_of_orig = vec![NONE; mesh.vertex_count()];
+/// Merges: every coded copy of an input vertex merges into the lowest coded copy. Returns
+/// that representative for each of the `input_vertices` input vertices, and the
+/// `(copy, representative)` pairs, copies ascending.
+fn merges_of_copies(orig_of_coded: &[u32], input_vertices: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
+    let mut rep_of_orig = vec![NONE; input_vertices];
     for (c, &o) in orig_of_coded.iter().enumerate() {
         if rep_of_orig[o as usize] == NONE {
             rep_of_orig[o as usize] = c as u32;
@@ -969,9 +1106,26 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         .filter(|&(c, &o)| rep_of_orig[o as usize] != c as u32)
         .map(|(c, &o)| (c as u32, rep_of_orig[o as usize]))
         .collect();
-    let final_of_coded = final_numbering(coded_count, &merges);
+    (rep_of_orig, merges)
+}
 
-    // Groups: renumbered by first appearance in encoding order; unused groups at the end.
+/// The groups as the connectivity section codes them (spec §6.5).
+struct GroupCoding {
+    /// Coded id of every input group: by first appearance in encoding order, unused groups
+    /// at the end.
+    group_new: Vec<u32>,
+    /// Coded group of every rebuilt face (`NONE` for holes).
+    face_group: Vec<u32>,
+    /// Per mesh face in encoding order: its group's symbol, context class, and the number of
+    /// groups seen before it.
+    syms: Vec<(GroupSym, usize, u32)>,
+    /// The input's groups in coded order.
+    coded_order: Vec<Group>,
+}
+
+/// Numbers the groups by first appearance in encoding order and finds the symbol that codes
+/// each mesh face's group (`face_source`: the input face of each rebuilt face).
+fn code_groups(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> GroupCoding {
     let mut group_new = vec![NONE; mesh.groups.len()];
     let mut next_group = 0u32;
     let mut face_group_new = vec![NONE; rb.faces.len()];
@@ -983,9 +1137,9 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
         if rf.hole {
             continue;
         }
-        let og = mesh.face_groups[rebuilt_face_source[i] as usize] as usize;
-        group_candidates(&rb, i, &face_group_new, prev_real, &mut cands);
-        let class = group_class(&rb, i, &face_group_new, &cands);
+        let og = mesh.face_groups[face_source[i] as usize] as usize;
+        group_candidates(rb, i, &face_group_new, prev_real, &mut cands);
+        let class = group_class(rb, i, &face_group_new, &cands);
         let seen = next_group;
         let sym = if group_new[og] == NONE {
             group_new[og] = next_group;
@@ -996,7 +1150,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             match cands.iter().take(GROUP_CANDIDATES).position(|&c| c == g) {
                 Some(c) => GroupSym::Candidate(c as u8),
                 None => {
-                    vertex_candidates(&rb, i, &face_group_new, &cands, &mut vcands);
+                    vertex_candidates(rb, i, &face_group_new, &cands, &mut vcands);
                     match vcands.iter().position(|&c| c == g) {
                         Some(c) => GroupSym::Vertex(c as u8),
                         None => GroupSym::Recent(recency.rank_of(g)),
@@ -1017,26 +1171,41 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
     for (og, &ng) in group_new.iter().enumerate() {
         groups_new_order[ng as usize] = mesh.groups[og].clone();
     }
-    let group_count = mesh.groups.len() as u64;
-
-    // Connectivity section.
-    let mut conn = Vec::new();
-    put_varint(&mut conn, tr.labels.len() as u64);
-    {
-        let mut enc = RangeEncoder::new();
-        let mut models = ConnModels::new(true);
-        for &l in &tr.labels {
-            models.encode_label(&mut enc, l);
-        }
-        if group_count > 1 {
-            for &(sym, class, seen) in &group_syms {
-                models.encode_group(&mut enc, sym, class, seen);
-            }
-        }
-        conn.extend_from_slice(&enc.finish());
+    GroupCoding {
+        group_new,
+        face_group: face_group_new,
+        syms: group_syms,
+        coded_order: groups_new_order,
     }
+}
 
-    // Patches section.
+/// The connectivity section: the label count, then the labels and (with more than one
+/// group) the group symbols, range coded.
+fn connectivity_section(
+    labels: &[Label],
+    group_syms: &[(GroupSym, usize, u32)],
+    group_count: u64,
+) -> Vec<u8> {
+    let mut conn = Vec::new();
+    put_varint(&mut conn, labels.len() as u64);
+    let mut enc = RangeEncoder::new();
+    let mut models = ConnModels::new(true);
+    for &l in labels {
+        models.encode_label(&mut enc, l);
+    }
+    if group_count > 1 {
+        for &(sym, class, seen) in group_syms {
+            models.encode_group(&mut enc, sym, class, seen);
+        }
+    }
+    conn.extend_from_slice(&enc.finish());
+    conn
+}
+
+/// The quantisation grid over the mesh's positions (and the box `opts.grid_covers`, when
+/// given). Fails when the grid's box overflows f64.
+fn encode_quantizer(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Quantizer> {
+    let bits = opts.quantization_bits;
     let quant = match opts.grid_covers {
         None => Quantizer::for_positions(&mesh.positions, bits, opts.step_scale),
         Some(corners) => {
@@ -1055,10 +1224,17 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             opts.step_scale
         )));
     }
-    let (patches, group_axes) = patches::encode(&groups_new_order, &quant)?;
+    Ok(quant)
+}
 
-    // Creases section.
-    let edges = label_edges(&rb.label_edge);
+/// The sharp flag of every edge (label order: `edges`), from the mesh's sharp edges between
+/// input vertices. Fails when a sharp edge is not an edge of the mesh.
+fn sharp_edge_flags(
+    mesh: &ControlMesh,
+    rb: &Rebuilt,
+    edges: &[u32],
+    orig_of_coded: &[u32],
+) -> Result<Vec<bool>> {
     let mut sharp = vec![false; edges.len()];
     let mut matched = BTreeSet::new();
     for (j, &h) in edges.iter().enumerate() {
@@ -1078,150 +1254,145 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
             "sharp edge {missing:?} is not an edge of the mesh"
         )));
     }
-    let mut corner: Vec<bool> = orig_of_coded
-        .iter()
-        .map(|o| mesh.corners.contains(o))
-        .collect();
-    let mut creases_enc = RangeEncoder::new();
-    let crease_he = code_creases(
-        &rb,
-        &edges,
-        &face_group_new,
-        &mut sharp,
-        &mut corner,
-        &mut creases_enc,
-    )?;
-    let creases = creases_enc.finish();
+    Ok(sharp)
+}
 
-    // Geometry section.
-    let mut q: Vec<[i32; 3]> = coded_to_work
-        .iter()
-        .map(|&w| quant.quantize(work.positions[w as usize]))
-        .collect();
-    let kinds: Vec<PatchKind> = groups_new_order.iter().map(|g| g.patch).collect();
-    let face_plane_group = plane_groups_of_faces(&face_group_new, &kinds);
-    let (face_axis, axes) = patches::face_axes(&face_group_new, &group_axes);
+/// The geometry section: the grid points `q` of the coded vertices, walked as the current
+/// version does (predictions along the creases `crease_he`, arcs round the groups' axes).
+fn geometry_section(
+    rb: &Rebuilt,
+    groups: &GroupCoding,
+    group_axes: &[Option<geometry::GridAxis>],
+    crease_he: &[bool],
+    bits: u8,
+    mut q: Vec<[i32; 3]>,
+) -> Result<Vec<u8>> {
+    let kinds: Vec<PatchKind> = groups.coded_order.iter().map(|g| g.patch).collect();
+    let face_plane_group = plane_groups_of_faces(&groups.face_group, &kinds);
+    let (face_axis, axes) = patches::face_axes(&groups.face_group, group_axes);
     let mut geom_enc = RangeEncoder::new();
-    {
-        let mut ge = GeomEncoder::new(&mut geom_enc);
-        // The encoder writes the current version: predictions along creases, arcs round axes.
-        geometry::walk(
-            &rb,
-            &face_plane_group,
-            groups_new_order.len(),
-            bits,
-            Some(&crease_he),
-            (!axes.is_empty()).then_some(&ArcAxes {
-                face_axis: &face_axis,
-                axes: &axes,
-            }),
-            &mut q,
-            &mut ge,
-        )?;
-    }
-    let geometry = geom_enc.finish();
+    let mut ge = GeomEncoder::new(&mut geom_enc);
+    geometry::walk(
+        rb,
+        &face_plane_group,
+        groups.coded_order.len(),
+        bits,
+        Some(crease_he),
+        (!axes.is_empty()).then_some(&ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
+        }),
+        &mut q,
+        &mut ge,
+    )?;
+    Ok(geom_enc.finish())
+}
 
-    // Header.
-    let mut flags = 0u64;
-    if let Content::ControlMesh { .. } = opts.content {
-        flags |= FLAG_CONTROL_MESH;
-    }
-    if !quant.as_f32 {
-        flags |= FLAG_BOX_F64;
-    }
-    if isolated > 0 {
-        flags |= FLAG_ISOLATED;
-    }
-    if !merges.is_empty() {
-        flags |= FLAG_MERGES;
-    }
-    if patches.is_some() {
-        flags |= FLAG_PATCHES;
-    }
-    let store_names = opts.store_group_names && groups_new_order.iter().any(|g| !g.name.is_empty());
-    if store_names {
-        flags |= FLAG_NAMES;
-    }
-    let mut header = Vec::new();
-    put_varint(&mut header, flags);
-    if let Content::ControlMesh { default_level } = opts.content {
-        header.push(default_level);
-    }
-    header.push(bits);
-    put_varint(&mut header, mesh.vertex_count() as u64);
-    put_varint(&mut header, mesh.face_count() as u64);
-    put_varint(&mut header, mesh.face_vertices.len() as u64);
-    put_varint(&mut header, group_count);
-    if isolated > 0 {
-        put_varint(&mut header, isolated);
-    }
-    if !merges.is_empty() {
-        put_varint(&mut header, merges.len() as u64);
-    }
-    for v in quant.min.iter().chain(std::iter::once(&quant.extent)) {
-        if quant.as_f32 {
-            header.extend_from_slice(&(*v as f32).to_le_bytes());
-        } else {
-            header.extend_from_slice(&v.to_le_bytes());
+/// What the header section records besides the mesh's own counts.
+struct HeaderFields<'a> {
+    content: Content,
+    bits: u8,
+    /// Vertices the traversal does not reach.
+    isolated: u64,
+    /// Number of `(copy, representative)` merges.
+    merges: u64,
+    quant: &'a Quantizer,
+    /// Whether the file has a patches section / a names section.
+    patches: bool,
+    names: bool,
+}
+
+impl HeaderFields<'_> {
+    /// The header's flag bits.
+    fn flags(&self) -> u64 {
+        let mut flags = 0u64;
+        if let Content::ControlMesh { .. } = self.content {
+            flags |= FLAG_CONTROL_MESH;
         }
+        if !self.quant.as_f32 {
+            flags |= FLAG_BOX_F64;
+        }
+        if self.isolated > 0 {
+            flags |= FLAG_ISOLATED;
+        }
+        if self.merges > 0 {
+            flags |= FLAG_MERGES;
+        }
+        if self.patches {
+            flags |= FLAG_PATCHES;
+        }
+        if self.names {
+            flags |= FLAG_NAMES;
+        }
+        flags
     }
 
-    let mut out = Vec::new();
-    out.extend_from_slice(&MAGIC);
-    out.push(FORMAT_VERSION_MAJOR);
-    out.push(FORMAT_VERSION_MINOR);
-    put_section(&mut out, SEC_HEADER, &header, false, true);
-    put_section(&mut out, SEC_CONNECTIVITY, &conn, true, false);
-    if let Some(p) = patches {
-        put_section(&mut out, SEC_PATCHES, &p, true, false);
-    }
-    put_section(&mut out, SEC_CREASES, &creases, true, false);
-    put_section(&mut out, SEC_GEOMETRY, &geometry, true, false);
-    if !merges.is_empty() {
-        let mut fx = Vec::new();
-        let mut prev: i64 = -1;
-        for &(d, r) in &merges {
-            put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
-            put_varint(&mut fx, u64::from(d - r - 1));
-            prev = i64::from(d);
+    /// The header section's payload for `mesh` (spec §5).
+    fn section(&self, mesh: &ControlMesh) -> Vec<u8> {
+        let mut header = Vec::new();
+        put_varint(&mut header, self.flags());
+        if let Content::ControlMesh { default_level } = self.content {
+            header.push(default_level);
         }
-        put_section(&mut out, SEC_FIXUPS, &fx, true, false);
-    }
-    if store_names {
-        let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
-        let mut input_of_coded = vec![0u32; group_new.len()];
-        for (og, &ng) in group_new.iter().enumerate() {
-            input_of_coded[ng as usize] = og as u32;
+        header.push(self.bits);
+        put_varint(&mut header, mesh.vertex_count() as u64);
+        put_varint(&mut header, mesh.face_count() as u64);
+        put_varint(&mut header, mesh.face_vertices.len() as u64);
+        put_varint(&mut header, mesh.groups.len() as u64);
+        if self.isolated > 0 {
+            put_varint(&mut header, self.isolated);
         }
-        let payload = names::write(&input_names, &input_of_coded);
-        put_section(&mut out, SEC_NAMES, &payload, true, false);
+        if self.merges > 0 {
+            put_varint(&mut header, self.merges);
+        }
+        let quant = self.quant;
+        for v in quant.min.iter().chain(std::iter::once(&quant.extent)) {
+            if quant.as_f32 {
+                header.extend_from_slice(&(*v as f32).to_le_bytes());
+            } else {
+                header.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        header
     }
+}
 
-    let vertex: Vec<u32> = (0..mesh.vertex_count())
-        .map(|v| final_of_coded[rep_of_orig[v] as usize])
-        .collect();
+/// The fixups section: per merge, the gap from the previous copy and how far back its
+/// representative is.
+fn fixups_section(merges: &[(u32, u32)]) -> Vec<u8> {
+    let mut fx = Vec::new();
+    let mut prev: i64 = -1;
+    for &(d, r) in merges {
+        put_varint(&mut fx, (i64::from(d) - prev - 1) as u64);
+        put_varint(&mut fx, u64::from(d - r - 1));
+        prev = i64::from(d);
+    }
+    fx
+}
+
+/// The names section: the input's group names, and the input group of every coded group
+/// (`group_new`: the coded id of every input group).
+fn names_section(mesh: &ControlMesh, group_new: &[u32]) -> Vec<u8> {
+    let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
+    let mut input_of_coded = vec![0u32; group_new.len()];
+    for (og, &ng) in group_new.iter().enumerate() {
+        input_of_coded[ng as usize] = og as u32;
+    }
+    names::write(&input_names, &input_of_coded)
+}
+
+/// The decoded id of every input face: the mesh faces numbered in encoding order
+/// (`face_source`: the input face of each rebuilt face).
+fn mesh_face_numbering(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> Vec<u32> {
     let mut face = vec![NONE; mesh.face_count()];
     let mut next_face = 0u32;
     for (i, rf) in rb.faces.iter().enumerate() {
         if !rf.hole {
-            face[rebuilt_face_source[i] as usize] = next_face;
+            face[face_source[i] as usize] = next_face;
             next_face += 1;
         }
     }
-    // With names stored, the decoder restores the input's group order.
-    let group = if store_names {
-        (0..mesh.groups.len() as u32).collect()
-    } else {
-        group_new
-    };
-    Ok((
-        out,
-        EncodeMap {
-            vertex,
-            face,
-            group,
-        },
-    ))
+    face
 }
 
 /// Final vertex id of every coded vertex after the merges (`(copy, representative)` pairs,
@@ -1844,188 +2015,65 @@ fn decode_full<const MEASURE: bool>(
     budget: &mut Budget,
 ) -> Result<(Decoded, Summary)> {
     let mut sections_info = Vec::new();
-    let (features, header, quant, sections) =
-        read_file::<MEASURE>(bytes, limits, budget, &mut sections_info)?;
-    let payload = |id: u8, budget: &mut Budget| match &sections[id as usize] {
-        Some(s) => section_payload(s, limits, budget).map(Some),
-        None => Ok(None),
-    };
-
-    let nf = header.face_count as usize;
-    let coded_count = header
-        .vertex_count
-        .checked_add(header.merged_vertex_count)
-        .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
-        as usize;
-    let group_count = header.group_count as usize;
-
-    // Isolated vertices cost at least 15 adaptive bits each in the geometry section: bound
-    // their number by its size before allocating per-vertex arrays.
-    let geometry_len = sections[SEC_GEOMETRY as usize]
-        .as_ref()
-        .map_or(0, |s| s.payload_len()) as usize;
-    if header.isolated_vertex_count.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
-        return Err(Error::format(
-            "geometry",
-            "isolated_vertex_count",
-            format!(
-                "{} isolated vertices cannot fit in {geometry_len} coded bytes",
-                header.isolated_vertex_count
-            ),
-        ));
-    }
+    let file = FileDecode::read::<MEASURE>(bytes, limits, budget, &mut sections_info)?;
+    file.check_isolated_vertices_fit()?;
+    let header = &file.header;
 
     // Connectivity.
-    let conn = payload(SEC_CONNECTIVITY, budget)?.unwrap_or_default();
+    let conn = file.payload(SEC_CONNECTIVITY, budget)?.unwrap_or_default();
     let (label_count, rb, mut face_group, group_bits) =
-        decode_connectivity::<MEASURE>(&conn, &header, features.groups_v3, budget)?;
+        decode_connectivity::<MEASURE>(&conn, header, file.features.groups_v3, budget)?;
     drop_payload(conn, budget);
     // Released when the mesh is assembled.
-    let arrays = rb.bytes + decode_array_bytes(&header, label_count as u64, rb.faces.len() as u64);
+    let arrays = rb.bytes + decode_array_bytes(header, label_count as u64, rb.faces.len() as u64);
 
-    // Patches.
-    let (patch_kinds, grid_axes) = match payload(SEC_PATCHES, budget)? {
-        Some(p) => {
-            let decoded = if LEGACY && !features.coded_patches {
-                patches::decode_v1(&p, group_count, &quant)?
-            } else {
-                patches::decode(&p, group_count, &quant)?
-            };
-            drop_payload(p, budget);
-            decoded
-        }
-        None => (
-            vec![PatchKind::Closed; group_count],
-            vec![None; group_count],
-        ),
-    };
+    let (patch_kinds, grid_axes) = file.patches(budget)?;
 
     // Creases, and the geometry walk's arrays (released after the geometry).
-    let walk_bytes = geometry_bytes(&header, rb.next.len() as u64, rb.faces.len() as u64);
+    let walk_bytes = geometry_bytes(header, rb.next.len() as u64, rb.faces.len() as u64);
     budget.charge("decode memory for the geometry walk (bytes)", walk_bytes)?;
     let edges = label_edges(&rb.label_edge);
     let mut sharp = vec![false; edges.len()];
-    let mut corner = vec![false; coded_count];
-    let crease_he = {
-        let creases = payload(SEC_CREASES, budget)?.unwrap_or_default();
-        let mut d = RangeDecoder::new(&creases, "creases")?;
-        let crease = code_creases(&rb, &edges, &face_group, &mut sharp, &mut corner, &mut d)?;
-        d.finish()?;
-        drop_payload(creases, budget);
-        crease
-    };
-
-    // Geometry.
-    let mut q = vec![[0i32; 3]; coded_count];
-    {
-        let face_plane_group = plane_groups_of_faces(&face_group, &patch_kinds);
-        let (face_axis, axes) = patches::face_axes(&face_group, &grid_axes);
-        let arcs = ArcAxes {
-            face_axis: &face_axis,
-            axes: &axes,
-        };
-        let geometry = payload(SEC_GEOMETRY, budget)?.unwrap_or_default();
-        let mut d = RangeDecoder::new(&geometry, "geometry")?;
-        let mut gd = GeomDecoder::new(&mut d, quant.max_q(), budget);
-        geometry::walk(
-            &rb,
-            &face_plane_group,
-            group_count,
-            quant.bits,
-            features.crease_prediction.then_some(crease_he.as_slice()),
-            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
-            &mut q,
-            &mut gd,
-        )?;
-        d.finish()?;
-        drop_payload(geometry, budget);
-    }
+    let mut corner = vec![false; file.coded_count];
+    let crease_he = file.creases(&rb, &edges, &face_group, &mut sharp, &mut corner, budget)?;
+    let q = file.geometry(
+        &rb,
+        &face_group,
+        &patch_kinds,
+        &grid_axes,
+        &crease_he,
+        budget,
+    )?;
     drop(crease_he);
     budget.release(walk_bytes);
 
     // Fixups.
-    let fixups = payload(SEC_FIXUPS, budget)?;
-    let merges = decode_fixups(fixups.as_deref(), header.merged_vertex_count, coded_count)?;
+    let fixups = file.payload(SEC_FIXUPS, budget)?;
+    let merges = decode_fixups(
+        fixups.as_deref(),
+        header.merged_vertex_count,
+        file.coded_count,
+    )?;
     if let Some(p) = fixups {
         drop_payload(p, budget);
     }
-    let final_of_coded = final_numbering(coded_count, &merges);
+    let final_of_coded = final_numbering(file.coded_count, &merges);
 
-    // Names, and (version 2) the input's group order: coded group `c` becomes group
-    // `input_of_coded[c]`.
-    let mut names = vec![String::new(); group_count];
-    let mut input_of_coded: Option<Vec<u32>> = None;
-    if let Some(p) = payload(SEC_NAMES, budget)? {
-        if LEGACY && !features.names_in_input_order {
-            names = names::read_v1(&p, group_count)?;
-        } else {
-            let (n, order) = names::read(&p, group_count, budget)?;
-            names = n;
-            input_of_coded = Some(order);
-        }
-        drop_payload(p, budget);
-    }
-    let mut patch_kinds = patch_kinds;
-    if let Some(order) = &input_of_coded {
-        for g in face_group.iter_mut() {
-            if let Some(&o) = order.get(*g as usize) {
-                *g = o;
-            }
-        }
-        let mut kinds = vec![PatchKind::Closed; group_count];
-        for (c, &o) in order.iter().enumerate() {
-            kinds[o as usize] = patch_kinds[c];
-        }
-        patch_kinds = kinds;
-    }
-
-    // Assemble.
-    let sharp_count = sharp.iter().filter(|&&s| s).count() as u64;
-    let corner_count = corner.iter().filter(|&&c| c).count() as u64;
-    budget.charge(
-        "decode memory for the decoded mesh (bytes)",
-        mesh_bytes(&header) + sharp_count * SHARP_EDGE_BYTES + corner_count * CORNER_BYTES,
+    let (names, patch_kinds) = file.names_and_group_order(&mut face_group, patch_kinds, budget)?;
+    let mesh = file.assemble(
+        &rb,
+        CodedContent {
+            q,
+            final_of_coded,
+            face_group,
+            names,
+            patch_kinds,
+            edges,
+            sharp,
+            corner,
+        },
+        budget,
     )?;
-    let mut mesh = ControlMesh::new();
-    let final_count = header.vertex_count as usize;
-    mesh.positions = vec![DVec3::ZERO; final_count];
-    for c in 0..coded_count {
-        mesh.positions[final_of_coded[c] as usize] = quant.dequantize(q[c]);
-    }
-    mesh.face_vertices
-        .reserve(header.face_corner_count as usize);
-    mesh.face_offsets.reserve(nf);
-    mesh.face_groups.reserve(nf);
-    let mut buf = Vec::new();
-    for (i, rf) in rb.faces.iter().enumerate() {
-        if rf.hole {
-            continue;
-        }
-        buf.clear();
-        buf.extend(rb.face_vertices(i).map(|v| final_of_coded[v as usize]));
-        mesh.push_face(&buf, face_group[i]);
-    }
-    mesh.groups = names
-        .into_iter()
-        .zip(&patch_kinds)
-        .map(|(name, &patch)| Group { name, patch })
-        .collect();
-    for (j, &h) in edges.iter().enumerate() {
-        if sharp[j] {
-            let t = rb.twin[h as usize];
-            mesh.sharp_edges.insert(edge_key(
-                final_of_coded[rb.vertex[h as usize] as usize],
-                final_of_coded[rb.vertex[t as usize] as usize],
-            ));
-        }
-    }
-    for (c, &is) in corner.iter().enumerate() {
-        if is {
-            mesh.corners.insert(final_of_coded[c]);
-        }
-    }
-    mesh.validate()
-        .map_err(|e| Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}")))?;
     // The input and the mesh stay charged: the caller holds them.
     budget.release(arrays);
 
@@ -2039,7 +2087,282 @@ fn decode_full<const MEASURE: bool>(
         label_count,
         group_bits,
     };
-    Ok((Decoded { header, mesh }, summary))
+    Ok((
+        Decoded {
+            header: file.header,
+            mesh,
+        },
+        summary,
+    ))
+}
+
+/// A file being decoded: what [`read_file`] found in it, and the limits it is decoded within.
+struct FileDecode<'a, 'l> {
+    features: Features,
+    header: Header,
+    quant: Quantizer,
+    sections: Sections<'a>,
+    limits: &'l Limits,
+    /// Coded vertices: the output vertices and the merged copies.
+    coded_count: usize,
+}
+
+/// What the sections after the connectivity decode to, in coded numbering, for
+/// [`FileDecode::assemble`].
+struct CodedContent {
+    /// Grid point of every coded vertex.
+    q: Vec<[i32; 3]>,
+    /// Output vertex of every coded vertex (after the merges).
+    final_of_coded: Vec<u32>,
+    /// Group of every rebuilt face (in the input's group order).
+    face_group: Vec<u32>,
+    /// Name and patch kind of every group.
+    names: Vec<String>,
+    patch_kinds: Vec<PatchKind>,
+    /// Every edge's half-edge (label order) and sharp flag.
+    edges: Vec<u32>,
+    sharp: Vec<bool>,
+    /// Corner flag of every coded vertex.
+    corner: Vec<bool>,
+}
+
+impl<'a, 'l> FileDecode<'a, 'l> {
+    /// Reads the file's start ([`read_file`]) and checks that its coded vertex count fits.
+    fn read<const MEASURE: bool>(
+        bytes: &'a [u8],
+        limits: &'l Limits,
+        budget: &mut Budget,
+        sections_info: &mut Vec<SectionInfo>,
+    ) -> Result<Self> {
+        let (features, header, quant, sections) =
+            read_file::<MEASURE>(bytes, limits, budget, sections_info)?;
+        let coded_count = header
+            .vertex_count
+            .checked_add(header.merged_vertex_count)
+            .ok_or_else(|| Error::format("header", "merged_vertex_count", "overflow"))?
+            as usize;
+        Ok(FileDecode {
+            features,
+            header,
+            quant,
+            sections,
+            limits,
+            coded_count,
+        })
+    }
+
+    /// Section `id`'s payload if the file has it, inflated after its raw length is checked
+    /// and charged ([`section_payload`]).
+    fn payload(&self, id: u8, budget: &mut Budget) -> Result<Option<std::borrow::Cow<'a, [u8]>>> {
+        match &self.sections[id as usize] {
+            Some(s) => section_payload(s, self.limits, budget).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// Isolated vertices cost at least 15 adaptive bits each in the geometry section: bounds
+    /// their number by its size before per-vertex arrays are allocated.
+    fn check_isolated_vertices_fit(&self) -> Result<()> {
+        let geometry_len = self.sections[SEC_GEOMETRY as usize]
+            .as_ref()
+            .map_or(0, |s| s.payload_len()) as usize;
+        let isolated = self.header.isolated_vertex_count;
+        if isolated.saturating_mul(15) > rangecoder::max_symbols(geometry_len) {
+            return Err(Error::format(
+                "geometry",
+                "isolated_vertex_count",
+                format!("{isolated} isolated vertices cannot fit in {geometry_len} coded bytes"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The patches section: each group's patch kind and grid axis (closed patches without
+    /// axes when the file has no such section).
+    fn patches(&self, budget: &mut Budget) -> Result<patches::DecodedPatches> {
+        let group_count = self.header.group_count as usize;
+        Ok(match self.payload(SEC_PATCHES, budget)? {
+            Some(p) => {
+                let decoded = if LEGACY && !self.features.coded_patches {
+                    patches::decode_v1(&p, group_count, &self.quant)?
+                } else {
+                    patches::decode(&p, group_count, &self.quant)?
+                };
+                drop_payload(p, budget);
+                decoded
+            }
+            None => (
+                vec![PatchKind::Closed; group_count],
+                vec![None; group_count],
+            ),
+        })
+    }
+
+    /// The creases section: fills the sharp flag of every edge and the corner flag of every
+    /// coded vertex, and returns per half-edge whether its edge is a crease.
+    fn creases(
+        &self,
+        rb: &Rebuilt,
+        edges: &[u32],
+        face_group: &[u32],
+        sharp: &mut [bool],
+        corner: &mut [bool],
+        budget: &mut Budget,
+    ) -> Result<Vec<bool>> {
+        let creases = self.payload(SEC_CREASES, budget)?.unwrap_or_default();
+        let mut d = RangeDecoder::new(&creases, "creases")?;
+        let crease = code_creases(rb, edges, face_group, sharp, corner, &mut d)?;
+        d.finish()?;
+        drop_payload(creases, budget);
+        Ok(crease)
+    }
+
+    /// The geometry section: the grid point of every coded vertex, walked with the
+    /// predictions the file's version has (along the creases `crease_he`, on circles round
+    /// the groups' `grid_axes`).
+    fn geometry(
+        &self,
+        rb: &Rebuilt,
+        face_group: &[u32],
+        patch_kinds: &[PatchKind],
+        grid_axes: &[Option<geometry::GridAxis>],
+        crease_he: &[bool],
+        budget: &mut Budget,
+    ) -> Result<Vec<[i32; 3]>> {
+        let features = &self.features;
+        let mut q = vec![[0i32; 3]; self.coded_count];
+        let face_plane_group = plane_groups_of_faces(face_group, patch_kinds);
+        let (face_axis, axes) = patches::face_axes(face_group, grid_axes);
+        let arcs = ArcAxes {
+            face_axis: &face_axis,
+            axes: &axes,
+        };
+        let geometry = self.payload(SEC_GEOMETRY, budget)?.unwrap_or_default();
+        let mut d = RangeDecoder::new(&geometry, "geometry")?;
+        let mut gd = GeomDecoder::new(&mut d, self.quant.max_q(), budget);
+        geometry::walk(
+            rb,
+            &face_plane_group,
+            self.header.group_count as usize,
+            self.quant.bits,
+            features.crease_prediction.then_some(crease_he),
+            (features.arc_prediction && !axes.is_empty()).then_some(&arcs),
+            &mut q,
+            &mut gd,
+        )?;
+        d.finish()?;
+        drop_payload(geometry, budget);
+        Ok(q)
+    }
+
+    /// The names section's group names, and (version 2 on) the input's group order: coded
+    /// group `c` becomes group `input_of_coded[c]`, in `face_group` and in the patch kinds
+    /// returned.
+    fn names_and_group_order(
+        &self,
+        face_group: &mut [u32],
+        patch_kinds: Vec<PatchKind>,
+        budget: &mut Budget,
+    ) -> Result<(Vec<String>, Vec<PatchKind>)> {
+        let group_count = self.header.group_count as usize;
+        let mut names = vec![String::new(); group_count];
+        let mut input_of_coded: Option<Vec<u32>> = None;
+        if let Some(p) = self.payload(SEC_NAMES, budget)? {
+            if LEGACY && !self.features.names_in_input_order {
+                names = names::read_v1(&p, group_count)?;
+            } else {
+                let (n, order) = names::read(&p, group_count, budget)?;
+                names = n;
+                input_of_coded = Some(order);
+            }
+            drop_payload(p, budget);
+        }
+        let mut patch_kinds = patch_kinds;
+        if let Some(order) = &input_of_coded {
+            for g in face_group.iter_mut() {
+                if let Some(&o) = order.get(*g as usize) {
+                    *g = o;
+                }
+            }
+            let mut kinds = vec![PatchKind::Closed; group_count];
+            for (c, &o) in order.iter().enumerate() {
+                kinds[o as usize] = patch_kinds[c];
+            }
+            patch_kinds = kinds;
+        }
+        Ok((names, patch_kinds))
+    }
+
+    /// The decoded mesh (charged first): positions, the mesh faces in encoding order with
+    /// their groups, the groups, sharp edges and corners, all in output numbering; it must
+    /// be valid.
+    fn assemble(
+        &self,
+        rb: &Rebuilt,
+        content: CodedContent,
+        budget: &mut Budget,
+    ) -> Result<ControlMesh> {
+        let header = &self.header;
+        let CodedContent {
+            q,
+            final_of_coded,
+            face_group,
+            names,
+            patch_kinds,
+            edges,
+            sharp,
+            corner,
+        } = content;
+        let nf = header.face_count as usize;
+        let sharp_count = sharp.iter().filter(|&&s| s).count() as u64;
+        let corner_count = corner.iter().filter(|&&c| c).count() as u64;
+        budget.charge(
+            "decode memory for the decoded mesh (bytes)",
+            mesh_bytes(header) + sharp_count * SHARP_EDGE_BYTES + corner_count * CORNER_BYTES,
+        )?;
+        let mut mesh = ControlMesh::new();
+        let final_count = header.vertex_count as usize;
+        mesh.positions = vec![DVec3::ZERO; final_count];
+        for c in 0..self.coded_count {
+            mesh.positions[final_of_coded[c] as usize] = self.quant.dequantize(q[c]);
+        }
+        mesh.face_vertices
+            .reserve(header.face_corner_count as usize);
+        mesh.face_offsets.reserve(nf);
+        mesh.face_groups.reserve(nf);
+        let mut buf = Vec::new();
+        for (i, rf) in rb.faces.iter().enumerate() {
+            if rf.hole {
+                continue;
+            }
+            buf.clear();
+            buf.extend(rb.face_vertices(i).map(|v| final_of_coded[v as usize]));
+            mesh.push_face(&buf, face_group[i]);
+        }
+        mesh.groups = names
+            .into_iter()
+            .zip(&patch_kinds)
+            .map(|(name, &patch)| Group { name, patch })
+            .collect();
+        for (j, &h) in edges.iter().enumerate() {
+            if sharp[j] {
+                let t = rb.twin[h as usize];
+                mesh.sharp_edges.insert(edge_key(
+                    final_of_coded[rb.vertex[h as usize] as usize],
+                    final_of_coded[rb.vertex[t as usize] as usize],
+                ));
+            }
+        }
+        for (c, &is) in corner.iter().enumerate() {
+            if is {
+                mesh.corners.insert(final_of_coded[c]);
+            }
+        }
+        mesh.validate().map_err(|e| {
+            Error::format("fixups", "merges", format!("decoded mesh is invalid: {e}"))
+        })?;
+        Ok(mesh)
+    }
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 
 use glam::DVec3;
 
-use super::weld::weld_where;
+use super::weld::{weld_where, Welded};
 use super::{MeshFormat, ReadReport};
 use crate::error::{Error, Result};
 use crate::mesh::{edge_key, ControlMesh, PatchKind};
@@ -158,22 +158,55 @@ fn check_extent(raw: &RawMesh, path: &Path) -> Result<()> {
 /// Welds, repairs and validates a parsed file; see the [`io`](super) module docs for the
 /// rules. Errors name `path`.
 pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlMesh, ReadReport)> {
-    let mut report = ReadReport::new(format);
-    report.input_vertices = raw.positions.len();
-    report.input_faces = raw.input_faces.max(raw.face_count());
-    report.dropped_degenerate_faces = raw.dropped_short_faces;
-    let mut notes = raw.notes.clone();
-    if raw.dropped_short_faces > 0 {
-        Examples {
-            count: raw.dropped_short_faces,
-            shown: raw.short_face_examples.clone(),
-        }
-        .note(
-            "faces with fewer than 3 vertices in the file dropped",
-            &mut notes,
-        );
-    }
+    let mut repair = Repair::start(&raw, format, path);
+    check_raw_mesh(&raw, path)?;
 
+    // 1. Weld duplicates that lie on an open boundary of the stored mesh (or are used by no
+    //    face): that is where exporters cut surfaces apart. See `weld` for why coincident
+    //    vertices inside closed surfaces are not merged.
+    let eligible = weld_eligible(&raw);
+    let welded = weld_where(&raw.positions, |i| eligible[i]);
+    repair.record_weld(&welded);
+
+    // 2. Faces: map to welded vertices, remove repeats, drop those left with < 3.
+    let mut faces = repair.repair_faces(&raw, &welded.remap)?;
+
+    // 3. Groups: drop the empty ones, keep the order of the rest.
+    let mut mesh = ControlMesh::new();
+    repair.drop_empty_groups(&raw, &mut faces.groups, &mut mesh)?;
+
+    // 4. Remove unreferenced vertices, keeping the order of the others.
+    let (positions, compact) = repair.remove_unreferenced(&welded.positions, &mut faces.vertices);
+    // Maps a file vertex to the final index, if it survived.
+    let final_index = |v: u32| -> Option<u32> {
+        let c = compact[welded.remap[v as usize] as usize];
+        (c != u32::MAX).then_some(c)
+    };
+
+    mesh.positions = positions;
+    mesh.face_offsets = faces.offsets;
+    mesh.face_vertices = faces.vertices;
+    mesh.face_groups = faces.groups;
+
+    // 5. Edge statistics (and the edge set for checking sharp edges).
+    let edges = sorted_edges(&mesh);
+    repair.record_edge_statistics(&mesh, &edges);
+
+    // 6. Sharp edges and corners.
+    repair.add_sharp_edges(&raw, &mut mesh, &edges, &final_index)?;
+    repair.add_corners(&raw, &mut mesh, &final_index)?;
+    let mut report = repair.report;
+    report.repairs = repair.notes;
+
+    mesh.validate()
+        .map_err(|e| Error::input(path, format!("internal reader error: {e}")))?;
+    Ok((mesh, report))
+}
+
+/// The safety net every format gets before any repair: some faces, counts that fit u32,
+/// finite coordinates with a finite extent, vertex references in range. Parsers check
+/// most of these with line numbers.
+fn check_raw_mesh(raw: &RawMesh, path: &Path) -> Result<()> {
     if raw.face_count() == 0 {
         let why = if raw.input_faces > 0 {
             "no valid faces (all faces were degenerate)"
@@ -203,7 +236,7 @@ pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlM
             ),
         ));
     }
-    check_extent(&raw, path)?;
+    check_extent(raw, path)?;
     let nv = raw.positions.len() as u32;
     for f in 0..raw.face_count() {
         if let Some(&v) = raw.face(f).iter().find(|&&v| v >= nv) {
@@ -217,193 +250,271 @@ pub fn finish(raw: RawMesh, format: MeshFormat, path: &Path) -> Result<(ControlM
             ));
         }
     }
+    Ok(())
+}
 
-    // 1. Weld duplicates that lie on an open boundary of the stored mesh (or are used by no
-    //    face): that is where exporters cut surfaces apart. See `weld` for why coincident
-    //    vertices inside closed surfaces are not merged.
-    let eligible = weld_eligible(&raw);
-    let welded = weld_where(&raw.positions, |i| eligible[i]);
-    report.welded_vertices = welded.merged();
-    report.coincident_vertices_kept = welded.coincident_kept;
-    if welded.coincident_kept > 0 {
-        notes.push(format!(
-            "{} vertices share coordinates with another vertex but were not welded (inside \
-             closed surfaces, e.g. touching solids; welding would make non-manifold edges)",
-            welded.coincident_kept
-        ));
-    }
+/// Faces after repair, as CSR like [`ControlMesh`]'s.
+struct RepairedFaces {
+    offsets: Vec<u32>,
+    vertices: Vec<u32>,
+    groups: Vec<u32>,
+}
 
-    // 2. Faces: map to welded vertices, remove repeats, drop those left with < 3.
-    let mut face_offsets = Vec::with_capacity(raw.face_count() + 1);
-    face_offsets.push(0u32);
-    let mut face_vertices = Vec::with_capacity(raw.face_vertices.len());
-    let mut face_groups = Vec::with_capacity(raw.face_count());
-    let mut dropped = Examples::new();
-    let mut repaired = Examples::new();
-    let mut polygon = Vec::new();
-    for f in 0..raw.face_count() {
-        polygon.clear();
-        for &v in raw.face(f) {
-            let w = welded.remap[v as usize];
-            if !polygon.contains(&w) {
-                polygon.push(w);
+/// The repairs of one file as [`finish`] makes them: the report and its notes so far, and
+/// the path errors name.
+struct Repair<'p> {
+    report: ReadReport,
+    notes: Vec<String>,
+    path: &'p Path,
+}
+
+impl<'p> Repair<'p> {
+    /// The report of what the parser saw and dropped, with the parser's notes.
+    fn start(raw: &RawMesh, format: MeshFormat, path: &'p Path) -> Self {
+        let mut report = ReadReport::new(format);
+        report.input_vertices = raw.positions.len();
+        report.input_faces = raw.input_faces.max(raw.face_count());
+        report.dropped_degenerate_faces = raw.dropped_short_faces;
+        let mut notes = raw.notes.clone();
+        if raw.dropped_short_faces > 0 {
+            Examples {
+                count: raw.dropped_short_faces,
+                shown: raw.short_face_examples.clone(),
             }
+            .note(
+                "faces with fewer than 3 vertices in the file dropped",
+                &mut notes,
+            );
         }
-        if polygon.len() < 3 {
-            dropped.add(|| raw.describe_face(f));
-            continue;
-        }
-        if polygon.len() != raw.face(f).len() {
-            repaired.add(|| raw.describe_face(f));
-        }
-        face_vertices.extend_from_slice(&polygon);
-        face_offsets.push(face_vertices.len() as u32);
-        face_groups.push(raw.face_groups[f]);
-    }
-    report.dropped_degenerate_faces += dropped.count;
-    report.repaired_faces = repaired.count;
-    dropped.note(
-        "degenerate faces dropped (fewer than 3 distinct vertices after welding)",
-        &mut notes,
-    );
-    repaired.note(
-        "faces repaired by removing repeated vertices (first occurrence kept)",
-        &mut notes,
-    );
-    if face_groups.is_empty() {
-        return Err(Error::input(
+        Repair {
+            report,
+            notes,
             path,
-            format!(
-                "no valid faces: all {} faces are degenerate (fewer than 3 distinct vertices)",
-                raw.face_count()
-            ),
-        ));
+        }
     }
 
-    // 3. Groups: drop the empty ones, keep the order of the rest.
-    let mut faces_per_group = vec![0usize; raw.group_names.len()];
-    for &g in &face_groups {
-        match faces_per_group.get_mut(g as usize) {
-            Some(n) => *n += 1,
-            None => {
+    /// Reports the welded vertices and the coincident ones left apart.
+    fn record_weld(&mut self, welded: &Welded) {
+        self.report.welded_vertices = welded.merged();
+        self.report.coincident_vertices_kept = welded.coincident_kept;
+        if welded.coincident_kept > 0 {
+            self.notes.push(format!(
+                "{} vertices share coordinates with another vertex but were not welded (inside \
+                 closed surfaces, e.g. touching solids; welding would make non-manifold edges)",
+                welded.coincident_kept
+            ));
+        }
+    }
+
+    /// The faces on the welded vertices (`remap`: the welded vertex of each file vertex)
+    /// with repeated vertices removed (first occurrence kept); those left with fewer than 3
+    /// are dropped. Fails when none is left.
+    fn repair_faces(&mut self, raw: &RawMesh, remap: &[u32]) -> Result<RepairedFaces> {
+        let mut face_offsets = Vec::with_capacity(raw.face_count() + 1);
+        face_offsets.push(0u32);
+        let mut face_vertices = Vec::with_capacity(raw.face_vertices.len());
+        let mut face_groups = Vec::with_capacity(raw.face_count());
+        let mut dropped = Examples::new();
+        let mut repaired = Examples::new();
+        let mut polygon = Vec::new();
+        for f in 0..raw.face_count() {
+            polygon.clear();
+            for &v in raw.face(f) {
+                let w = remap[v as usize];
+                if !polygon.contains(&w) {
+                    polygon.push(w);
+                }
+            }
+            if polygon.len() < 3 {
+                dropped.add(|| raw.describe_face(f));
+                continue;
+            }
+            if polygon.len() != raw.face(f).len() {
+                repaired.add(|| raw.describe_face(f));
+            }
+            face_vertices.extend_from_slice(&polygon);
+            face_offsets.push(face_vertices.len() as u32);
+            face_groups.push(raw.face_groups[f]);
+        }
+        self.report.dropped_degenerate_faces += dropped.count;
+        self.report.repaired_faces = repaired.count;
+        dropped.note(
+            "degenerate faces dropped (fewer than 3 distinct vertices after welding)",
+            &mut self.notes,
+        );
+        repaired.note(
+            "faces repaired by removing repeated vertices (first occurrence kept)",
+            &mut self.notes,
+        );
+        if face_groups.is_empty() {
+            return Err(Error::input(
+                self.path,
+                format!(
+                    "no valid faces: all {} faces are degenerate (fewer than 3 distinct vertices)",
+                    raw.face_count()
+                ),
+            ));
+        }
+        Ok(RepairedFaces {
+            offsets: face_offsets,
+            vertices: face_vertices,
+            groups: face_groups,
+        })
+    }
+
+    /// Adds the groups that have faces to `mesh`, in file order, and renumbers `face_groups`
+    /// to them; the empty ones are dropped.
+    fn drop_empty_groups(
+        &mut self,
+        raw: &RawMesh,
+        face_groups: &mut [u32],
+        mesh: &mut ControlMesh,
+    ) -> Result<()> {
+        let mut faces_per_group = vec![0usize; raw.group_names.len()];
+        for &g in face_groups.iter() {
+            match faces_per_group.get_mut(g as usize) {
+                Some(n) => *n += 1,
+                None => {
+                    return Err(Error::input(
+                        self.path,
+                        format!("internal reader error: face group {g} does not exist"),
+                    ))
+                }
+            }
+        }
+        let mut group_remap = vec![u32::MAX; raw.group_names.len()];
+        let mut empty = Examples::new();
+        for (g, name) in raw.group_names.iter().enumerate() {
+            if faces_per_group[g] == 0 {
+                empty.add(|| format!("`{name}`"));
+            } else {
+                group_remap[g] = mesh.push_group(name.clone(), PatchKind::default());
+            }
+        }
+        self.report.dropped_empty_groups = empty.count;
+        empty.note("empty groups dropped (no faces)", &mut self.notes);
+        for g in face_groups.iter_mut() {
+            *g = group_remap[*g as usize];
+        }
+        Ok(())
+    }
+
+    /// Removes the welded vertices no face uses, keeping the order of the others, and
+    /// renumbers `face_vertices`. Returns the kept positions and the new index of every
+    /// welded vertex (`u32::MAX` for those removed).
+    fn remove_unreferenced(
+        &mut self,
+        welded_positions: &[DVec3],
+        face_vertices: &mut [u32],
+    ) -> (Vec<DVec3>, Vec<u32>) {
+        let mut compact = vec![u32::MAX; welded_positions.len()];
+        for &v in face_vertices.iter() {
+            compact[v as usize] = 0;
+        }
+        let mut positions = Vec::with_capacity(welded_positions.len());
+        for (v, slot) in compact.iter_mut().enumerate() {
+            if *slot == 0 {
+                *slot = positions.len() as u32;
+                positions.push(welded_positions[v]);
+            }
+        }
+        self.report.unreferenced_vertices = welded_positions.len() - positions.len();
+        if self.report.unreferenced_vertices > 0 {
+            self.notes.push(format!(
+                "{} vertices used by no face removed",
+                self.report.unreferenced_vertices
+            ));
+        }
+        for v in face_vertices.iter_mut() {
+            *v = compact[*v as usize];
+        }
+        (positions, compact)
+    }
+
+    /// Reports the boundary and non-manifold edges (from `edges`, the mesh's sorted edges)
+    /// and the zero-area faces.
+    fn record_edge_statistics(&mut self, mesh: &ControlMesh, edges: &[(u32, u32)]) {
+        let (boundary, nonmanifold) = count_edge_multiplicities(edges);
+        self.report.boundary_edges = boundary;
+        self.report.nonmanifold_edges = nonmanifold;
+        self.report.zero_area_faces = (0..mesh.face_count())
+            .filter(|&f| is_zero_area(&mesh.positions, mesh.face(f)))
+            .count();
+    }
+
+    /// Marks the file's sharp edges on `mesh` (`final_index`: the mesh vertex of a file
+    /// vertex that survived); those that are no edge of it (in sorted `edges`) are dropped.
+    /// Fails on a sharp edge naming a vertex beyond the file's.
+    fn add_sharp_edges(
+        &mut self,
+        raw: &RawMesh,
+        mesh: &mut ControlMesh,
+        edges: &[(u32, u32)],
+        final_index: &impl Fn(u32) -> Option<u32>,
+    ) -> Result<()> {
+        let nv = raw.positions.len() as u32;
+        let mut bad_sharp = Examples::new();
+        for &[a, b] in &raw.sharp_edges {
+            if a >= nv || b >= nv {
                 return Err(Error::input(
-                    path,
-                    format!("internal reader error: face group {g} does not exist"),
-                ))
+                    self.path,
+                    format!(
+                        "sharp edge ({}, {}) references a vertex beyond the {nv} vertices",
+                        a as u64 + 1,
+                        b as u64 + 1
+                    ),
+                ));
+            }
+            match (final_index(a), final_index(b)) {
+                (Some(x), Some(y)) if x != y && edges.binary_search(&edge_key(x, y)).is_ok() => {
+                    mesh.set_sharp(x, y);
+                }
+                _ => bad_sharp.add(|| format!("({}, {})", a as u64 + 1, b as u64 + 1)),
             }
         }
-    }
-    let mut mesh = ControlMesh::new();
-    let mut group_remap = vec![u32::MAX; raw.group_names.len()];
-    let mut empty = Examples::new();
-    for (g, name) in raw.group_names.iter().enumerate() {
-        if faces_per_group[g] == 0 {
-            empty.add(|| format!("`{name}`"));
-        } else {
-            group_remap[g] = mesh.push_group(name.clone(), PatchKind::default());
-        }
-    }
-    report.dropped_empty_groups = empty.count;
-    empty.note("empty groups dropped (no faces)", &mut notes);
-    for g in &mut face_groups {
-        *g = group_remap[*g as usize];
+        self.report.dropped_sharp_edges = bad_sharp.count;
+        bad_sharp.note(
+            "sharp edges dropped (not an edge of any face after welding; 1-based file vertices)",
+            &mut self.notes,
+        );
+        Ok(())
     }
 
-    // 4. Remove unreferenced vertices, keeping the order of the others.
-    let mut compact = vec![u32::MAX; welded.positions.len()];
-    for &v in &face_vertices {
-        compact[v as usize] = 0;
-    }
-    let mut positions = Vec::with_capacity(welded.positions.len());
-    for (v, slot) in compact.iter_mut().enumerate() {
-        if *slot == 0 {
-            *slot = positions.len() as u32;
-            positions.push(welded.positions[v]);
-        }
-    }
-    report.unreferenced_vertices = welded.positions.len() - positions.len();
-    if report.unreferenced_vertices > 0 {
-        notes.push(format!(
-            "{} vertices used by no face removed",
-            report.unreferenced_vertices
-        ));
-    }
-    for v in &mut face_vertices {
-        *v = compact[*v as usize];
-    }
-    // Maps a file vertex to the final index, if it survived.
-    let final_index = |v: u32| -> Option<u32> {
-        let c = compact[welded.remap[v as usize] as usize];
-        (c != u32::MAX).then_some(c)
-    };
-
-    mesh.positions = positions;
-    mesh.face_offsets = face_offsets;
-    mesh.face_vertices = face_vertices;
-    mesh.face_groups = face_groups;
-
-    // 5. Edge statistics (and the edge set for checking sharp edges).
-    let edges = sorted_edges(&mesh);
-    let (boundary, nonmanifold) = count_edge_multiplicities(&edges);
-    report.boundary_edges = boundary;
-    report.nonmanifold_edges = nonmanifold;
-    report.zero_area_faces = (0..mesh.face_count())
-        .filter(|&f| is_zero_area(&mesh.positions, mesh.face(f)))
-        .count();
-
-    // 6. Sharp edges and corners.
-    let mut bad_sharp = Examples::new();
-    for &[a, b] in &raw.sharp_edges {
-        if a >= nv || b >= nv {
-            return Err(Error::input(
-                path,
-                format!(
-                    "sharp edge ({}, {}) references a vertex beyond the {nv} vertices",
-                    a as u64 + 1,
-                    b as u64 + 1
-                ),
-            ));
-        }
-        match (final_index(a), final_index(b)) {
-            (Some(x), Some(y)) if x != y && edges.binary_search(&edge_key(x, y)).is_ok() => {
-                mesh.set_sharp(x, y);
+    /// Tags the file's corners on `mesh` (`final_index` as in
+    /// [`add_sharp_edges`](Self::add_sharp_edges)); those whose vertex no face uses are
+    /// dropped. Fails on a corner beyond the file's vertices.
+    fn add_corners(
+        &mut self,
+        raw: &RawMesh,
+        mesh: &mut ControlMesh,
+        final_index: &impl Fn(u32) -> Option<u32>,
+    ) -> Result<()> {
+        let nv = raw.positions.len() as u32;
+        let mut bad_corner = Examples::new();
+        for &c in &raw.corners {
+            if c >= nv {
+                return Err(Error::input(
+                    self.path,
+                    format!(
+                        "corner vertex {} does not exist ({nv} vertices)",
+                        c as u64 + 1
+                    ),
+                ));
             }
-            _ => bad_sharp.add(|| format!("({}, {})", a as u64 + 1, b as u64 + 1)),
-        }
-    }
-    report.dropped_sharp_edges = bad_sharp.count;
-    bad_sharp.note(
-        "sharp edges dropped (not an edge of any face after welding; 1-based file vertices)",
-        &mut notes,
-    );
-    let mut bad_corner = Examples::new();
-    for &c in &raw.corners {
-        if c >= nv {
-            return Err(Error::input(
-                path,
-                format!(
-                    "corner vertex {} does not exist ({nv} vertices)",
-                    c as u64 + 1
-                ),
-            ));
-        }
-        match final_index(c) {
-            Some(x) => {
-                mesh.corners.insert(x);
+            match final_index(c) {
+                Some(x) => {
+                    mesh.corners.insert(x);
+                }
+                None => bad_corner.add(|| format!("{}", c as u64 + 1)),
             }
-            None => bad_corner.add(|| format!("{}", c as u64 + 1)),
         }
+        self.report.dropped_corners = bad_corner.count;
+        bad_corner.note(
+            "corners dropped (vertex used by no face; 1-based file vertices)",
+            &mut self.notes,
+        );
+        Ok(())
     }
-    report.dropped_corners = bad_corner.count;
-    bad_corner.note(
-        "corners dropped (vertex used by no face; 1-based file vertices)",
-        &mut notes,
-    );
-    report.repairs = notes;
-
-    mesh.validate()
-        .map_err(|e| Error::input(path, format!("internal reader error: {e}")))?;
-    Ok((mesh, report))
 }
 
 /// Vertices that may be welded: those on an edge used by exactly one face of the stored mesh,

@@ -98,6 +98,51 @@ pub(crate) fn extract_at(
     levels: &[u8],
     mode: BoundaryPatchOutput,
 ) -> Result<(AdaptiveMesh, Vec<u32>)> {
+    check_extract_input(r, top, pos, levels)?;
+    let n = top;
+    let l0 = r.full(0);
+    let plan = match mode {
+        BoundaryPatchOutput::Sparse => SparsePlan::new(l0, &r.base),
+        BoundaryPatchOutput::Dense => None,
+    };
+    let levels = shown_levels(plan.as_ref(), levels);
+    let ex = Extraction {
+        r,
+        l0,
+        level_nv: (0..n).map(|m| r.full(m).nv).collect(),
+        n,
+        span: 1usize << n,
+        levels,
+    };
+    let mut moved = ex.gap_fill(pos);
+
+    // Triangles, with fans through the finer neighbour's vertices.
+    let mut out = Emitted::new(pos.len());
+    for k in 0..l0.nf() {
+        if let Some(pl) = &plan {
+            let u = pl.unit[k];
+            if u != DENSE {
+                if (u as usize) >= k {
+                    ex.emit_unit(pl, k, &mut out);
+                }
+                // else: emitted with its belt partner
+                continue;
+            }
+        }
+        ex.emit_base_triangle(k, &mut out);
+    }
+
+    // A vertex on an edge between two levels moves once (the edge's coarser side decides).
+    moved.sort_unstable_by_key(|&(v, _)| v);
+    let disp = Displaced { pos, moved };
+    let (mesh, mut remap) = compact(&disp, normals, &out.centroids, out.tris, out.groups);
+    remap.truncate(pos.len());
+    Ok((mesh, remap))
+}
+
+/// Checks the arguments of [`extract_at`]: `top` within the refinement, one level per base
+/// triangle, none above `top`, and one position per level-`top` vertex.
+fn check_extract_input(r: &Refinement, top: u32, pos: &[DVec3], levels: &[u8]) -> Result<()> {
     if top > r.max_level() {
         return Err(Error::Parameter(format!(
             "level {top} shown, refinement built to {}",
@@ -106,7 +151,6 @@ pub(crate) fn extract_at(
     }
     let n = top;
     let l0 = r.full(0);
-    let level_nv: Vec<usize> = (0..n).map(|m| r.full(m).nv).collect();
     if levels.len() != l0.nf() {
         return Err(Error::Parameter(format!(
             "{} per-face levels given, the mesh has {} base triangles",
@@ -125,12 +169,13 @@ pub(crate) fn extract_at(
             "positions do not match level {n}"
         )));
     }
-    let plan = match mode {
-        BoundaryPatchOutput::Sparse => SparsePlan::new(l0, &r.base),
-        BoundaryPatchOutput::Dense => None,
-    };
-    // Both faces of a belt quad are shown at the finer of their two levels.
-    let levels: Vec<u8> = match &plan {
+    Ok(())
+}
+
+/// The level each base triangle is shown at: as asked, except that both faces of a belt
+/// quad of the sparse `plan` are shown at the finer of their two levels.
+fn shown_levels(plan: Option<&SparsePlan>, levels: &[u8]) -> Vec<u8> {
+    match plan {
         Some(pl) => (0..levels.len())
             .map(|k| match pl.unit[k] {
                 DENSE => levels[k],
@@ -138,157 +183,231 @@ pub(crate) fn extract_at(
             })
             .collect(),
         None => levels.to_vec(),
-    };
-    let e0 = l0.ne();
-    let span = 1usize << n;
-    // x_j along base edge e (j = 0..=2^n), in the stored direction a -> b
-    let x = |e: usize, j: usize| -> u32 { edge_vertex(l0, &level_nv, n, e, j) };
+    }
+}
 
-    // Gap filling.
-    // Gap-filled positions, by vertex id: few vertices move, so they are kept beside `pos`
-    // rather than in a copy of it (a refinement's finest level has many more vertices than
-    // an output to an accuracy uses).
-    let mut moved: Vec<(u32, DVec3)> = Vec::new();
-    for e in 0..e0 {
-        let [fl, fr] = l0.edge_faces[e];
-        if fr == NONE {
-            continue;
-        }
-        let (la, lb) = (levels[fl as usize] as u32, levels[fr as usize] as u32);
-        let (lc, lf) = (la.min(lb), la.max(lb));
-        if lf == lc {
-            continue;
-        }
-        let step = 1usize << (n - lf);
-        let s = 1usize << (n - lc);
-        let mut j = step;
-        while j < span {
-            if j % s != 0 {
-                let j0 = j / s * s;
-                let t = (j - j0) as f64 / s as f64;
-                let (a, b) = (pos[x(e, j0) as usize], pos[x(e, j0 + s) as usize]);
-                moved.push((x(e, j), a * (1.0 - t) + b * t));
-            }
-            j += step;
+/// What [`extract_at`] reads while it emits triangles.
+struct Extraction<'a> {
+    r: &'a Refinement,
+    l0: &'a super::topology::Level,
+    /// Vertex count of every level below `n`.
+    level_nv: Vec<usize>,
+    /// The finest level shown, and the number of its edges along a base edge.
+    n: u32,
+    span: usize,
+    /// The level each base triangle is shown at.
+    levels: Vec<u8>,
+}
+
+/// The triangles [`extract_at`] emits, and scratch lists reused from face to face.
+struct Emitted {
+    tris: Vec<[u32; 3]>,
+    /// Group of every triangle.
+    groups: Vec<u32>,
+    /// Corners of the triangles fanned round their centroid, whose vertex ids follow the
+    /// `first_centroid` positions.
+    centroids: Vec<[u32; 3]>,
+    first_centroid: usize,
+    /// Outline of the current face: its corners with the finer neighbours' vertices between.
+    poly: Vec<u32>,
+    bufs: sparse::Chains,
+    flat_tris: Vec<u32>,
+}
+
+impl Emitted {
+    /// Nothing emitted yet; centroids are numbered from `first_centroid` on.
+    fn new(first_centroid: usize) -> Self {
+        Emitted {
+            tris: Vec::new(),
+            groups: Vec::new(),
+            centroids: Vec::new(),
+            first_centroid,
+            poly: Vec::with_capacity(64),
+            bufs: sparse::Chains::default(),
+            flat_tris: Vec::new(),
         }
     }
 
-    // Triangles, with fans through the finer neighbour's vertices.
-    let mut tris: Vec<[u32; 3]> = Vec::new();
-    let mut groups: Vec<u32> = Vec::new();
-    let mut centroids: Vec<[u32; 3]> = Vec::new(); // corners of split triangles
-    let mut poly: Vec<u32> = Vec::with_capacity(64);
-    let mut bufs = sparse::Chains::default();
-    let mut flat_tris: Vec<u32> = Vec::new();
-    for k in 0..l0.nf() {
-        if let Some(pl) = &plan {
-            let u = pl.unit[k];
-            if u != DENSE {
-                if (u as usize) < k {
-                    continue; // emitted with its belt partner
-                }
-                // Chain along edge slot s of base face f: its split points at the finer
-                // of the two levels meeting there (gap-filled positions), else its ends.
-                let mut chain = |f: usize, s: usize, v: &mut Vec<u32>| {
-                    let c = &l0.faces[3 * f..3 * f + 3];
-                    let (a, b) = (c[s], c[(s + 1) % 3]);
-                    let be = l0.face_edges[3 * f + s] as usize;
-                    v.clear();
-                    if !pl.split[be] {
-                        v.extend_from_slice(&[a, b]);
-                        return;
-                    }
-                    let [bl, br] = l0.edge_faces[be];
-                    let other = if bl as usize == f { br } else { bl };
-                    let lo = if other == NONE {
-                        0
-                    } else {
-                        levels[other as usize]
-                    };
-                    let lf = levels[f].max(lo) as u32;
-                    let step = 1usize << (n - lf);
-                    let forward = l0.edges[be][0] == a;
-                    let mut j = 0;
-                    while j <= span {
-                        v.push(x(be, if forward { j } else { span - j }));
-                        j += step;
-                    }
-                };
-                flat_tris.clear();
-                let t = sparse::emit_unit(l0, pl, k, &mut chain, &mut bufs, &mut flat_tris);
-                tris.extend(flat_tris.chunks(3).map(|c| [c[0], c[1], c[2]]));
-                groups.extend(std::iter::repeat_n(r.base.group[k], t));
-                continue;
+    /// Triangulates the outline `poly` of the face with corners `c`, in group `g`: the face
+    /// itself when no edge has extra vertices, a fan from the opposite corner when one edge
+    /// (slot `extra_edge`) has, else a fan round a new centroid vertex.
+    fn triangulate_outline(
+        &mut self,
+        c: [u32; 3],
+        g: u32,
+        edges_with_extras: usize,
+        extra_edge: usize,
+    ) {
+        let poly = &self.poly;
+        if edges_with_extras == 0 {
+            self.tris.push([c[0], c[1], c[2]]);
+            self.groups.push(g);
+        } else if edges_with_extras == 1 {
+            // fan from the corner opposite the edge with extras
+            let apex = c[(extra_edge + 2) % 3];
+            let ai = poly.iter().position(|&v| v == apex).unwrap_or(0);
+            let len = poly.len();
+            for i in 1..len - 1 {
+                let (p1, p2) = (poly[(ai + i) % len], poly[(ai + i + 1) % len]);
+                self.tris.push([apex, p1, p2]);
+                self.groups.push(g);
+            }
+        } else {
+            let centre = (self.first_centroid + self.centroids.len()) as u32;
+            self.centroids.push([c[0], c[1], c[2]]);
+            let len = poly.len();
+            for i in 0..len {
+                self.tris.push([centre, poly[i], poly[(i + 1) % len]]);
+                self.groups.push(g);
             }
         }
-        let m = levels[k] as u32;
-        let faces = LevelFaces::new(r, m);
-        let g = r.base.group[k];
+    }
+}
+
+impl Extraction<'_> {
+    /// Level-`n` vertex `j` (`0..=span`) along base edge `e`, in its stored direction.
+    fn x(&self, e: usize, j: usize) -> u32 {
+        edge_vertex(self.l0, &self.level_nv, self.n, e, j)
+    }
+
+    /// Gap filling: along every base edge between faces shown at two different levels, the
+    /// finer side's extra vertices move onto the coarser side's chords. Returns the moved
+    /// vertices with their new positions: few vertices move, so they are kept beside `pos`
+    /// rather than in a copy of it (a refinement's finest level has many more vertices than
+    /// an output to an accuracy uses).
+    fn gap_fill(&self, pos: &[DVec3]) -> Vec<(u32, DVec3)> {
+        let (l0, n, span) = (self.l0, self.n, self.span);
+        let levels = &self.levels;
+        let mut moved: Vec<(u32, DVec3)> = Vec::new();
+        for e in 0..l0.ne() {
+            let [fl, fr] = l0.edge_faces[e];
+            if fr == NONE {
+                continue;
+            }
+            let (la, lb) = (levels[fl as usize] as u32, levels[fr as usize] as u32);
+            let (lc, lf) = (la.min(lb), la.max(lb));
+            if lf == lc {
+                continue;
+            }
+            let step = 1usize << (n - lf);
+            let s = 1usize << (n - lc);
+            let mut j = step;
+            while j < span {
+                if j % s != 0 {
+                    let j0 = j / s * s;
+                    let t = (j - j0) as f64 / s as f64;
+                    let (a, b) = (pos[self.x(e, j0) as usize], pos[self.x(e, j0 + s) as usize]);
+                    moved.push((self.x(e, j), a * (1.0 - t) + b * t));
+                }
+                j += step;
+            }
+        }
+        moved
+    }
+
+    /// Emits the sparse unit of base triangle `k` (with its belt partner, if any) as the
+    /// plan `pl` triangulates it.
+    fn emit_unit(&self, pl: &SparsePlan, k: usize, out: &mut Emitted) {
+        let (l0, n, span) = (self.l0, self.n, self.span);
+        let levels = &self.levels;
+        // Chain along edge slot s of base face f: its split points at the finer
+        // of the two levels meeting there (gap-filled positions), else its ends.
+        let mut chain = |f: usize, s: usize, v: &mut Vec<u32>| {
+            let c = &l0.faces[3 * f..3 * f + 3];
+            let (a, b) = (c[s], c[(s + 1) % 3]);
+            let be = l0.face_edges[3 * f + s] as usize;
+            v.clear();
+            if !pl.split[be] {
+                v.extend_from_slice(&[a, b]);
+                return;
+            }
+            let [bl, br] = l0.edge_faces[be];
+            let other = if bl as usize == f { br } else { bl };
+            let lo = if other == NONE {
+                0
+            } else {
+                levels[other as usize]
+            };
+            let lf = levels[f].max(lo) as u32;
+            let step = 1usize << (n - lf);
+            let forward = l0.edges[be][0] == a;
+            let mut j = 0;
+            while j <= span {
+                v.push(self.x(be, if forward { j } else { span - j }));
+                j += step;
+            }
+        };
+        out.flat_tris.clear();
+        let t = sparse::emit_unit(l0, pl, k, &mut chain, &mut out.bufs, &mut out.flat_tris);
+        out.tris
+            .extend(out.flat_tris.chunks(3).map(|c| [c[0], c[1], c[2]]));
+        out.groups
+            .extend(std::iter::repeat_n(self.r.base.group[k], t));
+    }
+
+    /// Emits base triangle `k` at its level: every face of that level inside it, fanned
+    /// through the vertices a finer neighbour has along its edges.
+    fn emit_base_triangle(&self, k: usize, out: &mut Emitted) {
+        let m = self.levels[k] as u32;
+        let faces = LevelFaces::new(self.r, m);
+        let g = self.r.base.group[k];
         let q = 1usize << (2 * m);
         for f in k * q..(k + 1) * q {
             let (c, fe) = faces.face(f);
-            poly.clear();
-            let mut edges_with_extras = 0;
-            let mut extra_edge = 0;
-            for (s, &cs) in c.iter().enumerate() {
-                poly.push(cs);
-                let eps = fe[s] as usize;
-                if eps >= e0 << m {
-                    continue;
-                }
-                let be = eps >> m;
-                let [bl, br] = l0.edge_faces[be];
-                let other = if bl as usize == k { br } else { bl };
-                if other == NONE {
-                    continue;
-                }
-                let lo = levels[other as usize] as u32;
-                if lo <= m {
-                    continue;
-                }
-                edges_with_extras += 1;
-                extra_edge = s;
-                let seg = eps - (be << m);
-                let per = 1usize << (n - m);
-                let step = 1usize << (n - lo);
-                let forward = faces.edge_start(eps) == cs;
-                let cnt = per / step;
-                for t in 1..cnt {
-                    let tt = if forward { t } else { cnt - t };
-                    poly.push(x(be, seg * per + tt * step));
-                }
-            }
-            if edges_with_extras == 0 {
-                tris.push([c[0], c[1], c[2]]);
-                groups.push(g);
-            } else if edges_with_extras == 1 {
-                // fan from the corner opposite the edge with extras
-                let apex = c[(extra_edge + 2) % 3];
-                let ai = poly.iter().position(|&v| v == apex).unwrap_or(0);
-                let len = poly.len();
-                for i in 1..len - 1 {
-                    let (p1, p2) = (poly[(ai + i) % len], poly[(ai + i + 1) % len]);
-                    tris.push([apex, p1, p2]);
-                    groups.push(g);
-                }
-            } else {
-                let centre = (pos.len() + centroids.len()) as u32;
-                centroids.push([c[0], c[1], c[2]]);
-                let len = poly.len();
-                for i in 0..len {
-                    tris.push([centre, poly[i], poly[(i + 1) % len]]);
-                    groups.push(g);
-                }
-            }
+            let (edges_with_extras, extra_edge) =
+                self.face_outline(&faces, k, m, c, fe, &mut out.poly);
+            out.triangulate_outline(c, g, edges_with_extras, extra_edge);
         }
     }
 
-    // A vertex on an edge between two levels moves once (the edge's coarser side decides).
-    moved.sort_unstable_by_key(|&(v, _)| v);
-    let disp = Displaced { pos, moved };
-    let (mesh, mut remap) = compact(&disp, normals, &centroids, tris, groups);
-    remap.truncate(pos.len());
-    Ok((mesh, remap))
+    /// Fills `poly` with the outline of level-`m` face (corners `c`, edges `fe`) of base
+    /// triangle `k`: its corners, and along each edge on a base edge whose other side is
+    /// shown finer, that side's vertices. Returns the number of such edges and the slot of
+    /// the last one.
+    fn face_outline(
+        &self,
+        faces: &LevelFaces,
+        k: usize,
+        m: u32,
+        c: [u32; 3],
+        fe: [u32; 3],
+        poly: &mut Vec<u32>,
+    ) -> (usize, usize) {
+        let (l0, n) = (self.l0, self.n);
+        let e0 = l0.ne();
+        poly.clear();
+        let mut edges_with_extras = 0;
+        let mut extra_edge = 0;
+        for (s, &cs) in c.iter().enumerate() {
+            poly.push(cs);
+            let eps = fe[s] as usize;
+            if eps >= e0 << m {
+                continue;
+            }
+            let be = eps >> m;
+            let [bl, br] = l0.edge_faces[be];
+            let other = if bl as usize == k { br } else { bl };
+            if other == NONE {
+                continue;
+            }
+            let lo = self.levels[other as usize] as u32;
+            if lo <= m {
+                continue;
+            }
+            edges_with_extras += 1;
+            extra_edge = s;
+            let seg = eps - (be << m);
+            let per = 1usize << (n - m);
+            let step = 1usize << (n - lo);
+            let forward = faces.edge_start(eps) == cs;
+            let cnt = per / step;
+            for t in 1..cnt {
+                let tt = if forward { t } else { cnt - t };
+                poly.push(self.x(be, seg * per + tt * step));
+            }
+        }
+        (edges_with_extras, extra_edge)
+    }
 }
 
 /// The faces of one level as the extraction reads them: from the level's arrays, or for a

@@ -124,7 +124,50 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
     if nv >= u32::MAX as usize / 2 {
         return Err(Error::Mesh(format!("{nv} vertices is too many")));
     }
-    // Frames, one per Cylinder/Cone group, in group order.
+    let (frames, group_frame) = group_frames(mesh)?;
+    let has_frames = !frames.is_empty();
+    let mut base = Base {
+        group_frame,
+        frames,
+        ..Default::default()
+    };
+    let faces = fan_triangulate(mesh, &mut base)?;
+    let EdgeIndex {
+        edges,
+        edge_faces,
+        face_edges,
+    } = index_edges(mesh, &faces, &base)?;
+    let (vf_off, vf) = vertex_corners(nv, &faces);
+    let mut lvl = Level {
+        nv,
+        faces,
+        face_edges,
+        edges,
+        edge_faces,
+        ..Default::default()
+    };
+    let mut ecls = crease_flags(&lvl, mesh);
+    let rings = level0_rings(&lvl, &vf_off, &vf)?;
+    let _ = lvl.rings.set(rings);
+    let vcls: Vec<u8> = (0..nv)
+        .map(|v| classify_vertex(&lvl, v, &ecls, &base, mesh))
+        .collect();
+    let eframe = add_edge_rules(&lvl, &base, &vcls, &mut ecls, has_frames);
+    let vframe = if has_frames {
+        vertex_frames(&lvl, &vcls, &ecls, &eframe)
+    } else {
+        Vec::new()
+    };
+    lvl.vclass = vcls;
+    lvl.eclass = ecls;
+    lvl.vframe = vframe;
+    lvl.eframe = eframe;
+    Ok((lvl, base))
+}
+
+/// Frames, one per Cylinder/Cone group, in group order, and the frame id of every group
+/// (0 = none; frame `i` has id `i + 1`).
+fn group_frames(mesh: &ControlMesh) -> Result<(Vec<Frame>, Vec<u16>)> {
     let scale = mesh.diagonal().max(1e-300);
     let mut frames = Vec::new();
     let mut group_frame = vec![0u16; mesh.groups.len()];
@@ -141,15 +184,13 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
             }
         }
     }
-    let has_frames = !frames.is_empty();
+    Ok((frames, group_frame))
+}
 
-    // Fan triangulation.
+/// Fan triangulation: the corners of the base triangles, 3 per triangle; fills `base`'s
+/// control face, group and boundary-patch flag of each.
+fn fan_triangulate(mesh: &ControlMesh, base: &mut Base) -> Result<Vec<u32>> {
     let mut faces = Vec::with_capacity(mesh.face_vertices.len() * 3);
-    let mut base = Base {
-        group_frame,
-        frames,
-        ..Default::default()
-    };
     for (f, poly) in mesh.faces().enumerate() {
         let g = mesh.face_groups[f];
         let bp = matches!(mesh.groups[g as usize].patch, PatchKind::Boundary(_));
@@ -164,8 +205,21 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
     if nf >= (u32::MAX / 4) as usize {
         return Err(Error::Mesh(format!("{nf} triangles is too many")));
     }
+    Ok(faces)
+}
 
-    // Edges in first-met order; orientation = direction first met.
+/// The edges of the base triangles (see [`Level`] for the three arrays).
+struct EdgeIndex {
+    edges: Vec<[u32; 2]>,
+    edge_faces: Vec<[u32; 2]>,
+    face_edges: Vec<u32>,
+}
+
+/// Numbers the edges of the triangles `faces` in first-met order (orientation: the
+/// direction first met). Fails on an edge traversed twice the same way or by more than two
+/// faces, and on a sharp edge of `mesh` that is not an edge.
+fn index_edges(mesh: &ControlMesh, faces: &[u32], base: &Base) -> Result<EdgeIndex> {
+    let nf = faces.len() / 3;
     let mut edge_index: HashMap<(u32, u32), u32> = HashMap::with_capacity(nf * 2);
     let mut edges: Vec<[u32; 2]> = Vec::with_capacity(nf * 3 / 2 + 8);
     let mut edge_faces: Vec<[u32; 2]> = Vec::with_capacity(nf * 3 / 2 + 8);
@@ -203,7 +257,6 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
             face_edges[3 * f + s] = e;
         }
     }
-    let ne = edges.len();
     for &(a, b) in &mesh.sharp_edges {
         if !edge_index.contains_key(&(a, b)) {
             return Err(Error::Mesh(format!(
@@ -211,10 +264,17 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
             )));
         }
     }
+    Ok(EdgeIndex {
+        edges,
+        edge_faces,
+        face_edges,
+    })
+}
 
-    // Vertex -> incident (face, slot) CSR.
+/// Vertex -> incident corners (index `3f + s`) as CSR: offsets (`nv + 1`) and corners.
+fn vertex_corners(nv: usize, faces: &[u32]) -> (Vec<u32>, Vec<u32>) {
     let mut vf_off = vec![0u32; nv + 1];
-    for &v in &faces {
+    for &v in faces {
         vf_off[v as usize + 1] += 1;
     }
     for i in 0..nv {
@@ -226,18 +286,12 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
         vf[fill[v as usize] as usize] = i as u32; // corner index 3f+s
         fill[v as usize] += 1;
     }
+    (vf_off, vf)
+}
 
-    let mut lvl = Level {
-        nv,
-        faces,
-        face_edges,
-        edges,
-        edge_faces,
-        ..Default::default()
-    };
-
-    // Crease flags.
-    let mut ecls: Vec<u8> = (0..ne)
+/// Crease flags of every edge: mesh boundary, or sharp in `mesh`.
+fn crease_flags(lvl: &Level, mesh: &ControlMesh) -> Vec<u8> {
+    (0..lvl.ne())
         .map(|e| {
             let [a, b] = lvl.edges[e];
             let mut c = 0;
@@ -249,152 +303,193 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
             }
             c
         })
-        .collect();
+        .collect()
+}
 
-    // Rings (CCW fans) and classification.
+/// The ring (CCW fan of edges) of every level-0 vertex, from its corners (`vf_off`, `vf`:
+/// see [`vertex_corners`]). Fails at a vertex whose faces do not form a single fan.
+fn level0_rings(lvl: &Level, vf_off: &[u32], vf: &[u32]) -> Result<Rings> {
+    let nv = lvl.nv;
     let mut ring_offsets = Vec::with_capacity(nv + 1);
     ring_offsets.push(0u32);
-    let mut ring_edges = Vec::with_capacity(ne * 2);
-    let mut vcls = vec![vclass::FIXED; nv];
+    let mut ring_edges = Vec::with_capacity(lvl.ne() * 2);
     for v in 0..nv {
         let corners = &vf[vf_off[v] as usize..vf_off[v + 1] as usize];
-        let nfaces = corners.len();
-        if nfaces == 0 {
-            ring_offsets.push(ring_edges.len() as u32);
-            continue; // isolated vertex: FIXED
-        }
-        // A wedge (f, s) spans from edge e_out = FE[f][s] (v -> next) to e_in = FE[f][s+2].
-        // Start at the wedge whose e_out is a boundary edge, else at the first corner.
-        let mut start = None;
-        for &c in corners {
-            let (f, s) = (c as usize / 3, c as usize % 3);
-            let e_out = lvl.face_edges[3 * f + s];
-            if lvl.edge_faces[e_out as usize][1] == NONE {
-                if start.is_some() {
-                    return Err(Error::Mesh(format!(
-                        "vertex {v} has more than one boundary fan (non-manifold vertex)"
-                    )));
-                }
-                start = Some(c);
-            }
-        }
-        let is_boundary = start.is_some();
-        let first = start.unwrap_or(corners[0]) as usize;
-        let mut c = first;
-        let mut count = 0usize;
-        let mut last_in = NONE;
-        loop {
-            let (f, s) = (c / 3, c % 3);
-            ring_edges.push(lvl.face_edges[3 * f + s]);
-            count += 1;
-            let e_in = lvl.face_edges[3 * f + (s + 2) % 3];
-            let ef = lvl.edge_faces[e_in as usize];
-            let nf2 = if ef[0] as usize == f { ef[1] } else { ef[0] };
-            if nf2 == NONE {
-                last_in = e_in;
-                break;
-            }
-            // the slot of v in the next face
-            let nf2 = nf2 as usize;
-            let s2 = (0..3).find(|&k| lvl.faces[3 * nf2 + k] as usize == v);
-            let Some(s2) = s2 else {
-                return Err(Error::Mesh(format!("corrupt fan at vertex {v}")));
-            };
-            c = 3 * nf2 + s2;
-            if c == first || count > nfaces {
-                break;
-            }
-        }
-        if is_boundary {
-            ring_edges.push(last_in);
-        }
-        if count != nfaces || (!is_boundary && c != first) {
-            return Err(Error::Mesh(format!(
-                "vertex {v}: its {nfaces} faces do not form a single fan (non-manifold vertex)"
-            )));
+        if !corners.is_empty() {
+            push_vertex_ring(lvl, v, corners, &mut ring_edges)?;
         }
         ring_offsets.push(ring_edges.len() as u32);
     }
-    let _ = lvl.rings.set(Rings {
+    Ok(Rings {
         offsets: ring_offsets,
         edges: ring_edges,
-    });
+    })
+}
 
-    for (v, vc) in vcls.iter_mut().enumerate() {
-        let ring = lvl.ring(v);
-        if ring.is_empty() {
-            continue;
+/// Appends the ring of vertex `v` (incident at `corners`, at least one) to `ring_edges`.
+/// Fails when its faces do not form a single fan (a non-manifold vertex).
+fn push_vertex_ring(
+    lvl: &Level,
+    v: usize,
+    corners: &[u32],
+    ring_edges: &mut Vec<u32>,
+) -> Result<()> {
+    let nfaces = corners.len();
+    // A wedge (f, s) spans from edge e_out = FE[f][s] (v -> next) to e_in = FE[f][s+2].
+    // Start at the wedge whose e_out is a boundary edge, else at the first corner.
+    let mut start = None;
+    for &c in corners {
+        let (f, s) = (c as usize / 3, c as usize % 3);
+        let e_out = lvl.face_edges[3 * f + s];
+        if lvl.edge_faces[e_out as usize][1] == NONE {
+            if start.is_some() {
+                return Err(Error::Mesh(format!(
+                    "vertex {v} has more than one boundary fan (non-manifold vertex)"
+                )));
+            }
+            start = Some(c);
         }
-        let is_boundary = ecls[ring[0] as usize] & eclass::BOUNDARY != 0;
-        let s = ring
-            .iter()
-            .filter(|&&e| ecls[e as usize] & eclass::CREASE != 0)
-            .count();
-        // faces of the wedge i: between ring[i] and ring[i+1]; the face is the one on the
-        // counter-clockwise side of ring[i] seen from v.
-        let wedge_face = |i: usize| -> u32 {
-            let e = ring[i] as usize;
-            let [a, _] = lvl.edges[e];
-            let ef = lvl.edge_faces[e];
-            // the face in which v -> other: left if a == v
-            if a as usize == v {
-                ef[0]
-            } else {
-                ef[1]
-            }
-        };
-        let nwedges = if is_boundary {
-            ring.len() - 1
-        } else {
-            ring.len()
-        };
-        let touches_bp = (0..nwedges).any(|i| base.boundary_patch[wedge_face(i) as usize]);
-        let tagged = mesh.corners.contains(&(v as u32));
-        *vc = if tagged || s >= 3 {
-            vclass::CORNER
-        } else if s == 2 {
-            // sectors: walk wedges starting after a crease edge
-            let k0 = (0..ring.len())
-                .find(|&i| ecls[ring[i] as usize] & eclass::CREASE != 0)
-                .unwrap_or(0);
-            let mut regular = true;
-            let mut nt = 0usize;
-            let mut closed = false;
-            for step in 0..nwedges {
-                let i = (k0 + step) % ring.len();
-                let f = wedge_face(i);
-                nt += 1;
-                closed |= !base.boundary_patch[f as usize];
-                let next = (i + 1) % ring.len();
-                let ends_sector = ecls[ring[next] as usize] & eclass::CREASE != 0
-                    || (is_boundary && next == ring.len() - 1);
-                if ends_sector {
-                    if closed && nt != 3 {
-                        regular = false;
-                    }
-                    nt = 0;
-                    closed = false;
-                }
-            }
-            if regular {
-                vclass::CREASE_REGULAR
-            } else {
-                vclass::CREASE_NONREG
-            }
-        } else if touches_bp {
-            if s == 1 {
-                vclass::CORNER
-            } else {
-                vclass::FIXED
-            }
-        } else if s == 1 {
-            vclass::DART
-        } else {
-            vclass::SMOOTH
-        };
     }
+    let is_boundary = start.is_some();
+    let first = start.unwrap_or(corners[0]) as usize;
+    let mut c = first;
+    let mut count = 0usize;
+    let mut last_in = NONE;
+    loop {
+        let (f, s) = (c / 3, c % 3);
+        ring_edges.push(lvl.face_edges[3 * f + s]);
+        count += 1;
+        let e_in = lvl.face_edges[3 * f + (s + 2) % 3];
+        let ef = lvl.edge_faces[e_in as usize];
+        let nf2 = if ef[0] as usize == f { ef[1] } else { ef[0] };
+        if nf2 == NONE {
+            last_in = e_in;
+            break;
+        }
+        // the slot of v in the next face
+        let nf2 = nf2 as usize;
+        let s2 = (0..3).find(|&k| lvl.faces[3 * nf2 + k] as usize == v);
+        let Some(s2) = s2 else {
+            return Err(Error::Mesh(format!("corrupt fan at vertex {v}")));
+        };
+        c = 3 * nf2 + s2;
+        if c == first || count > nfaces {
+            break;
+        }
+    }
+    if is_boundary {
+        ring_edges.push(last_in);
+    }
+    if count != nfaces || (!is_boundary && c != first) {
+        return Err(Error::Mesh(format!(
+            "vertex {v}: its {nfaces} faces do not form a single fan (non-manifold vertex)"
+        )));
+    }
+    Ok(())
+}
 
-    // Edge rules and frames.
+/// The face of wedge `i` of vertex `v`'s ring (between `ring[i]` and `ring[i+1]`): the one
+/// on the counter-clockwise side of `ring[i]` seen from `v`.
+fn wedge_face(lvl: &Level, v: usize, ring: &[u32], i: usize) -> u32 {
+    let e = ring[i] as usize;
+    let [a, _] = lvl.edges[e];
+    let ef = lvl.edge_faces[e];
+    // the face in which v -> other: left if a == v
+    if a as usize == v {
+        ef[0]
+    } else {
+        ef[1]
+    }
+}
+
+/// Class of vertex `v` from its crease edges (`ecls`), its corner tag and whether it touches
+/// a boundary patch; an isolated vertex is FIXED.
+fn classify_vertex(lvl: &Level, v: usize, ecls: &[u8], base: &Base, mesh: &ControlMesh) -> u8 {
+    let ring = lvl.ring(v);
+    if ring.is_empty() {
+        return vclass::FIXED;
+    }
+    let is_boundary = ecls[ring[0] as usize] & eclass::BOUNDARY != 0;
+    let s = ring
+        .iter()
+        .filter(|&&e| ecls[e as usize] & eclass::CREASE != 0)
+        .count();
+    let nwedges = if is_boundary {
+        ring.len() - 1
+    } else {
+        ring.len()
+    };
+    let touches_bp =
+        (0..nwedges).any(|i| base.boundary_patch[wedge_face(lvl, v, ring, i) as usize]);
+    let tagged = mesh.corners.contains(&(v as u32));
+    if tagged || s >= 3 {
+        vclass::CORNER
+    } else if s == 2 {
+        crease_vertex_class(lvl, v, ecls, base, is_boundary)
+    } else if touches_bp {
+        if s == 1 {
+            vclass::CORNER
+        } else {
+            vclass::FIXED
+        }
+    } else if s == 1 {
+        vclass::DART
+    } else {
+        vclass::SMOOTH
+    }
+}
+
+/// Class of vertex `v` on two crease edges: regular when every sector between them that
+/// has a closed-patch face is three triangles.
+fn crease_vertex_class(lvl: &Level, v: usize, ecls: &[u8], base: &Base, is_boundary: bool) -> u8 {
+    let ring = lvl.ring(v);
+    let nwedges = if is_boundary {
+        ring.len() - 1
+    } else {
+        ring.len()
+    };
+    // sectors: walk wedges starting after a crease edge
+    let k0 = (0..ring.len())
+        .find(|&i| ecls[ring[i] as usize] & eclass::CREASE != 0)
+        .unwrap_or(0);
+    let mut regular = true;
+    let mut nt = 0usize;
+    let mut closed = false;
+    for step in 0..nwedges {
+        let i = (k0 + step) % ring.len();
+        let f = wedge_face(lvl, v, ring, i);
+        nt += 1;
+        closed |= !base.boundary_patch[f as usize];
+        let next = (i + 1) % ring.len();
+        let ends_sector = ecls[ring[next] as usize] & eclass::CREASE != 0
+            || (is_boundary && next == ring.len() - 1);
+        if ends_sector {
+            if closed && nt != 3 {
+                regular = false;
+            }
+            nt = 0;
+            closed = false;
+        }
+    }
+    if regular {
+        vclass::CREASE_REGULAR
+    } else {
+        vclass::CREASE_NONREG
+    }
+}
+
+/// Adds each edge's rule to its class in `ecls` (crease rule from its end vertices' classes
+/// `vcls`, linear in a boundary patch, else smooth) and returns the frame id of every edge
+/// (empty without frames): the lowest frame of its faces' groups, for crease edges and
+/// boundary-patch edges.
+fn add_edge_rules(
+    lvl: &Level,
+    base: &Base,
+    vcls: &[u8],
+    ecls: &mut [u8],
+    has_frames: bool,
+) -> Vec<u16> {
+    let ne = lvl.ne();
     let mut eframe = if has_frames {
         vec![0u16; ne]
     } else {
@@ -425,30 +520,26 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
                 .unwrap_or(0);
         }
     }
-    let mut vframe = if has_frames {
-        vec![0u16; nv]
-    } else {
-        Vec::new()
-    };
-    if has_frames {
-        for v in 0..nv {
-            if vclass::is_crease(vcls[v]) {
-                vframe[v] = lvl
-                    .ring(v)
-                    .iter()
-                    .filter(|&&e| ecls[e as usize] & eclass::CREASE != 0)
-                    .map(|&e| eframe[e as usize])
-                    .filter(|&id| id != 0)
-                    .min()
-                    .unwrap_or(0);
-            }
+    eframe
+}
+
+/// Frame id of every vertex (the mesh has frames): for crease vertices, the lowest frame of
+/// their crease edges.
+fn vertex_frames(lvl: &Level, vcls: &[u8], ecls: &[u8], eframe: &[u16]) -> Vec<u16> {
+    let mut vframe = vec![0u16; lvl.nv];
+    for v in 0..lvl.nv {
+        if vclass::is_crease(vcls[v]) {
+            vframe[v] = lvl
+                .ring(v)
+                .iter()
+                .filter(|&&e| ecls[e as usize] & eclass::CREASE != 0)
+                .map(|&e| eframe[e as usize])
+                .filter(|&id| id != 0)
+                .min()
+                .unwrap_or(0);
         }
     }
-    lvl.vclass = vcls;
-    lvl.eclass = ecls;
-    lvl.vframe = vframe;
-    lvl.eframe = eframe;
-    Ok((lvl, base))
+    vframe
 }
 
 /// Element counts `(V, E, F)` after one 1-to-4 step.
