@@ -404,3 +404,50 @@ fn closed_patches_are_fitted_onto_their_exact_surfaces() {
     assert!(worst <= 1.0, "{worst} from the sphere");
     assert!(mean.abs() <= 0.08, "mean radial deviation {mean}");
 }
+
+/// A model still out of tolerance when its rounds run out has its failing groups faceted
+/// and measured in rounds beyond `max_rounds` until it holds: with one round allowed, a
+/// cylinder of eight facets (which sag beyond the tolerance from any smooth surface through
+/// their vertices) fails the first round, and its side is faceted and measured in a second.
+#[test]
+fn groups_failing_when_the_rounds_run_out_are_faceted_and_measured() {
+    use std::fmt::Write as _;
+    let n = 8;
+    let mut obj = String::new();
+    for z in [0.0, 2.0] {
+        for i in 0..n {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            writeln!(obj, "v {} {} {z}", a.cos(), a.sin()).unwrap();
+        }
+    }
+    writeln!(obj, "v 0 0 0\nv 0 0 2\ng side").unwrap();
+    for i in 0..n {
+        let (a, b) = (i + 1, (i + 1) % n + 1);
+        writeln!(obj, "f {a} {b} {}\nf {a} {} {}", b + n, b + n, a + n).unwrap();
+    }
+    writeln!(obj, "g bottom").unwrap();
+    for i in 0..n {
+        writeln!(obj, "f {} {} {}", 2 * n + 1, (i + 1) % n + 1, i + 1).unwrap();
+    }
+    writeln!(obj, "g top").unwrap();
+    for i in 0..n {
+        writeln!(obj, "f {} {} {}", 2 * n + 2, i + 1 + n, (i + 1) % n + 1 + n).unwrap();
+    }
+    let (mesh, _) = scode::io::read_mesh_bytes(
+        obj.as_bytes(),
+        scode::io::MeshFormat::Obj,
+        Path::new("cylinder.obj"),
+    )
+    .unwrap();
+    let mut opts = ModelEncodeOptions::default();
+    opts.fit.max_rounds = 1;
+    let (_, report) = encode_fitted(&mesh, &[], &opts).unwrap();
+    assert!(
+        report.within_tolerance && report.faceted_groups >= 1 && report.rounds == 2,
+        "{} rounds, {} faceted, {:?}\n{:#?}",
+        report.rounds,
+        report.faceted_groups,
+        report.error,
+        report.notes
+    );
+}

@@ -71,7 +71,9 @@ pub struct FitOptions {
     pub default_level: Option<u8>,
     /// Segmentation of ungrouped meshes: dihedral angle of sharp edges.
     pub sharp_angle_deg: f64,
-    /// Rebuild rounds with more control points before giving up on the tolerance.
+    /// Rebuild rounds with more control points before the groups still out of tolerance
+    /// are stored as their input facets; a few more rounds may follow to measure those
+    /// (each facets the groups still failing) before the fit gives up on the tolerance.
     pub max_rounds: usize,
     /// Random area-weighted samples of the input for the error measurement, and of the
     /// decoded surface as many per unit of the input's area (besides the vertices and the

@@ -47,6 +47,11 @@ const FINER_CHORD_SHARE: f64 = 0.25;
 const NO_GAIN_ROUNDS: usize = 3;
 const NO_GAIN_RATIO: f64 = 0.98;
 
+/// Rounds the fit may run beyond `FitOptions::max_rounds` to measure groups faceted at the
+/// end of the rounds (each such round facets the groups still failing, so they end when none
+/// is left to facet).
+const FACETING_ROUNDS: usize = 3;
+
 /// How many groups of `plan` are closed patches.
 fn closed_count(plan: &Plan) -> usize {
     plan.groups
@@ -123,7 +128,13 @@ impl Rounds<'_> {
         // The smallest worst excess of a failing round so far, and how many failing rounds
         // since came no nearer.
         let (mut nearest, mut no_gain) = (f64::INFINITY, 0);
-        for round in 0..opts.max_rounds.max(1) {
+        // Rounds allowed: `max_rounds`, and beyond it the rounds that measure faceted groups
+        // (see `FACETING_ROUNDS`).
+        let mut budget = opts.max_rounds.max(1);
+        let mut next_round = 0;
+        while next_round < budget {
+            let round = next_round;
+            next_round += 1;
             report.rounds = round + 1;
             let Round {
                 built,
@@ -157,13 +168,17 @@ impl Rounds<'_> {
                     0
                 };
                 nearest = nearest.min(worst);
-                // The last resort, while a round is left to measure it: the groups still
-                // failing become their input facets.
-                let stuck = no_gain >= NO_GAIN_ROUNDS || round + 2 == opts.max_rounds;
+                // The last resort: the groups still failing become their input facets, and a
+                // round measures them. At the end of the rounds this repeats while there are
+                // failing groups to facet: faceting a group changes the chains it shares, so
+                // a neighbour may fail next, and a model that can be held to the tolerance
+                // is not given up a round early.
+                let stuck = no_gain >= NO_GAIN_ROUNDS || round + 2 >= budget;
                 if stuck
-                    && round + 1 < opts.max_rounds
+                    && round + 1 < opts.max_rounds.max(1) + FACETING_ROUNDS
                     && facet_failing(self.chains, &measured, tol, plan, report) > 0
                 {
+                    budget = budget.max(round + 2);
                     (nearest, no_gain) = (f64::INFINITY, 0);
                     continue;
                 }
@@ -175,7 +190,7 @@ impl Rounds<'_> {
                     break;
                 }
             }
-            let last = round + 1 >= opts.max_rounds;
+            let last = round + 1 >= budget;
             match self.after_measurement(ok, last, &mut relaxing, &measured, plan, report) {
                 Next::Stop => break,
                 Next::Measure => continue,
@@ -205,10 +220,7 @@ impl Rounds<'_> {
             // and every round once the worst excess is within 1.5 tol, refine every chain of
             // a failing group: convergence first (near the tolerance, refining only near the
             // failures takes more rounds than it saves control points).
-            let reach = if round + 4 >= opts.max_rounds
-                || !self.keep_planes_on_faces
-                || worst < 1.5 * tol
-            {
+            let reach = if round + 4 >= budget || !self.keep_planes_on_faces || worst < 1.5 * tol {
                 ChainReach::All
             } else {
                 ChainReach::NearFailures
