@@ -442,11 +442,15 @@ impl Measure<'_> {
             }
             return;
         }
+        // Neighbouring triangles share most of their samples: asked for triangle by
+        // triangle, the repeats are dropped as they come.
         let mut want = Vec::new();
         for &k in &dense {
+            want.clear();
             self.sample_vertices(k, m, &mut want);
+            lazy.ask(&want, false);
         }
-        lazy.evaluate(&want, false);
+        lazy.run();
         let limit = lazy.limit();
         let mut values = vec![0.0f64; dense.len()];
         par::for_each_heavy(&mut values, |i, v| {
@@ -857,9 +861,11 @@ impl Measure<'_> {
             }
             let mut want = Vec::new();
             for &k in at.iter().filter(|&&k| self.unit(k).is_none()) {
+                want.clear();
                 self.output_vertices(k, m, &mut want);
+                lazy.ask(&want, false);
             }
-            lazy.evaluate(&want, false);
+            lazy.run();
         }
     }
 
@@ -995,9 +1001,11 @@ impl Measure<'_> {
     ) -> Result<(lod::AdaptiveMesh, Vec<u32>)> {
         let mut want = Vec::new();
         for (k, &m) in levels.iter().enumerate() {
+            want.clear();
             self.output_vertices(k, m.into(), &mut want);
+            lazy.ask(&want, opts.normals);
         }
-        lazy.evaluate(&want, opts.normals);
+        lazy.run();
         let nv = self.level_nv[self.top as usize];
         loop {
             let normals = opts.normals.then(|| &lazy.normals()[..nv]);
