@@ -442,11 +442,15 @@ impl Measure<'_> {
             }
             return;
         }
+        // Neighbouring triangles share most of their samples: asked for triangle by
+        // triangle, the repeats are dropped as they come.
         let mut want = Vec::new();
         for &k in &dense {
+            want.clear();
             self.sample_vertices(k, m, &mut want);
+            lazy.ask(&want, false);
         }
-        lazy.evaluate(&want, false);
+        lazy.run();
         let limit = lazy.limit();
         let mut values = vec![0.0f64; dense.len()];
         par::for_each_heavy(&mut values, |i, v| {
@@ -595,8 +599,7 @@ impl Measure<'_> {
         let s = self.sample_level(m);
         let q = 1usize << (2 * m);
         let group = self.r.base.group[k];
-        let (mut around, mut ring, mut near, mut faces) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut around, mut ring, mut faces) = (Vec::new(), Vec::new(), Vec::new());
         let mut points = Vec::new();
         let mut err2 = self.floor * self.floor;
         for f in k * q..(k + 1) * q {
@@ -625,8 +628,14 @@ impl Measure<'_> {
                 // to the sample level's triangles at the sample.
                 let o = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
                 if (o - p).length_squared() > err2 {
-                    self.samples_around(x, s, limit, &mut faces, &mut near);
-                    err2 = err2.max(nearest(o, &near, err2.sqrt()));
+                    err2 = err2.max(self.nearest_sample_triangle(
+                        o,
+                        x,
+                        s,
+                        limit,
+                        err2.sqrt(),
+                        &mut faces,
+                    ));
                 }
             }
             if err2 > stop_above * stop_above {
@@ -687,16 +696,19 @@ impl Measure<'_> {
         }
     }
 
-    /// Into `near`: the level-`s` triangles (corners at their limit points) at vertex `x`
-    /// of level `s - 1` or `s`, the children of the level-`(s - 1)` faces at it.
-    fn samples_around(
+    /// [`nearest`] from `p` among the level-`s` triangles (corners at their limit points) at
+    /// vertex `x` of level `s - 1` or `s`, the children of the level-`(s - 1)` faces at it,
+    /// taken in the order of those faces' ids. Each triangle is made only when it is reached:
+    /// the search usually stops at one of the first.
+    fn nearest_sample_triangle(
         &self,
+        p: DVec3,
         x: u32,
         s: u32,
         limit: &[DVec3],
+        below: f64,
         faces: &mut Vec<u32>,
-        near: &mut Vec<[DVec3; 3]>,
-    ) {
+    ) -> f64 {
         let last = self.r.full(s - 1);
         faces.clear();
         if (x as usize) < last.nv {
@@ -709,17 +721,22 @@ impl Measure<'_> {
             let d = x as usize - last.nv;
             faces.extend(last.edge_faces[d].iter().filter(|&&g| g != NONE));
         }
-        near.clear();
+        let mut best = f64::INFINITY;
         for &g in faces.iter() {
             let c = child_faces(last, g as usize);
-            near.extend(c.chunks_exact(3).map(|t| {
-                [
+            for t in c.chunks_exact(3) {
+                let tri = [
                     limit[t[0] as usize],
                     limit[t[1] as usize],
                     limit[t[2] as usize],
-                ]
-            }));
+                ];
+                best = best.min(point_triangle_distance_squared(p, &tri));
+                if best <= below * below {
+                    return best;
+                }
+            }
         }
+        best
     }
 
     /// Both faces of a belt quad at the finer of their levels (the extraction shows them so).
@@ -857,9 +874,11 @@ impl Measure<'_> {
             }
             let mut want = Vec::new();
             for &k in at.iter().filter(|&&k| self.unit(k).is_none()) {
+                want.clear();
                 self.output_vertices(k, m, &mut want);
+                lazy.ask(&want, false);
             }
-            lazy.evaluate(&want, false);
+            lazy.run();
         }
     }
 
@@ -995,9 +1014,11 @@ impl Measure<'_> {
     ) -> Result<(lod::AdaptiveMesh, Vec<u32>)> {
         let mut want = Vec::new();
         for (k, &m) in levels.iter().enumerate() {
+            want.clear();
             self.output_vertices(k, m.into(), &mut want);
+            lazy.ask(&want, opts.normals);
         }
-        lazy.evaluate(&want, opts.normals);
+        lazy.run();
         let nv = self.level_nv[self.top as usize];
         loop {
             let normals = opts.normals.then(|| &lazy.normals()[..nv]);

@@ -29,6 +29,13 @@ pub(crate) struct LazyLimits<'a> {
     normal: Vec<DVec3>,
     have_limit: Vec<u64>,
     have_normal: Vec<u64>,
+    /// Vertices asked for and not evaluated yet, by the level they are born at, and the
+    /// vertices of that level their limit masks (or rings) read; kept between batches so
+    /// that their buffers are reused.
+    todo: Vec<Vec<u32>>,
+    support: Vec<Vec<u32>>,
+    /// Whether the vertices in `todo` were asked for with their normals.
+    todo_normals: bool,
 }
 
 /// `n` zero vectors, allocated zeroed rather than written (`vec![DVec3::ZERO; n]` writes
@@ -91,6 +98,9 @@ impl<'a> LazyLimits<'a> {
             nv,
             pos,
             have,
+            todo: vec![Vec::new(); top as usize + 1],
+            support: vec![Vec::new(); top as usize + 1],
+            todo_normals: false,
         }
     }
 
@@ -115,11 +125,11 @@ impl<'a> LazyLimits<'a> {
     }
 
     /// The last level, seen through the one before (its arrays are not built).
-    fn finest(&self) -> NextLevel<'a> {
-        let top = self.r.max_level();
+    fn finest(r: &'a Refinement) -> NextLevel<'a> {
+        let top = r.max_level();
         NextLevel {
-            l: self.r.full(top - 1),
-            base: &self.r.base,
+            l: r.full(top - 1),
+            base: &r.base,
             j: top - 1,
         }
     }
@@ -127,9 +137,21 @@ impl<'a> LazyLimits<'a> {
     /// Evaluates the limit points of `verts` (and with `normals` their limit normals) that
     /// are not evaluated yet.
     pub fn evaluate(&mut self, verts: &[u32], normals: bool) {
+        self.ask(verts, normals);
+        self.run();
+    }
+
+    /// Queues the limit points of `verts` (and with `normals` their limit normals) that are
+    /// neither evaluated nor queued yet, for [`Self::run`]. A caller with many vertices, most
+    /// asked for several times, asks in small batches so that no array of the repeats is
+    /// ever made. Every batch before a `run` asks with the same `normals`.
+    pub fn ask(&mut self, verts: &[u32], normals: bool) {
+        debug_assert!(
+            self.todo.iter().all(Vec::is_empty) || self.todo_normals == normals,
+            "one run evaluates normals for all of its vertices or for none"
+        );
+        self.todo_normals = normals;
         let top = self.r.max_level();
-        let mut todo: Vec<Vec<u32>> = vec![Vec::new(); top as usize + 1];
-        let mut rings: Vec<Vec<u32>> = vec![Vec::new(); top as usize + 1];
         for &v in verts {
             // Marked when queued, so that a vertex asked for many times is evaluated once.
             let i = v as usize;
@@ -139,22 +161,31 @@ impl<'a> LazyLimits<'a> {
                 continue;
             }
             let b = self.birth(v);
-            todo[b as usize].push(v);
-            let (t, ring) = (&self.r.tables, &mut rings[b as usize]);
+            self.todo[b as usize].push(v);
+            let (r, ring) = (self.r, &mut self.support[b as usize]);
             if b < top {
-                support_into(self.r.full(b), t, v, normals, ring);
+                support_into(r.full(b), &r.tables, v, normals, ring);
             } else {
-                support_into(&self.finest(), t, v, normals, ring);
+                support_into(&Self::finest(r), &r.tables, v, normals, ring);
             }
         }
-        for (b, ring) in rings.iter_mut().enumerate() {
+    }
+
+    /// Evaluates what [`Self::ask`] queued.
+    pub fn run(&mut self) {
+        let top = self.r.max_level();
+        let normals = self.todo_normals;
+        let mut support = std::mem::take(&mut self.support);
+        for (b, ring) in support.iter_mut().enumerate() {
             self.positions(b as u32, ring);
+            ring.clear();
         }
+        self.support = support;
         let (t, base) = (&self.r.tables, &self.r.base);
-        for (b, vs) in todo.iter().enumerate() {
+        for (b, vs) in self.todo.iter_mut().enumerate() {
             let b = b as u32;
             let p = &self.pos[b as usize];
-            for &v in vs {
+            for &v in vs.iter() {
                 let i = v as usize;
                 let (lim, nor) = if b < top {
                     let l = self.r.full(b);
@@ -163,7 +194,7 @@ impl<'a> LazyLimits<'a> {
                         normals.then(|| eval::eval_normal(l, t, base, b, p, i, None)),
                     )
                 } else {
-                    let l = self.finest();
+                    let l = Self::finest(self.r);
                     (
                         eval::eval_limit(&l, t, base, p, i),
                         normals.then(|| eval::eval_normal(&l, t, base, b, p, i, None)),
@@ -174,6 +205,7 @@ impl<'a> LazyLimits<'a> {
                     self.normal[i] = nn;
                 }
             }
+            vs.clear();
         }
     }
 
