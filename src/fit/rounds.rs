@@ -190,8 +190,8 @@ impl Rounds<'_> {
                     break;
                 }
             }
-            let last = round + 1 >= budget;
-            match self.after_measurement(ok, last, &mut relaxing, &measured, plan, report) {
+            let rounds_left = budget.saturating_sub(round + 1);
+            match self.after_measurement(ok, rounds_left, &mut relaxing, &measured, plan, report) {
                 Next::Stop => break,
                 Next::Measure => continue,
                 Next::Refine => {}
@@ -334,14 +334,17 @@ impl Rounds<'_> {
         })
     }
 
-    /// Decides what follows a measurement (`ok`: within tolerance; `last`: the last round
-    /// allowed) and starts, checks or ends a relaxation: a model within tolerance relaxes its
-    /// refined closed patches once; when relaxing broke the tolerance, the relaxed groups
-    /// that fail get their converged thresholds back and the model is measured once more.
+    /// Decides what follows a measurement (`ok`: within tolerance; `rounds_left`: how many
+    /// more rounds are allowed) and starts, checks or ends a relaxation: a model within
+    /// tolerance relaxes its refined closed patches once; when relaxing broke the tolerance,
+    /// the relaxed groups that fail get their converged thresholds back and the model is
+    /// measured once more. A relaxation starts only while both of those rounds are left:
+    /// measured in the last round, one failing group of the dozens relaxed would throw the
+    /// whole relaxation away, which is what a model that converges late mostly gets.
     fn after_measurement(
         &self,
         ok: bool,
-        last: bool,
+        rounds_left: usize,
         relaxing: &mut Option<Relaxation>,
         measured: &Measurement,
         plan: &mut Plan,
@@ -349,7 +352,7 @@ impl Rounds<'_> {
     ) -> Next {
         let (faces, tol) = (self.faces, self.tol);
         match relaxing.take() {
-            None if ok && (!self.opts.relax || last) => Next::Stop,
+            None if ok && (!self.opts.relax || rounds_left < 2) => Next::Stop,
             None if ok => {
                 let relaxed = relax_refined_groups(
                     &faces.mesh,
@@ -377,7 +380,7 @@ impl Rounds<'_> {
                 let failing: Vec<usize> = (0..faces.mesh.groups.len())
                     .filter(|&g| measured.group_excess[g].0 > tol)
                     .collect();
-                if failing.iter().any(|g| r.groups.binary_search(g).is_err()) || last {
+                if failing.iter().any(|g| r.groups.binary_search(g).is_err()) || rounds_left == 0 {
                     return Next::Stop;
                 }
                 for &g in &r.groups {
