@@ -443,11 +443,16 @@ impl Measure<'_> {
             return;
         }
         // Neighbouring triangles share most of their samples: asked for triangle by
-        // triangle, the repeats are dropped as they come.
-        let mut want = Vec::new();
+        // triangle, the repeats are dropped as they come, and a triangle asks for the samples
+        // of the triangles around it only where those are not measured here themselves.
+        let mut asked = vec![false; self.l0().nf()];
+        for &k in &dense {
+            asked[k] = true;
+        }
+        let (mut want, mut scratch) = (Vec::new(), SampleScratch::default());
         for &k in &dense {
             want.clear();
-            self.sample_vertices(k, m, &mut want);
+            self.sample_vertices(k, m, &asked, &mut scratch, &mut want);
             lazy.ask(&want, false);
         }
         lazy.run();
@@ -512,32 +517,45 @@ impl Measure<'_> {
         (m + 2).min(self.r.max_level())
     }
 
-    /// The corners of the level-`s` descendants of face `g` of level `m`, into `out`.
-    fn descendant_corners(&self, g: usize, m: u32, s: u32, out: &mut Vec<u32>) {
-        let q = 1usize << (2 * (s - m));
-        if s < self.r.max_level() {
-            out.extend_from_slice(&self.r.full(s).faces[3 * g * q..3 * (g + 1) * q]);
-        } else {
-            let prev = self.r.full(s - 1);
-            for h in g * q / 4..(g + 1) * q / 4 {
-                out.extend_from_slice(&child_faces(prev, h));
-            }
-        }
+    /// The vertices of level `s` (`m + 1` or `m + 2`) on face `g` of level `m`, each once:
+    /// its corners and the vertices [`Self::points_over`] it.
+    fn vertices_over(
+        &self,
+        g: usize,
+        m: u32,
+        s: u32,
+        scratch: &mut SampleScratch,
+        out: &mut Vec<u32>,
+    ) {
+        out.extend_from_slice(&self.r.full(m).faces[3 * g..3 * g + 3]);
+        scratch.points.clear();
+        self.points_over(m, g, s - m, &mut scratch.points);
+        out.extend(scratch.points.iter().map(|&(x, _)| x));
     }
 
     /// The vertices whose limit points the measurement of dense base triangle `k` at level
-    /// `m` reads: those of the sample level's faces over its level-`m` faces and over the
-    /// faces around them.
-    fn sample_vertices(&self, k: usize, m: u32, out: &mut Vec<u32>) {
+    /// `m` reads: those of the sample level over its level-`m` faces and over the faces
+    /// around them, leaving out the faces of the base triangles `asked` marks (which ask for
+    /// their own).
+    fn sample_vertices(
+        &self,
+        k: usize,
+        m: u32,
+        asked: &[bool],
+        scratch: &mut SampleScratch,
+        out: &mut Vec<u32>,
+    ) {
         let lm = self.r.full(m);
         let s = self.sample_level(m);
         let q = 1usize << (2 * m);
-        let mut around = Vec::new();
         for f in k * q..(k + 1) * q {
-            self.descendant_corners(f, m, s, out);
-            faces_around(lm, f, &mut around);
-            for &g in around.iter().filter(|&&g| g as usize >> (2 * m) != k) {
-                self.descendant_corners(g as usize, m, s, out);
+            self.vertices_over(f, m, s, scratch, out);
+            faces_around(lm, f, &mut scratch.around);
+            for i in 0..scratch.around.len() {
+                let g = scratch.around[i] as usize;
+                if g >> (2 * m) != k && !asked[g >> (2 * m)] {
+                    self.vertices_over(g, m, s, scratch, out);
+                }
             }
         }
     }
@@ -1092,6 +1110,13 @@ fn nearest(p: DVec3, tris: &[[DVec3; 3]], below: f64) -> f64 {
         }
     }
     best
+}
+
+/// Buffers [`Measure::sample_vertices`] reuses from one triangle to the next.
+#[derive(Default)]
+struct SampleScratch {
+    around: Vec<u32>,
+    points: Vec<(u32, [f64; 3])>,
 }
 
 /// The faces of level `l` around the corners of face `f` (other than `f`), into `out`.

@@ -6,6 +6,15 @@
 #[cfg(feature = "parallel")]
 const MIN_PARALLEL: usize = 1 << 14;
 
+/// Whether a loop of `n` items is handed to the thread pool (`min` and more items): not when
+/// the pool has a single thread, which would run the same work sequentially while the caller
+/// waits, and each hand-off costs two context switches (on a busy machine, a wait for the
+/// scheduler each).
+#[cfg(feature = "parallel")]
+fn parallel(n: usize, min: usize) -> bool {
+    n >= min && rayon::current_num_threads() > 1
+}
+
 /// Calls `f(i, chunk_i)` for consecutive chunks of `chunk` elements.
 pub(crate) fn for_each_chunk_mut<T: Send>(
     data: &mut [T],
@@ -13,7 +22,7 @@ pub(crate) fn for_each_chunk_mut<T: Send>(
     f: impl Fn(usize, &mut [T]) + Sync + Send,
 ) {
     #[cfg(feature = "parallel")]
-    if data.len() >= MIN_PARALLEL {
+    if parallel(data.len(), MIN_PARALLEL) {
         use rayon::prelude::*;
         data.par_chunks_mut(chunk)
             .enumerate()
@@ -29,7 +38,7 @@ pub(crate) fn for_each_chunk_mut<T: Send>(
 /// Calls `f(i, x_i)` for every element.
 pub(crate) fn for_each_mut<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
     #[cfg(feature = "parallel")]
-    if data.len() >= MIN_PARALLEL {
+    if parallel(data.len(), MIN_PARALLEL) {
         use rayon::prelude::*;
         data.par_iter_mut()
             .enumerate()
@@ -47,7 +56,7 @@ pub(crate) fn for_each_mut<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) + 
 /// [`for_each_mut`]'s threshold would keep a few thousand of them on one thread.
 pub(crate) fn for_each_heavy<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
     #[cfg(feature = "parallel")]
-    if data.len() >= 2 {
+    if parallel(data.len(), 2) {
         use rayon::prelude::*;
         data.par_iter_mut().enumerate().for_each(|(i, x)| f(i, x));
         return;
@@ -61,7 +70,7 @@ pub(crate) fn for_each_heavy<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) 
 /// each take long, as [`for_each_heavy`]).
 pub(crate) fn map_heavy<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync + Send) -> Vec<R> {
     #[cfg(feature = "parallel")]
-    if n >= 2 {
+    if parallel(n, 2) {
         use rayon::prelude::*;
         return (0..n).into_par_iter().map(f).collect();
     }
@@ -77,7 +86,7 @@ pub(crate) fn for_each_segment_mut<T: Send>(
 ) {
     let n = offsets.len().saturating_sub(1);
     #[cfg(feature = "parallel")]
-    if data.len() >= MIN_PARALLEL {
+    if parallel(data.len(), MIN_PARALLEL) {
         use rayon::prelude::*;
         const BLOCK: usize = 4096;
         let mut blocks: Vec<(usize, &mut [T])> = Vec::with_capacity(n / BLOCK + 1);
@@ -113,7 +122,7 @@ pub(crate) fn extend_mapped<T: Send>(
     f: impl Fn(usize) -> T + Sync + Send,
 ) {
     #[cfg(feature = "parallel")]
-    if n >= MIN_PARALLEL {
+    if parallel(n, MIN_PARALLEL) {
         use rayon::prelude::*;
         out.par_extend((0..n).into_par_iter().with_min_len(2048).map(f));
         return;
