@@ -28,7 +28,7 @@ fn tmp(name: &str) -> PathBuf {
 /// The repository's root, above this package (`cli/`): the example model, spec vectors and
 /// test data.
 fn repo() -> PathBuf {
-    repo().join("..")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 fn example() -> String {
