@@ -1,6 +1,6 @@
 //! Times segmentation, curve-network extraction and the Hausdorff distance on the largest
 //! corpus tessellation (trj4, a bearing assembly). Reports timings, asserts nothing; the
-//! criterion benches in `benches/` cover the codec and subdivision.
+//! criterion benches in `cli/benches/` cover the codec and subdivision.
 //!
 //! Run: `cargo run --release --example large_mesh_timings` (`SCODE_CORPUS` overrides the
 //! corpus folder).

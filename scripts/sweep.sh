@@ -8,4 +8,4 @@
 # cargo run --release --example step_sweep
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo test --release --features sweep --test sweep -- --nocapture "$@"
+cargo test -p scode --release --features sweep --test sweep -- --nocapture "$@"

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Sets up what the tests need on a fresh machine and runs them: formatting, lints, the whole
-# test suite (unit, property, corpus round-trips and encodes of the small corpus models, spec
-# vectors, the Khronos glTF validator on decoded glTF), the decoder-only and
-# WebAssembly-viewer checks, the viewer's end-to-end test in headless Chromium, and a short
-# fuzzing pass. The same corpus checks on the larger models are scripts/sweep.sh.
+# test suite of the library and of the command-line tool (`cli/`): unit, property, corpus
+# round-trips and encodes of the small corpus models, spec vectors, the Khronos glTF
+# validator on decoded glTF; the decoder-only, library-dependency and WebAssembly-viewer
+# checks, the viewer's end-to-end test in headless Chromium, and a short fuzzing pass. The same corpus checks on the larger models are scripts/sweep.sh.
 # Usage: scripts/test.sh            (FUZZ_SECONDS=10 per fuzz target by default, nine targets;
 #                                    FUZZ_SECONDS=0 skips fuzzing; E2E=0 skips the browser test)
 set -euo pipefail
@@ -34,7 +34,14 @@ echo "== viewer/pkg built from the current decoder sources"
 viewer/build.sh --check
 
 echo "== decoder-only library (no default features)"
-cargo check --lib --no-default-features
+cargo check -p scode --lib --no-default-features
+
+echo "== the library's default features: none of the command-line tool's dependencies"
+LIB_DEPS=$(cargo tree -p scode --locked -e normal --prefix none)
+if echo "$LIB_DEPS" | grep -E '^(clap|anyhow|indicatif|plotters|png|mimalloc) '; then
+  echo "error: the library's default build pulls in the dependencies above" >&2
+  exit 1
+fi
 
 echo "== an embedder of the library (tests/embed: no default features, plus the mesh encoder)"
 # It builds through the documented API alone, and none of the command-line tool's, the
@@ -46,13 +53,17 @@ if echo "$EMBED_DEPS" | grep -E '^(clap|anyhow|indicatif|plotters|png|mimalloc|t
   exit 1
 fi
 
-echo "== cargo clippy (with the sweep tests, which cargo test leaves out)"
-cargo clippy --all-targets --features sweep -- -D warnings
+# The library and the command-line tool; the Python package (`python/`, which needs a Python
+# interpreter to build) is scripts/test_python.sh's.
+CRATES=(--workspace --exclude scode-python)
 
-echo "== npm packages of the tests: gltf-validator (tests/gltf_output.rs)"
+echo "== cargo clippy: library and command-line tool (with the sweep tests, which cargo test leaves out)"
+cargo clippy "${CRATES[@]}" --all-targets --features scode/sweep -- -D warnings
+
+echo "== npm packages of the tests: gltf-validator (cli/tests/gltf_output.rs)"
 # Under CI the validator test fails without them; elsewhere it says it was skipped.
 if command -v npm >/dev/null 2>&1; then
-  (cd tests/gltf_validator && npm ci --no-audit --no-fund --loglevel=error)
+  (cd cli/tests/gltf_validator && npm ci --no-audit --no-fund --loglevel=error)
 elif [ -n "${CI:-}" ]; then
   echo "error: npm not found: the glTF validator test needs Node.js 20 with npm" >&2
   exit 1
@@ -60,10 +71,10 @@ else
   echo "note: npm not found; the glTF validator test will report that it was skipped" >&2
 fi
 
-echo "== cargo test"
-PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test --all-targets
+echo "== cargo test: library and command-line tool"
+PROPTEST_CASES=${PROPTEST_CASES:-64} cargo test "${CRATES[@]}" --all-targets
 echo "== cargo test --doc (the API's examples)"
-cargo test --doc
+cargo test "${CRATES[@]}" --doc
 
 echo "== wasm/ engine (native): clippy and tests"
 WASM_NATIVE_TARGET="${CARGO_TARGET_DIR:-$PWD/target}"
@@ -78,7 +89,7 @@ if [ "${E2E:-1}" != "0" ]; then
     $SUDO apt-get update -qq && $SUDO apt-get install -y -qq chromium >/dev/null
   fi
   (cd viewer/test && npm ci --no-audit --no-fund --loglevel=error)
-  # cargo test built the scode binary (with `scode view`, which embeds viewer/pkg).
+  # cargo test built the scode binary (package scode-cli; `scode view` embeds viewer/pkg).
   SCODE_BIN="${CARGO_TARGET_DIR:-target}/debug/scode" node viewer/test/e2e.mjs
 fi
 

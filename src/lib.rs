@@ -39,15 +39,19 @@
 //! - `step` (default): STEP input ([`Input::Step`]).
 //! - `parallel` (default): multi-threaded refinement and fitting (rayon); same results.
 //! - `legacy-formats` (default): decoding of format versions 1 and 2.
-//! - `cli`, `report`, `mimalloc` (default): the `scode` command-line tool, its reports and
-//!   plots, and its allocator. An embedder turns default features off:
-//!   `scode = { version = "0.1", default-features = false, features = ["encoder"] }`.
+//! - `remesh` (default): decoding to a smallest angle ([`DecodeOptions::min_angle`]:
+//!   constrained Delaunay refinement of plane patches).
+//!
+//! A decoder alone turns default features off; an embedder that encodes meshes but never
+//! reads STEP adds `encoder`:
+//! `scode = { version = "0.1", default-features = false, features = ["encoder"] }`. The
+//! command-line tool, its reports, plots and allocator are the `scode-cli` package (`cli/`).
 //!
 //! # Internal modules
 //!
 //! The modules below the API (hidden from this documentation) are public for the `scode`
-//! command-line tool, the WebAssembly viewer, the tests and the benches; they follow the
-//! layers mesh, io, subdiv, fit, codec, metrics, pipeline, and are not a stable interface.
+//! command-line tool (package `scode-cli`), the WebAssembly viewer, the tests and the
+//! benches; they follow the layers mesh, io, subdiv, fit, codec, metrics, pipeline, and are not a stable interface.
 #![forbid(unsafe_code)]
 
 #[doc(hidden)]
@@ -77,9 +81,6 @@ pub mod surface;
 #[cfg(feature = "encoder")]
 #[doc(hidden)]
 pub mod pipeline;
-#[cfg(feature = "report")]
-#[doc(hidden)]
-pub mod report;
 
 mod api;
 

@@ -1,6 +1,16 @@
-//! Helpers shared by the integration tests (also used by the benches and examples).
+//! Helpers shared by the integration tests of the library and of the command-line tool
+//! (`cli/tests`, through `#[path]`), also used by the benches and examples.
 
 use std::path::{Path, PathBuf};
+
+/// The repository's root (the workspace's, holding `Cargo.lock`): the including package's
+/// folder, or the folder above it for the command-line tool in `cli/`.
+pub fn repo_dir() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .find(|p| p.join("Cargo.lock").is_file())
+        .expect("no Cargo.lock above the package: not in the scode repository")
+}
 
 /// The shared corpus: `$SCODE_CORPUS`, else `<repo>/../shared/corpus`, else
 /// `/work/shared/corpus`.
@@ -20,7 +30,7 @@ pub fn corpus_dir() -> Option<PathBuf> {
         return Some(p);
     }
     let candidates = [
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus"),
+        repo_dir().join("../shared/corpus"),
         PathBuf::from("/work/shared/corpus"),
     ];
     if let Some(found) = candidates.iter().find(|p| p.join("MANIFEST.md").is_file()) {

@@ -4,12 +4,12 @@
 //! (c) a full decode (`subdivide`: topology, positions and the output mesh).
 //!
 //! Run: `cargo bench --bench subdivide` (wall time, rayon pools of 1 thread and of all
-//! threads) and `cargo bench --bench subdivide --no-default-features --features encoder,mimalloc`
+//! threads) and `cargo bench -p scode-cli --bench subdivide --no-default-features --features mimalloc`
 //! (sequential build, measured in the thread's own CPU time (clock_gettime(CLOCK_THREAD_CPUTIME_ID)), which stays
 //! meaningful on a loaded machine). SCODE_CORPUS overrides the corpus folder.
 
 /// The `scode` binary's allocator (see the `mimalloc` feature); build the bench with
-/// `--no-default-features --features cli,parallel` to measure the system allocator.
+/// `-p scode-cli --no-default-features --features parallel` to measure the system allocator.
 #[cfg(feature = "mimalloc")]
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -18,7 +18,7 @@ use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use scode::subdiv::{Refinement, SubdivOptions};
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../../tests/common/mod.rs"]
 mod common;
 use common::corpus_dir;
 

@@ -20,11 +20,11 @@ use super::run::{
     Ruler,
 };
 use super::steps::Setting;
-use crate::io;
-use crate::io::step::{read_step_tessellations, surface_name, StepModel, StepOptions};
-use crate::mesh::{ControlMesh, Tolerance};
-use crate::metrics::raw_binary_bytes;
-use crate::pipeline::{bits_for_tolerance, step_options_for};
+use scode::io;
+use scode::io::step::{read_step_tessellations, surface_name, StepModel, StepOptions};
+use scode::mesh::{ControlMesh, Tolerance};
+use scode::metrics::raw_binary_bytes;
+use scode::pipeline::{bits_for_tolerance, step_options_for};
 
 /// How finely the B-rep reference tessellates the faces it measures through facets: its
 /// chordal tolerance is the tightest accuracy of the report divided by this.
@@ -193,7 +193,7 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
             // the description, so accuracies near it are read for what they are.
             Err(failures) => (
                 nominal.clone(),
-                crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION,
+                scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * scode::pipeline::STEP_CHORD_FRACTION,
                 failures,
             ),
         };
@@ -209,7 +209,7 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
     } else {
         let d = format!(
             "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
-            crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * crate::pipeline::STEP_CHORD_FRACTION
+            scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * scode::pipeline::STEP_CHORD_FRACTION
         );
         (None, Vec::new(), d)
     };

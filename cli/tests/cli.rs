@@ -25,8 +25,14 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// The repository's root, above this package (`cli/`): the example model, spec vectors and
+/// test data.
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
 fn example() -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
+    repo()
         .join("corpus/boss_plate.obj")
         .to_string_lossy()
         .into_owned()
@@ -412,7 +418,7 @@ fn every_effort_meets_the_tolerance_and_an_unknown_one_is_refused() {
 /// on the failed write (std's `println!` panics on a closed pipe).
 #[test]
 fn a_closed_stdout_is_no_panic() {
-    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/cad_part.scode");
+    let file = repo().join("spec/vectors/cad_part.scode");
     let mut child = Command::new(env!("CARGO_BIN_EXE_scode"))
         .args(["info", "--groups", file.to_str().unwrap()])
         .stdout(std::process::Stdio::piped())
@@ -649,7 +655,7 @@ fn the_output_may_not_be_the_input_or_another_format() {
 /// written) unless `--allow-skipped` lets the rest be encoded.
 #[test]
 fn skipped_step_faces_need_allow_skipped() {
-    let step = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_offset_face.step");
+    let step = repo().join("tests/data/cube_offset_face.step");
     let step = step.to_str().unwrap();
     for raw in [false, true] {
         let out = tmp(&format!("cube-raw-{raw}.scode"));
@@ -677,10 +683,7 @@ fn skipped_step_faces_need_allow_skipped() {
 /// line, not a stack overflow that aborts the process.
 #[test]
 fn deeply_nested_step_is_an_input_error() {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_offset_face.step"),
-    )
-    .unwrap();
+    let text = std::fs::read_to_string(repo().join("tests/data/cube_offset_face.step")).unwrap();
     let deep = text.replace(
         "#1 = CARTESIAN_POINT('',(0.0,0.0,0.0));",
         &format!(
@@ -862,7 +865,7 @@ fn a_file_over_max_bytes_is_refused_before_it_is_read() {
 #[test]
 fn max_work_per_element_sets_the_work_bound() {
     // The CAD part's group candidates take a few walk steps: none are allowed here.
-    let part = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors/cad_part.scode");
+    let part = repo().join("spec/vectors/cad_part.scode");
     let part = part.to_str().unwrap();
     let (ok, text) = scode(&["info", "--max-work-per-element", "0", part]);
     assert!(!ok, "{text}");

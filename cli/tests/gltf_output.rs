@@ -4,9 +4,10 @@
 //! keeps the groups and their names.
 //!
 //! The validator is the npm package `gltf-validator`, installed by `npm ci` in
-//! `tests/gltf_validator/` (scripts/test.sh does it) and run with Node.js. Without them the
+//! `cli/tests/gltf_validator/` (scripts/test.sh does it) and run with Node.js. Without them the
 //! validator test says it was skipped; under CI (`CI` set) it fails instead.
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 
 use std::path::{Path, PathBuf};
@@ -79,7 +80,7 @@ fn validator() -> Option<PathBuf> {
 /// example (fitted, and raw, which decodes without normals and with quads) and, with the
 /// corpus, three CAD models (one of them an assembly of 18 bodies).
 fn models() -> Vec<(String, PathBuf, Vec<&'static str>)> {
-    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("corpus/boss_plate.obj");
+    let example = common::repo_dir().join("corpus/boss_plate.obj");
     let mut models = vec![
         ("boss_plate".to_string(), example.clone(), vec![]),
         ("boss_plate_raw".to_string(), example, vec!["--raw"]),
@@ -229,7 +230,7 @@ fn decode_to_gltf_and_encode_again_keeps_the_faces() {
 
 #[test]
 fn quantize_is_a_gltf_option() {
-    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("corpus/boss_plate.obj");
+    let example = common::repo_dir().join("corpus/boss_plate.obj");
     let x = tmp("quantize_option.scode");
     scode(&["encode", "--raw", s(&example), s(&x)]);
     let obj = tmp("quantize_option.obj");

@@ -8,11 +8,11 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use crate::codec::{self, Content, EncodeOptions};
-use crate::error::{Error, Result};
-use crate::io;
-use crate::mesh::Tolerance;
-use crate::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
+use scode::codec::{self, Content, EncodeOptions};
+use scode::error::{Error, Result};
+use scode::io;
+use scode::mesh::Tolerance;
+use scode::pipeline::{encode_fitted, sidecar_hints, ModelEncodeOptions};
 
 /// One encoder setting: a point of a rate-distortion curve.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -190,7 +190,7 @@ fn run_step_job(job: &ScodeJob) -> Result<ScodeJobResult> {
     let mut bytes = Vec::new();
     for run in 0..job.runs.max(1) {
         let t0 = Instant::now();
-        let (_, b, fit) = crate::pipeline::encode_step(&job.input, &opts)?;
+        let (_, b, fit) = scode::pipeline::encode_step(&job.input, &opts)?;
         if run == 0 && !fit.within_tolerance {
             result.note = Some(format!(
                 "fit missed its tolerance by {:.2}x after {} rounds",

@@ -16,10 +16,10 @@
 
 use glam::DVec3;
 
-use crate::error::{Error, Result};
-use crate::fit::encoder::ExactSurface;
-use crate::mesh::{AnalyticSurface, ControlMesh};
-use crate::metrics::{
+use scode::error::{Error, Result};
+use scode::fit::encoder::ExactSurface;
+use scode::mesh::{AnalyticSurface, ControlMesh};
+use scode::metrics::{
     closest_points, one_sided_distances, sample_surface, DistanceOptions, DistanceReport, OneSided,
     TriangleSurface,
 };
@@ -120,7 +120,7 @@ impl BrepReference {
     }
 
     /// Sampled symmetric distance between `decoded` and the part, as
-    /// [`crate::metrics::hausdorff`] measures two meshes (same sample counts and seeds,
+    /// [`scode::metrics::hausdorff`] measures two meshes (same sample counts and seeds,
     /// `decoded` as A); `diagonal` is the reference's.
     pub fn measure(&self, decoded: &ControlMesh) -> Result<DistanceReport> {
         let opts = DistanceOptions::default();
@@ -138,8 +138,8 @@ impl BrepReference {
         let mut ab = stats(&self.distances(&from_decoded));
         // The max also at points along the decoded surface's long edges (thin slivers), as
         // `scode info --against` takes them.
-        let spacing = crate::metrics::DEFAULT_EDGE_SPACING.resolve(self.mesh.diagonal());
-        let edges = crate::metrics::EdgeSamples::new(dec.positions(), dec.triangles(), spacing);
+        let spacing = scode::metrics::DEFAULT_EDGE_SPACING.resolve(self.mesh.diagonal());
+        let edges = scode::metrics::EdgeSamples::new(dec.positions(), dec.triangles(), spacing);
         let along: Vec<DVec3> = (0..edges.len()).map(|i| edges.get(i).point).collect();
         let edge_max = self.distances(&along).into_iter().fold(0.0, f64::max);
         ab.max = ab.max.max(edge_max);
@@ -180,7 +180,7 @@ fn stats(d: &[f64]) -> OneSided {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{Axis, Group};
+    use scode::mesh::{Axis, Group};
 
     /// A grid of `nu` x `nv` quads (split into triangles) mapped by `at(u, v)`, u and v in
     /// [0, 1], u periodic (the seam shares vertices), appended to `mesh` as `group`.
@@ -311,10 +311,10 @@ mod tests {
         );
         // The same decoded surface measured against the reference's facets is off by far
         // more than 1 %: the exact surfaces are what the numbers above rest on.
-        let facets = crate::metrics::hausdorff(
+        let facets = scode::metrics::hausdorff(
             &decoded,
             reference.mesh(),
-            &crate::metrics::DistanceOptions::default(),
+            &scode::metrics::DistanceOptions::default(),
         )
         .unwrap();
         assert!(

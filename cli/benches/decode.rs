@@ -20,7 +20,7 @@ use scode::pipeline::{
     decode_surface, encode_fitted, sidecar_hints, Detail, ModelEncodeOptions, SurfaceOptions,
 };
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../../tests/common/mod.rs"]
 mod common;
 use common::corpus_dir;
 

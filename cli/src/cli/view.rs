@@ -16,27 +16,27 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
     (
         "/",
         "text/html; charset=utf-8",
-        include_bytes!("../../viewer/index.html"),
+        include_bytes!("../../../viewer/index.html"),
     ),
     (
         "/index.html",
         "text/html; charset=utf-8",
-        include_bytes!("../../viewer/index.html"),
+        include_bytes!("../../../viewer/index.html"),
     ),
     (
         "/viewer.js",
         "text/javascript; charset=utf-8",
-        include_bytes!("../../viewer/viewer.js"),
+        include_bytes!("../../../viewer/viewer.js"),
     ),
     (
         "/pkg/scode_wasm.js",
         "text/javascript; charset=utf-8",
-        include_bytes!("../../viewer/pkg/scode_wasm.js"),
+        include_bytes!("../../../viewer/pkg/scode_wasm.js"),
     ),
     (
         "/pkg/scode_wasm_bg.wasm",
         "application/wasm",
-        include_bytes!("../../viewer/pkg/scode_wasm_bg.wasm"),
+        include_bytes!("../../../viewer/pkg/scode_wasm_bg.wasm"),
     ),
 ];
 

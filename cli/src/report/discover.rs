@@ -2,8 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
-use crate::io::MeshFormat;
+use scode::error::{Error, Result};
+use scode::io::MeshFormat;
 
 /// What the report will do with one input file.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -32,7 +32,7 @@ pub fn classify(path: &Path) -> Option<ModelSource> {
     if MeshFormat::from_path(path).is_ok() {
         return Some(ModelSource::Mesh);
     }
-    crate::io::step::is_step_path(path).then_some(ModelSource::Step)
+    scode::io::step::is_step_path(path).then_some(ModelSource::Step)
 }
 
 /// Expands files and directories (recursively, in sorted order) into the models of the

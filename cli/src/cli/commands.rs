@@ -975,7 +975,7 @@ fn fmt_axis(axis: &scode::mesh::Axis) -> String {
 }
 
 pub fn report(args: &ReportArgs) -> Result<()> {
-    use scode::report::{self, Progress, ReportOptions, StepRunner};
+    use scode_cli::report::{self, Progress, ReportOptions, StepRunner};
     let mut opts = if args.quick {
         ReportOptions::quick()
     } else {
@@ -1058,8 +1058,8 @@ pub fn report(args: &ReportArgs) -> Result<()> {
 
 /// The child side of `scode report`: one encode, result on stdout after the marker.
 pub fn report_step(job: &str) -> Result<()> {
-    let out = scode::report::run_scode_job_json(job)?;
-    println!("{}{out}", scode::report::RESULT_MARKER);
+    let out = scode_cli::report::run_scode_job_json(job)?;
+    println!("{}{out}", scode_cli::report::RESULT_MARKER);
     Ok(())
 }
 
@@ -1098,8 +1098,8 @@ impl ReportBars {
         }
     }
 
-    fn update(&self, p: &scode::report::Progress) {
-        use scode::report::Progress;
+    fn update(&self, p: &scode_cli::report::Progress) {
+        use scode_cli::report::Progress;
         match p {
             Progress::Planned {
                 models,

@@ -520,7 +520,7 @@ pub struct ReportArgs {
     /// stopped and later steps become error rows. Steps run from the loosest tolerance to
     /// the tightest, so the limit cuts the slowest points; raise it for the full curve of
     /// large models.
-    #[arg(long, default_value_t = scode::report::DEFAULT_MODEL_TIMEOUT_SECS, value_name = "SECS")]
+    #[arg(long, default_value_t = scode_cli::report::DEFAULT_MODEL_TIMEOUT_SECS, value_name = "SECS")]
     pub model_timeout_secs: u64,
     /// What errors are measured against: `brep` (the exact B-rep surfaces of a STEP file;
     /// the baselines then get the part tessellated at several chordal tolerances) or

@@ -10,9 +10,9 @@ use plotters::prelude::*;
 
 use super::run::{ModelReport, Report};
 use super::steps::Setting;
-use crate::error::{Error, Result};
+use scode::error::{Error, Result};
 
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans-ascii.ttf");
+const FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSans-ascii.ttf");
 const SIZE: (u32, u32) = (900, 600);
 
 /// One polyline and/or point set of a plot.

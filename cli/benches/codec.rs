@@ -1,13 +1,13 @@
 //! Encode and decode times on two corpus models: the fitting encoder (tolerance 1e-3 of the
 //! diagonal, the default), raw mode at 10 bits, and decoding (bitstream only, and to the
 //! surface a viewer shows: subdivision to the file's default level plus limit projection).
-//! Subdivision alone is benchmarked in `benches/subdivide.rs`.
+//! Subdivision alone is benchmarked in `cli/benches/subdivide.rs`.
 //!
 //! Run: `cargo bench --bench codec` (SCODE_CORPUS overrides the corpus folder). The fitting
 //! encoder takes seconds per model, so its group uses criterion's minimum of 10 samples.
 
 /// The `scode` binary's allocator (see the `mimalloc` feature); build the bench with
-/// `--no-default-features --features cli,parallel` to measure the system allocator.
+/// `-p scode-cli --no-default-features --features parallel` to measure the system allocator.
 #[cfg(feature = "mimalloc")]
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -21,7 +21,7 @@ use scode::pipeline::{
     decode_surface, encode_fitted, sidecar_hints, Detail, ModelEncodeOptions, SurfaceOptions,
 };
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../../tests/common/mod.rs"]
 mod common;
 use common::corpus_dir;
 

@@ -2,6 +2,7 @@
 //! (a `--draco-dir` and a `--gltfpack-dir` that hold neither take the "missing baseline"
 //! paths, so the test does not depend on them being installed).
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 
 use std::path::PathBuf;
@@ -60,7 +61,7 @@ fn report_runs_without_draco_and_writes_tables_and_plots() {
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    assert_eq!(header.join(","), scode::report::CSV_HEADER);
+    assert_eq!(header.join(","), scode_cli::report::CSV_HEADER);
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     let measured: Vec<&Vec<&str>> = rows

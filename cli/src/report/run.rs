@@ -14,12 +14,12 @@ use super::steps::{
     draco_ms, find_draco, find_gltfpack, median, run_scode, run_with_timeout, Baseline, DracoTools,
     ScodeJob, Setting, StepRunner,
 };
-use crate::codec::Limits;
-use crate::error::{Error, Result};
-use crate::io;
-use crate::mesh::ControlMesh;
-use crate::metrics::{measure_against_input, RateDistortion};
-use crate::pipeline::{decode_surface, Detail, SurfaceOptions};
+use scode::codec::Limits;
+use scode::error::{Error, Result};
+use scode::io;
+use scode::mesh::ControlMesh;
+use scode::metrics::{measure_against_input, RateDistortion};
+use scode::pipeline::{decode_surface, Detail, SurfaceOptions};
 use serde::{Deserialize, Serialize};
 
 /// The default time budget of one model: the full corpus (37 models) at two models in
@@ -586,8 +586,8 @@ pub(super) fn run_scode_point(
         // As `scode info --against` measures it (group by group, the same figures).
         Ruler::Input(input) => {
             drop(surface);
-            let near = crate::pipeline::DEFAULT_RELATIVE_TOLERANCE * input.diagonal();
-            let (distance, _) = crate::pipeline::measure_file_against_input(
+            let near = scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * input.diagonal();
+            let (distance, _) = scode::pipeline::measure_file_against_input(
                 &bytes,
                 input,
                 &Limits::default(),
@@ -987,7 +987,7 @@ mod tests {
         mesh.face_vertices = vec![0, 1, 2, 3];
         mesh.face_offsets = vec![0, 4];
         mesh.face_groups = vec![0];
-        mesh.groups = vec![crate::mesh::Group::default()];
+        mesh.groups = vec![scode::mesh::Group::default()];
         let dir = std::env::temp_dir().join(format!("scode-gltfpack-in-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("input.glb");

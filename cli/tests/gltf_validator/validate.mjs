@@ -1,9 +1,9 @@
 // Runs the Khronos glTF validator on each file named and prints one JSON line per file:
 // {"file", "errors", "warnings", "infos", "hints", "issues": [the errors and warnings]}.
-// Exits 1 when a file has errors. Used by tests/gltf_output.rs; `npm ci` here installs the
+// Exits 1 when a file has errors. Used by cli/tests/gltf_output.rs; `npm ci` here installs the
 // validator (scripts/test.sh does).
 //
-// Usage: node tests/gltf_validator/validate.mjs FILE.glb|FILE.gltf...
+// Usage: node cli/tests/gltf_validator/validate.mjs FILE.glb|FILE.gltf...
 
 import { readFileSync } from 'node:fs';
 import { createRequire } from 'node:module';

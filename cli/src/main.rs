@@ -1,5 +1,6 @@
-//! The `scode` command-line tool. Thin on purpose: it parses arguments, calls the library and
-//! prints; every algorithm lives in the `scode` library crate.
+//! The `scode` command-line tool. Thin on purpose: it parses arguments, calls the libraries
+//! and prints; every codec algorithm lives in the `scode` library crate, `scode report` in
+//! this package's library (`scode_cli::report`).
 #![forbid(unsafe_code)]
 
 mod cli;

@@ -35,7 +35,7 @@ pub use table::{
     csv, csv_rows, markdown, missing_baselines, summarise, SettingSummary, CSV_HEADER,
 };
 
-use crate::error::{Error, Result};
+use scode::error::{Error, Result};
 
 /// Files written by [`write_report`].
 #[derive(Clone, Debug, PartialEq)]
