@@ -67,7 +67,8 @@ pub(crate) fn for_each_heavy<T: Send>(data: &mut [T], f: impl Fn(usize, &mut T) 
 }
 
 /// `f(i)` for every `i` in `0..n`, in order, in parallel from two items on (for items that
-/// each take long, as [`for_each_heavy`]).
+/// each take long, as [`for_each_heavy`]). The encoder's per-face work is its only user.
+#[cfg(feature = "encoder")]
 pub(crate) fn map_heavy<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync + Send) -> Vec<R> {
     #[cfg(feature = "parallel")]
     if parallel(n, 2) {
