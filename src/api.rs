@@ -184,7 +184,7 @@ pub struct EncodeOptions {
     /// to than their sagitta. Default false. STEP input is always measured against its B-rep.
     pub chord_allowance: bool,
     /// The bytes of a mesh input's face sidecar (`<name>.faces.json`: each CAD face's
-    /// surface type, the face of group `face_<tag>` under its tag): groups on planes,
+    /// surface type, matched to the group of the same name, `face_<tag>`): groups on planes,
     /// cylinders and cones are then fitted as such instead of by the shape of their
     /// triangles, which fits some faces a guess cannot (the `scode` command reads the
     /// sidecar next to its input by itself). Ignored for STEP input, which has its own

@@ -141,7 +141,7 @@ pub fn sidecar_hints(
         return Ok(None);
     };
     let faces = faces_json::read_faces_json(&side)?;
-    Ok(Some((side.clone(), hints_for_faces(mesh, &faces))))
+    Ok(Some((side, hints_for_faces(mesh, &faces))))
 }
 
 /// Per-group surface hints from the bytes of a `faces.json` sidecar (named `name` in
@@ -155,6 +155,7 @@ pub fn sidecar_hints_from_bytes(
     Ok(hints_for_faces(mesh, &faces))
 }
 
+/// The surface hint of each group of `mesh` from the sidecar face of its name.
 fn hints_for_faces(mesh: &ControlMesh, faces: &[faces_json::FaceInfo]) -> Vec<SurfaceHint> {
     faces_json::face_info_for_groups(mesh, faces)
         .iter()
