@@ -39,6 +39,7 @@ use crate::metrics::{
     reference_samples, sample_density, space_filling_order, surface_area, DistanceOptions,
     EdgeSamples, SurfaceSample, TriangleSamples, TriangleSurface,
 };
+use crate::subdiv::par::for_each_heavy;
 use crate::subdiv::support::Supports;
 use crate::subdiv::{UniformSurface, DEFAULT_MAX_FACES};
 
@@ -257,19 +258,6 @@ fn top_k<T: Ord + Copy>(values: impl Iterator<Item = (f64, T)>, k: usize) -> Vec
     ids
 }
 
-/// Calls `f(i, item)` for every item (in parallel with the `parallel` feature).
-fn for_each_mut<T: Send>(items: &mut [T], f: impl Fn(usize, &mut T) + Sync + Send) {
-    #[cfg(feature = "parallel")]
-    {
-        use rayon::prelude::*;
-        items.par_iter_mut().enumerate().for_each(|(i, x)| f(i, x));
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        items.iter_mut().enumerate().for_each(|(i, x)| f(i, x));
-    }
-}
-
 impl<'a> ErrorMeter<'a> {
     /// A meter of `mesh` (triangulated: `triangles` are its faces), sampling both sides as
     /// `scode info --against` does with `opts` (its samples and seed; the edge spacing is
@@ -468,7 +456,7 @@ impl<'a> ErrorMeter<'a> {
             return Ok(None);
         };
         // Decoded->input for the changed groups' samples.
-        for_each_mut(&mut fresh, |k, gd| self.measure_decoded(changed[k], gd));
+        for_each_heavy(&mut fresh, |k, gd| self.measure_decoded(changed[k], gd));
         for (gd, &g) in fresh.into_iter().zip(&changed) {
             cache.groups[g] = Some(gd);
         }
