@@ -30,6 +30,7 @@ fn vectors() -> Vec<(&'static str, ControlMesh, EncodeOptions)> {
         ("multi_group", samples::multi_group(), control(3, 10)),
         ("cad_part", samples::cad_part(), control(4, 12)),
         ("turned_part", samples::turned_part(), control(3, 12)),
+        ("rounded_part", samples::rounded_part(), control(3, 12)),
     ]
 }
 

@@ -8,13 +8,14 @@ use scode::codec::bytes::{read_section, Reader};
 use scode::codec::samples::canonical_hash;
 use scode::codec::{decode, Limits};
 
-/// The current version's vectors and the frozen version-1 and version-2 ones, which must
+/// The current version's vectors and the frozen version-1, 2 and 3 ones, which must
 /// still decode.
 fn vectors() -> Vec<(String, Vec<u8>, u64, usize, usize)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("spec/vectors");
     let mut all = vectors_in(&root);
     all.extend(vectors_in(&root.join("v1")));
     all.extend(vectors_in(&root.join("v2")));
+    all.extend(vectors_in(&root.join("v3")));
     all
 }
 

@@ -442,6 +442,26 @@ fn decoded_analytic_faces_stay_on_their_exact_surfaces() {
     check_decoded_analytic_faces_on_exact_surfaces(&corpus, "bm2_ec_lever-A.stp");
 }
 
+/// Sphere and torus faces of the B-rep become sphere and torus patches (a corner blend, hub
+/// fillets), and their decoded vertices stay on the exact surfaces.
+#[test]
+fn spheres_and_tori_are_patches_on_their_exact_surfaces() {
+    use scode::mesh::{BoundarySurface, PatchKind};
+    let Some(corpus) = corpus_dir() else { return };
+    for (file, spheres, tori) in [("block_fillet3.step", 1, 0), ("bug33398.step", 20, 60)] {
+        let bytes = check_decoded_analytic_faces_on_exact_surfaces(&corpus, file);
+        let decoded = codec::decode(&bytes, &Limits::default()).unwrap();
+        let count =
+            |f: fn(&PatchKind) -> bool| decoded.mesh.groups.iter().filter(|g| f(&g.patch)).count();
+        let s = count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Sphere { .. })));
+        let t = count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Torus { .. })));
+        assert!(
+            s >= spheres && t >= tori,
+            "{file}: {s} sphere and {t} torus patches"
+        );
+    }
+}
+
 fn is_closed(model: &StepModel) -> bool {
     let mut count = std::collections::BTreeMap::new();
     for f in model.mesh.faces() {

@@ -1,4 +1,4 @@
-//! The `.scode` bitstream (writes version 3, reads 1 to 3): encoder, decoder and inspector.
+//! The `.scode` bitstream (writes version 4, reads 1 to 4): encoder, decoder and inspector.
 //! The byte-exact definition is `spec/format.md`; this module follows it section by section.
 //!
 //! Layout of a file: 4-byte magic `SCOD`, major and minor version bytes, then sections
@@ -38,7 +38,7 @@ use crate::error::{Error, Result};
 use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
 use crate::mesh::{edge_key, BoundarySurface, ControlMesh, Group, PatchKind};
 
-pub const FORMAT_VERSION_MAJOR: u8 = 3;
+pub const FORMAT_VERSION_MAJOR: u8 = 4;
 pub const FORMAT_VERSION_MINOR: u8 = 0;
 /// First four bytes of every `.scode` file.
 pub const MAGIC: [u8; 4] = *b"SCOD";
@@ -318,14 +318,16 @@ struct Features {
     /// coded (§9.2, version 2); version 1 stores plain names in coded order.
     names_in_input_order: bool,
     /// Geometry: crease vertices next to cylinders and cones are predicted on circles round
-    /// the axis (§8.2, version 3).
+    /// the axis (§8.2, versions 3 and 4).
     arc_prediction: bool,
     /// Patches: range-coded, directions by reference, cylinder origins with two coordinates
-    /// (§9 *Patches*, version 3); versions 1 and 2 store bytes.
+    /// (§9 *Patches*, versions 3 and 4); versions 1 and 2 store bytes.
     coded_patches: bool,
     /// Connectivity: group symbols with vertex candidates and recency ranks (§6.5,
     /// version 3).
     groups_v3: bool,
+    /// Patches: the size of the kind alphabet; version 4 adds spheres and tori.
+    patch_kinds: usize,
 }
 
 /// Whether this build reads versions 1 and 2 (feature `legacy-formats`, on by default; the
@@ -352,6 +354,7 @@ fn features_for(major: u8, _minor: u8) -> Result<Features> {
             arc_prediction: false,
             coded_patches: false,
             groups_v3: false,
+            patch_kinds: patches::KINDS_V3,
         }),
         2 => Ok(Features {
             known_flags: KNOWN_FLAGS,
@@ -360,14 +363,20 @@ fn features_for(major: u8, _minor: u8) -> Result<Features> {
             arc_prediction: false,
             coded_patches: false,
             groups_v3: false,
+            patch_kinds: patches::KINDS_V3,
         }),
-        3 => Ok(Features {
+        3 | 4 => Ok(Features {
             known_flags: KNOWN_FLAGS,
             crease_prediction: true,
             names_in_input_order: true,
             arc_prediction: true,
             coded_patches: true,
             groups_v3: true,
+            patch_kinds: if major == 3 {
+                patches::KINDS_V3
+            } else {
+                patches::KINDS
+            },
         }),
         _ => Err(Error::format(
             "header",
@@ -1593,11 +1602,11 @@ const FACE_BYTES: u64 = 4 + 4;
 const CODED_VERTEX_BYTES: u64 = 3 + 12 + 1 + 8 + 8;
 /// Per output vertex: the validation's stamp.
 const VERTEX_STAMP_BYTES: u64 = 4;
-/// Per group: patch kind decoded and reordered (2 x 56), grid axis (56) and axis list entry
-/// (48), plane state (112), the group record and its name (80 + 24), another name slot (24),
+/// Per group: patch kind decoded and reordered (2 x 64), grid axis (56) and axis list entry
+/// (48), plane state (112), the group record and its name (88 + 24), another name slot (24),
 /// and six u32 arrays (plane stamp, axis index, recency, name order, its rank flags, input
 /// order).
-const GROUP_BYTES: u64 = 2 * 56 + 56 + 48 + 112 + 80 + 24 + 24 + 6 * 4;
+const GROUP_BYTES: u64 = 2 * 64 + 56 + 48 + 112 + 88 + 24 + 24 + 6 * 4;
 /// The crease flags and the geometry walk, per half-edge (crease flag), per rebuilt face
 /// (plane group and axis) and per coded vertex (known flag, level, and the level buckets:
 /// each vertex enters each of 6 buckets at most once, and a bucket's capacity is at most
@@ -1617,10 +1626,10 @@ const CORNER_BYTES: u64 = 8;
 const _: () = {
     use std::mem::size_of;
     assert!(size_of::<Label>() as u64 <= LABEL_BYTES);
-    assert!(size_of::<PatchKind>() <= 56);
+    assert!(size_of::<PatchKind>() <= 64);
     assert!(size_of::<Option<geometry::GridAxis>>() <= 56);
     assert!(size_of::<geometry::GridAxis>() <= 48);
-    assert!(size_of::<Group>() <= 80 && size_of::<String>() <= 24);
+    assert!(size_of::<Group>() <= 88 && size_of::<String>() <= 24);
     assert!(size_of::<usize>() as u64 + 4 <= MESH_FACE_BYTES);
     assert!(size_of::<DVec3>() as u64 <= MESH_VERTEX_BYTES);
 };
@@ -2186,7 +2195,7 @@ impl<'a, 'l> FileDecode<'a, 'l> {
                 let decoded = if LEGACY && !self.features.coded_patches {
                     patches::decode_v1(&p, group_count, &self.quant)?
                 } else {
-                    patches::decode(&p, group_count, &self.quant)?
+                    patches::decode(&p, group_count, &self.quant, self.features.patch_kinds)?
                 };
                 drop_payload(p, budget);
                 decoded

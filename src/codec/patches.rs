@@ -1,11 +1,14 @@
-//! The `patches` section (`spec/format.md` §9, *Patches*): each group's patch kind and, for cylinders
-//! and cones, the axis. Writer and readers side by side.
+//! The `patches` section (`spec/format.md` §9, *Patches*): each group's patch kind and, for
+//! cylinders, cones, spheres and tori, the axis (and a torus's major radius). Writer and
+//! readers side by side.
 //!
 //! Version 3 range-codes the section: kinds with the previous kind as context; axis
 //! directions by reference into a short move-to-front list (CAD parts repeat a few
 //! directions); cylinder origins moved along the axis to the point whose dominant coordinate
 //! is 0 on the grid, so only two coordinates are stored, and a "same line" bit for coaxial
-//! cylinders. Versions 1 and 2 store bytes (kind, three zigzag varints, three i16) and zlib.
+//! cylinders. Version 4 adds two kinds to the alphabet, spheres and tori, stored like cones
+//! (the whole origin), a torus with its major radius in grid units. Versions 1 and 2 store
+//! bytes (kind, three zigzag varints, three i16) and zlib.
 
 use glam::DVec3;
 
@@ -21,7 +24,11 @@ const PATCH_CLOSED: u8 = 0;
 const PATCH_PLANE: u8 = 1;
 const PATCH_CYLINDER: u8 = 2;
 const PATCH_CONE: u8 = 3;
-const KINDS: usize = 4;
+const PATCH_SPHERE: u8 = 4;
+const PATCH_TORUS: u8 = 5;
+/// Size of the kind alphabet: version 4 adds spheres and tori to version 3's four kinds.
+pub const KINDS: usize = 6;
+pub const KINDS_V3: usize = 4;
 /// Axis directions are stored as three i16 components scaled by this.
 const DIRECTION_SCALE: f64 = 32767.0;
 /// Length of the move-to-front list of axis directions (version 3).
@@ -44,7 +51,28 @@ fn kind_of(patch: &PatchKind) -> (u8, Option<Axis>) {
         PatchKind::Boundary(BoundarySurface::Plane) => (PATCH_PLANE, None),
         PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => (PATCH_CYLINDER, Some(axis)),
         PatchKind::Boundary(BoundarySurface::Cone { axis }) => (PATCH_CONE, Some(axis)),
+        PatchKind::Boundary(BoundarySurface::Sphere { axis }) => (PATCH_SPHERE, Some(axis)),
+        PatchKind::Boundary(BoundarySurface::Torus { axis, .. }) => (PATCH_TORUS, Some(axis)),
     }
+}
+
+/// A torus's major radius in grid units (version 4).
+fn quantize_major_radius(patch: &PatchKind, quant: &Quantizer, name: &str) -> Result<i64> {
+    let PatchKind::Boundary(BoundarySurface::Torus { major_radius, .. }) = *patch else {
+        return Ok(0);
+    };
+    let step = quant.step();
+    let q = if step > 0.0 {
+        (major_radius / step).round()
+    } else {
+        0.0
+    };
+    if !(q.is_finite() && q >= 0.0 && q <= MAX_ORIGIN as f64) {
+        return Err(Error::Mesh(format!(
+            "group `{name}`: torus major radius {major_radius} cannot be quantised"
+        )));
+    }
+    Ok(q as i64)
 }
 
 /// The axis as version 3 stores it: direction as i16 components; the origin in grid units,
@@ -152,18 +180,22 @@ struct Models {
     same_line: BitModel,
     origin: IntModel,
     apex: IntModel,
+    major_radius: IntModel,
 }
 
 impl Models {
-    fn new() -> Self {
+    /// The models of a section whose kind alphabet has `kinds` symbols ([`KINDS`] or
+    /// [`KINDS_V3`]).
+    fn new(kinds: usize) -> Self {
         Models {
-            kinds: vec![FreqModel::new(KINDS); KINDS + 1],
+            kinds: vec![FreqModel::new(kinds); kinds + 1],
             direction: FreqModel::new(RECENT_DIRECTIONS + 1),
             negated: BitModel::default(),
             component: IntModel::default(),
             same_line: BitModel::default(),
             origin: IntModel::default(),
             apex: IntModel::default(),
+            major_radius: IntModel::default(),
         }
     }
 }
@@ -202,7 +234,7 @@ fn decode_coord(dec: &mut RangeDecoder, model: &mut IntModel, field: &'static st
     Ok(v)
 }
 
-/// Writes the version-3 section (`None` when every group is closed) and returns the grid
+/// Writes the version-4 section (`None` when every group is closed) and returns the grid
 /// axes the decoder will see, per group.
 pub fn encode(groups: &[Group], quant: &Quantizer) -> Result<EncodedPatches> {
     let mut axes = Vec::with_capacity(groups.len());
@@ -210,7 +242,7 @@ pub fn encode(groups: &[Group], quant: &Quantizer) -> Result<EncodedPatches> {
         return Ok((None, vec![None; groups.len()]));
     }
     let mut enc = RangeEncoder::new();
-    let mut m = Models::new();
+    let mut m = Models::new(KINDS);
     let mut recent = RecentDirections::default();
     let mut prev_kind = KINDS;
     for g in groups {
@@ -265,29 +297,43 @@ pub fn encode(groups: &[Group], quant: &Quantizer) -> Result<EncodedPatches> {
                 encode_coord(&mut enc, &mut m.apex, o);
             }
         }
+        if kind == PATCH_TORUS {
+            let r = quantize_major_radius(&g.patch, quant, &g.name)?;
+            encode_coord(&mut enc, &mut m.major_radius, r);
+        }
         axes.push(Some(GridAxis::new(a.origin, a.dir)));
     }
     Ok((Some(enc.finish()), axes))
 }
 
-fn patch_of(kind: u8, a: GridAxisBits, quant: &Quantizer) -> PatchKind {
+/// The patch of a stored axis kind; `major_radius` in grid units (tori only).
+fn patch_of(kind: u8, a: GridAxisBits, major_radius: i64, quant: &Quantizer) -> PatchKind {
     let axis = Axis {
         origin: DVec3::from([0, 1, 2].map(|i| quant.min[i] + a.origin[i] as f64 * quant.step())),
         direction: DVec3::from(a.dir.map(f64::from)).normalize(),
     };
-    PatchKind::Boundary(if kind == PATCH_CYLINDER {
-        BoundarySurface::Cylinder { axis }
-    } else {
-        BoundarySurface::Cone { axis }
+    PatchKind::Boundary(match kind {
+        PATCH_CYLINDER => BoundarySurface::Cylinder { axis },
+        PATCH_SPHERE => BoundarySurface::Sphere { axis },
+        PATCH_TORUS => BoundarySurface::Torus {
+            axis,
+            major_radius: major_radius as f64 * quant.step(),
+        },
+        _ => BoundarySurface::Cone { axis },
     })
 }
 
-/// Reads the version-3 section.
-pub fn decode(payload: &[u8], group_count: usize, quant: &Quantizer) -> Result<DecodedPatches> {
+/// Reads the version-3 (`kinds` = [`KINDS_V3`]) or version-4 (`kinds` = [`KINDS`]) section.
+pub fn decode(
+    payload: &[u8],
+    group_count: usize,
+    quant: &Quantizer,
+    kinds: usize,
+) -> Result<DecodedPatches> {
     let mut dec = RangeDecoder::new(payload, "patches")?;
-    let mut m = Models::new();
+    let mut m = Models::new(kinds);
     let mut recent = RecentDirections::default();
-    let mut prev_kind = KINDS;
+    let mut prev_kind = kinds;
     // A capacity hint only (the vectors grow if a file really holds more groups per byte);
     // `group_count` itself is already within the limits.
     let cap = group_count.min(payload.len().saturating_mul(64));
@@ -358,8 +404,17 @@ pub fn decode(payload: &[u8], group_count: usize, quant: &Quantizer) -> Result<D
                 *o = decode_coord(&mut dec, &mut m.apex, "axis_origin")?;
             }
         }
+        let major_radius = if kind == PATCH_TORUS {
+            let r = decode_coord(&mut dec, &mut m.major_radius, "major_radius")?;
+            if r < 0 {
+                return Err(Error::format("patches", "major_radius", "negative"));
+            }
+            r
+        } else {
+            0
+        };
         let a = GridAxisBits { origin, dir };
-        out.push(patch_of(kind, a, quant));
+        out.push(patch_of(kind, a, major_radius, quant));
         grid.push(Some(GridAxis::new(origin, dir)));
     }
     dec.finish()?;
@@ -397,7 +452,7 @@ pub fn decode_v1(payload: &[u8], group_count: usize, quant: &Quantizer) -> Resul
                 if dir == [0; 3] {
                     return Err(r.err("axis_direction", "zero direction"));
                 }
-                out.push(patch_of(kind, GridAxisBits { origin, dir }, quant));
+                out.push(patch_of(kind, GridAxisBits { origin, dir }, 0, quant));
                 grid.push(Some(GridAxis::new(origin, dir)));
             }
             k => return Err(r.err("kind", format!("unknown patch kind {k}"))),
@@ -484,11 +539,24 @@ mod tests {
             cone([0.5, 0.5, 0.5], [1.0, 1.0, 0.0]), // new direction
             cone([0.0, 0.0, 1e9], [0.0, 0.0, 1.0]), // apex needs the escape code
             cyl([0.3, -1.0, 2.0], [0.2, 1.0, 0.1]), // oblique, dominant y
+            PatchKind::Boundary(BoundarySurface::Sphere {
+                axis: Axis {
+                    origin: DVec3::new(0.25, 1.5, -0.5),
+                    direction: DVec3::new(0.0, 1.0, 1.0),
+                },
+            }),
+            PatchKind::Boundary(BoundarySurface::Torus {
+                axis: Axis {
+                    origin: DVec3::new(1.0, 1.0, 0.0),
+                    direction: DVec3::new(0.0, 0.0, 1.0), // a known direction, new kind
+                },
+                major_radius: 2.345,
+            }),
         ];
         let g = groups(&kinds);
         let (bytes, grid) = encode(&g, &q).unwrap();
         let bytes = bytes.unwrap();
-        let (back, grid2) = decode(&bytes, g.len(), &q).unwrap();
+        let (back, grid2) = decode(&bytes, g.len(), &q, KINDS).unwrap();
         assert_eq!(grid, grid2);
         assert_eq!(back.len(), kinds.len());
         for (a, b) in kinds.iter().zip(&back) {
@@ -507,6 +575,27 @@ mod tests {
                 ) => {
                     assert!((b.direction - a.direction.normalize()).length() < 1e-4);
                     assert!((b.origin - a.origin).abs().max_element() <= q.step() / 2.0 + 1e-6);
+                }
+                (
+                    PatchKind::Boundary(BoundarySurface::Sphere { axis: a }),
+                    PatchKind::Boundary(BoundarySurface::Sphere { axis: b }),
+                ) => {
+                    assert!((b.direction - a.direction.normalize()).length() < 1e-4);
+                    assert!((b.origin - a.origin).abs().max_element() <= q.step() / 2.0 + 1e-6);
+                }
+                (
+                    PatchKind::Boundary(BoundarySurface::Torus {
+                        axis: a,
+                        major_radius: ra,
+                    }),
+                    PatchKind::Boundary(BoundarySurface::Torus {
+                        axis: b,
+                        major_radius: rb,
+                    }),
+                ) => {
+                    assert!((b.direction - a.direction.normalize()).length() < 1e-4);
+                    assert!((b.origin - a.origin).abs().max_element() <= q.step() / 2.0 + 1e-6);
+                    assert!((ra - rb).abs() <= q.step() / 2.0 + 1e-9, "{ra} {rb}");
                 }
                 (a, b) => assert_eq!(a, b),
             }
@@ -531,24 +620,24 @@ mod tests {
         let q = quant();
         // A cylinder that references the (empty) direction list.
         let mut enc = RangeEncoder::new();
-        let mut m = Models::new();
+        let mut m = Models::new(KINDS);
         m.kinds[KINDS].encode(&mut enc, usize::from(PATCH_CYLINDER));
         m.direction.encode(&mut enc, 0);
-        let e = decode(&enc.finish(), 1, &q).unwrap_err().to_string();
+        let e = decode(&enc.finish(), 1, &q, KINDS).unwrap_err().to_string();
         assert!(e.contains("axis_direction"), "{e}");
         // A zero direction.
         let mut enc = RangeEncoder::new();
-        let mut m = Models::new();
+        let mut m = Models::new(KINDS);
         m.kinds[KINDS].encode(&mut enc, usize::from(PATCH_CONE));
         m.direction.encode(&mut enc, RECENT_DIRECTIONS);
         for _ in 0..3 {
             m.component.encode(&mut enc, 0);
         }
-        let e = decode(&enc.finish(), 1, &q).unwrap_err().to_string();
+        let e = decode(&enc.finish(), 1, &q, KINDS).unwrap_err().to_string();
         assert!(e.contains("zero direction"), "{e}");
         // An escaped coordinate that would have fitted the model.
         let mut enc = RangeEncoder::new();
-        let mut m = Models::new();
+        let mut m = Models::new(KINDS);
         m.kinds[KINDS].encode(&mut enc, usize::from(PATCH_CONE));
         m.direction.encode(&mut enc, RECENT_DIRECTIONS);
         for c in [0, 0, 2] {
@@ -558,10 +647,40 @@ mod tests {
         for _ in 0..4 {
             enc.encode_direct(0, 16);
         }
-        let e = decode(&enc.finish(), 1, &q).unwrap_err().to_string();
+        let e = decode(&enc.finish(), 1, &q, KINDS).unwrap_err().to_string();
         assert!(e.contains("escaped"), "{e}");
+        // A negative torus major radius.
+        let mut enc = RangeEncoder::new();
+        let mut m = Models::new(KINDS);
+        m.kinds[KINDS].encode(&mut enc, usize::from(PATCH_TORUS));
+        m.direction.encode(&mut enc, RECENT_DIRECTIONS);
+        for c in [0, 0, 2] {
+            m.component.encode(&mut enc, c);
+        }
+        for _ in 0..3 {
+            m.apex.encode(&mut enc, 0);
+        }
+        m.major_radius.encode(&mut enc, zigzag64(-3) as u32);
+        let e = decode(&enc.finish(), 1, &q, KINDS).unwrap_err().to_string();
+        assert!(e.contains("major_radius"), "{e}");
+        // A version-3 section has no sphere or torus kind: the same bytes read with version
+        // 3's alphabet are another file (and here an error or other kinds, never a torus).
+        let torus = groups(&[PatchKind::Boundary(BoundarySurface::Torus {
+            axis: Axis {
+                origin: DVec3::ZERO,
+                direction: DVec3::Z,
+            },
+            major_radius: 1.0,
+        })]);
+        let (bytes, _) = encode(&torus, &q).unwrap();
+        if let Ok((kinds, _)) = decode(&bytes.unwrap(), 1, &q, KINDS_V3) {
+            assert!(!matches!(
+                kinds[0],
+                PatchKind::Boundary(BoundarySurface::Torus { .. })
+            ));
+        }
         // Truncated: more groups than the data holds.
         let (bytes, _) = encode(&groups(&[cyl([0.0; 3], [1.0, 0.0, 0.0])]), &q).unwrap();
-        assert!(decode(&bytes.unwrap(), 50, &q).is_err());
+        assert!(decode(&bytes.unwrap(), 50, &q, KINDS).is_err());
     }
 }

@@ -163,6 +163,44 @@ pub fn turned_part() -> ControlMesh {
     m
 }
 
+/// A rounded part: the turned part's quad torus with rings of sphere and torus groups
+/// (format version 4): tori about z of two major radii (one the torus's own, so its ring
+/// stays on it), a sphere whose axis is off z and one about z, a closed ring; sharp edges
+/// between the rings. Exercises every branch of the version-4 patch kinds and the sphere and
+/// torus frames.
+pub fn rounded_part() -> ControlMesh {
+    let mut m = turned_part();
+    let axis = |o: DVec3, d: DVec3| Axis {
+        origin: o,
+        direction: d,
+    };
+    let kinds = [
+        PatchKind::Boundary(BoundarySurface::Torus {
+            axis: axis(DVec3::ZERO, DVec3::Z),
+            major_radius: 2.0,
+        }),
+        PatchKind::Boundary(BoundarySurface::Torus {
+            axis: axis(DVec3::ZERO, DVec3::Z),
+            major_radius: 2.0,
+        }),
+        PatchKind::Boundary(BoundarySurface::Sphere {
+            axis: axis(DVec3::new(0.0, 0.0, 0.5), DVec3::new(1.0, 0.5, 0.0)),
+        }),
+        PatchKind::Boundary(BoundarySurface::Torus {
+            axis: axis(DVec3::new(0.0, 0.0, -0.25), DVec3::new(0.0, 0.0, -1.0)),
+            major_radius: 1.5,
+        }),
+        PatchKind::Boundary(BoundarySurface::Sphere {
+            axis: axis(DVec3::ZERO, DVec3::Z),
+        }),
+        PatchKind::Closed,
+    ];
+    for (g, k) in m.groups.iter_mut().zip(kinds) {
+        g.patch = k;
+    }
+    m
+}
+
 /// A small CAD part: a box (one group per side) with a cylindrical boss on top, sharp
 /// edges on all group boundaries, corners at the box corners.
 pub fn cad_part() -> ControlMesh {
@@ -290,8 +328,13 @@ pub fn canonical_hash(m: &ControlMesh) -> u64 {
             PatchKind::Boundary(BoundarySurface::Plane) => (1, None),
             PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => (2, Some(axis)),
             PatchKind::Boundary(BoundarySurface::Cone { axis }) => (3, Some(axis)),
+            PatchKind::Boundary(BoundarySurface::Sphere { axis }) => (4, Some(axis)),
+            PatchKind::Boundary(BoundarySurface::Torus { axis, .. }) => (5, Some(axis)),
         };
         h.bytes(&[kind]);
+        if let PatchKind::Boundary(BoundarySurface::Torus { major_radius, .. }) = g.patch {
+            h.u64(major_radius.to_bits());
+        }
         if let Some(a) = axis {
             for c in a
                 .origin

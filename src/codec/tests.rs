@@ -367,10 +367,10 @@ fn coordinates_whose_box_overflows_are_refused() {
 #[test]
 fn decoder_rejects_versions_trailing_bytes_and_limits() {
     let b = encode(&cube(), &opts()).unwrap();
-    let mut v4 = b.clone();
-    v4[4] = 4;
-    let e = decode(&v4, &Limits::default()).unwrap_err().to_string();
-    assert!(e.contains("major version 4"), "{e}");
+    let mut v5 = b.clone();
+    v5[4] = 5;
+    let e = decode(&v5, &Limits::default()).unwrap_err().to_string();
+    assert!(e.contains("major version 5"), "{e}");
     let mut trailing = b.clone();
     trailing.push(0);
     assert!(decode(&trailing, &Limits::default()).is_err());

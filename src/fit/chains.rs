@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::curves::{self, build_curve_network, CurveNetwork, CurveOptions};
 use crate::error::Result;
-use crate::mesh::{Axis, ControlMesh, Tolerance};
+use crate::mesh::{BoundarySurface, ControlMesh, Tolerance};
 use crate::metrics::segment_parameter;
 
 /// The curve network with what the rounds look up in it.
@@ -62,13 +62,24 @@ impl Chains {
     }
 }
 
-/// Cylindrical coordinates about an axis: (theta, h, r).
-fn cyl_coords(axis: &Axis, p: DVec3) -> (f64, f64, f64) {
+/// A point's coordinates on a framed chain's surface, as the decoder combines them
+/// (`spec/subdivision.md` §5): cylinder and cone `(theta, h, r)`, sphere `(longitude,
+/// latitude, r)`, torus `(u, v, rho)`; `None` for a plane.
+fn frame_coords(surface: &BoundarySurface, p: DVec3) -> Option<[f64; 3]> {
+    let axis = surface.axis()?;
     let (e1, e2) = axis.direction.any_orthonormal_pair();
     let d = p - axis.origin;
     let h = d.dot(axis.direction);
     let q = d - axis.direction * h;
-    (q.dot(e2).atan2(q.dot(e1)), h, q.length())
+    let theta = q.dot(e2).atan2(q.dot(e1));
+    Some(match *surface {
+        BoundarySurface::Sphere { .. } => [theta, h.atan2(q.length()), d.length()],
+        BoundarySurface::Torus { major_radius, .. } => {
+            let w = q.length() - major_radius;
+            [theta, h.atan2(w), (w * w + h * h).sqrt()]
+        }
+        _ => [theta, h, q.length()],
+    })
 }
 
 /// Douglas-Peucker on a polyline given as points; returns kept indices (ends included).
@@ -82,7 +93,7 @@ fn douglas_peucker(points: &[DVec3], tol: f64) -> Vec<usize> {
 /// Control points (indices into `chain.vertices`) of one chain.
 pub(super) fn chain_controls(
     points: &[DVec3],
-    frame: Option<Axis>,
+    frame: Option<BoundarySurface>,
     tol: f64,
     max_step: f64,
     min_interior: usize,
@@ -90,50 +101,73 @@ pub(super) fn chain_controls(
     let n = points.len();
     let mut keep: Vec<usize> = match frame {
         None => douglas_peucker(points, tol),
-        Some(axis) => {
-            // Unwrapped cylindrical coordinates, scaled to lengths, then DP in that space,
+        Some(surface) => {
+            // Unwrapped frame coordinates, angles scaled to lengths, then DP in that space,
             // plus at most `max_step` radians between consecutive control points (a plane's
             // straight interior edges leave an arc's end at up to half that angle from its
             // chord, so coarse arcs let plane triangles cut across a hole).
-            let mut prev = None;
-            let mut unwrapped = 0.0;
+            let second_angular = matches!(
+                surface,
+                BoundarySurface::Sphere { .. } | BoundarySurface::Torus { .. }
+            );
+            let wrap = |mut d: f64| {
+                while d > std::f64::consts::PI {
+                    d -= std::f64::consts::TAU;
+                }
+                while d <= -std::f64::consts::PI {
+                    d += std::f64::consts::TAU;
+                }
+                d
+            };
+            let mut prev: Option<[f64; 3]> = None;
+            let mut unwrapped = [0.0; 2];
             let param: Vec<DVec3> = points
                 .iter()
                 .map(|&p| {
-                    let (th, h, r) = cyl_coords(&axis, p);
-                    if let Some(pt) = prev {
-                        let mut d: f64 = th - pt;
-                        while d > std::f64::consts::PI {
-                            d -= std::f64::consts::TAU;
-                        }
-                        while d <= -std::f64::consts::PI {
-                            d += std::f64::consts::TAU;
-                        }
-                        unwrapped += d;
+                    let c = frame_coords(&surface, p).unwrap_or_default();
+                    if let Some(pc) = prev {
+                        unwrapped[0] += wrap(c[0] - pc[0]);
+                        unwrapped[1] += wrap(c[1] - pc[1]);
                     }
-                    prev = Some(th);
-                    DVec3::new(unwrapped, h, r)
+                    prev = Some(c);
+                    let second = if second_angular { unwrapped[1] } else { c[1] };
+                    DVec3::new(unwrapped[0], second, c[2])
                 })
                 .collect();
             let rmax = param.iter().map(|q| q.z).fold(0.0, f64::max);
+            // The lengths of a radian in the first and second coordinates.
+            let scale = match surface {
+                BoundarySurface::Torus { major_radius, .. } => [major_radius + rmax, rmax],
+                BoundarySurface::Sphere { .. } => [rmax, rmax],
+                _ => [rmax, 1.0],
+            };
             let scaled: Vec<DVec3> = param
                 .iter()
-                .map(|q| DVec3::new(q.x * rmax, q.y, q.z))
+                .map(|q| DVec3::new(q.x * scale[0], q.y * scale[1], q.z))
                 .collect();
             let mut k = douglas_peucker(&scaled, tol);
             let mut out = vec![0];
             for w in k.windows(2) {
                 let (a, b) = (w[0], w[1]);
-                let span = (param[b].x - param[a].x).abs();
+                // The angle that turns most between a and b sets the pieces.
+                let i = if second_angular
+                    && (param[b].y - param[a].y).abs() > (param[b].x - param[a].x).abs()
+                {
+                    1
+                } else {
+                    0
+                };
+                let span = (param[b][i] - param[a][i]).abs();
                 let pieces = (span / max_step).ceil().max(1.0) as usize;
                 // Insert evenly spaced (in angle) chain vertices between a and b.
                 for s in 1..pieces {
-                    let target = param[a].x + (param[b].x - param[a].x) * s as f64 / pieces as f64;
+                    let target =
+                        param[a][i] + (param[b][i] - param[a][i]) * s as f64 / pieces as f64;
                     let best = (a + 1..b)
-                        .min_by(|&i, &j| {
-                            (param[i].x - target)
+                        .min_by(|&x, &y| {
+                            (param[x][i] - target)
                                 .abs()
-                                .total_cmp(&(param[j].x - target).abs())
+                                .total_cmp(&(param[y][i] - target).abs())
                         })
                         .unwrap_or(a);
                     if best > *out.last().unwrap_or(&0) {

@@ -10,10 +10,10 @@ use glam::DVec3;
 use super::decimate::SurfaceRef;
 use super::encoder::{FitOptions, FitReport, SurfaceHint};
 use super::plan::GroupPlan;
-use super::primitives::{fit_cone, fit_cylinder, fit_plane};
+use super::primitives::{fit_cone, fit_cylinder, fit_plane, fit_sphere, fit_torus};
 use super::segment::{segment, SegmentOptions};
 use crate::error::Result;
-use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind, Tolerance};
+use crate::mesh::{AnalyticSurface, Axis, BoundarySurface, ControlMesh, PatchKind, Tolerance};
 
 /// The input's faces as the fit works on them.
 pub(super) struct Faces {
@@ -43,6 +43,18 @@ pub(super) fn classify_faces(
     let diag = mesh.diagonal();
     let mut hints: Vec<SurfaceHint> = hints.to_vec();
     hints.resize(mesh.groups.len(), SurfaceHint::Unknown);
+    if opts.exact_surfaces.is_empty() {
+        // Sphere and torus patches only where the input has exact surfaces (STEP): measured
+        // against a tessellation, a face next to a sphere or torus patch follows its facets
+        // only with many more control points (the shared crease is refined in the patch's
+        // angles, through the input's chain vertices, where a Cartesian crease is fitted to
+        // the facets), and the corpus meshes came out larger in total.
+        for h in &mut hints {
+            if matches!(h, SurfaceHint::Sphere | SurfaceHint::Torus) {
+                *h = SurfaceHint::Freeform;
+            }
+        }
+    }
     let segmented = mesh.groups.len() <= 1;
     if segmented {
         let seg_opts = SegmentOptions {
@@ -147,10 +159,30 @@ fn classify_group(
                 _ => None,
             })
     };
+    let try_sphere = || {
+        fit_sphere(&points)
+            .filter(within)
+            .and_then(|f| match f.surface {
+                AnalyticSurface::Sphere { center, .. } => sphere_patch(&points, center, tol),
+                _ => None,
+            })
+    };
+    let try_torus = || {
+        fit_torus(&points, &normals)
+            .filter(within)
+            .and_then(|f| match f.surface {
+                AnalyticSurface::Torus {
+                    axis, major_radius, ..
+                } => torus_patch(&points, axis, major_radius, tol),
+                _ => None,
+            })
+    };
     let kind = match hint {
         SurfaceHint::Plane => try_plane(),
         SurfaceHint::Cylinder => try_cyl(),
         SurfaceHint::Cone => try_cone(),
+        SurfaceHint::Sphere => try_sphere(),
+        SurfaceHint::Torus => try_torus(),
         SurfaceHint::Freeform => None,
         SurfaceHint::Unknown => try_plane().or_else(try_cyl).or_else(try_cone),
     };
@@ -182,6 +214,10 @@ fn exact_surface_kind(
     };
     let fits = match surface {
         BoundarySurface::Plane => false,
+        BoundarySurface::Sphere { axis } => return sphere_patch(&points, axis.origin, tol),
+        BoundarySurface::Torus { axis, major_radius } => {
+            return torus_patch(&points, axis, major_radius, tol)
+        }
         BoundarySurface::Cylinder { axis } => {
             let r: Vec<f64> = points.iter().map(|&p| radial(&axis, p).1).collect();
             let mean = r.iter().sum::<f64>() / r.len() as f64;
@@ -223,5 +259,88 @@ fn collapse_surface(
         }
         PatchKind::Boundary(BoundarySurface::Cylinder { axis }) => SurfaceRef::Cylinder { axis },
         PatchKind::Boundary(BoundarySurface::Cone { axis }) => SurfaceRef::Cone { axis },
+        PatchKind::Boundary(BoundarySurface::Sphere { axis }) => SurfaceRef::Sphere {
+            center: axis.origin,
+        },
+        PatchKind::Boundary(BoundarySurface::Torus { axis, major_radius }) => {
+            SurfaceRef::Torus { axis, major_radius }
+        }
     }
+}
+
+/// Largest angle (radians) a sphere patch may reach from its middle direction, and a torus
+/// patch may span about its spine circle: the decoder interpolates between a boundary
+/// patch's curves in the surface's angles, which needs every control face well within a
+/// half turn, and a patch this wide still gets such faces from its boundary curves alone.
+const MAX_PATCH_HALF_ANGLE: f64 = 1.2;
+
+/// A sphere boundary patch for points on the sphere about `center` (within a quarter of the
+/// tolerance), with its axis perpendicular to their mean direction so that its poles are a
+/// quarter turn away from the patch's middle; `None` for a patch too wide for one (a
+/// hemisphere or more, a whole ball).
+fn sphere_patch(points: &[DVec3], center: DVec3, tol: f64) -> Option<PatchKind> {
+    let radii: Vec<f64> = points.iter().map(|&p| (p - center).length()).collect();
+    let mean = radii.iter().sum::<f64>() / radii.len() as f64;
+    if !mean.is_finite() || mean <= 0.0 || radii.iter().any(|r| (r - mean).abs() > 0.25 * tol) {
+        return None;
+    }
+    let middle = points
+        .iter()
+        .map(|&p| (p - center).normalize_or_zero())
+        .sum::<DVec3>()
+        .try_normalize()?;
+    let widest = points
+        .iter()
+        .map(|&p| (p - center).normalize_or_zero().dot(middle))
+        .fold(1.0, f64::min);
+    if widest < MAX_PATCH_HALF_ANGLE.cos() {
+        return None;
+    }
+    Some(PatchKind::Boundary(BoundarySurface::Sphere {
+        axis: Axis {
+            origin: center,
+            direction: middle.any_orthonormal_vector(),
+        },
+    }))
+}
+
+/// The torus boundary patch for points on it (within a quarter of the tolerance), if the
+/// torus is a ring (its tube does not reach the axis) and the points span less than
+/// `2 * MAX_PATCH_HALF_ANGLE` about the spine circle.
+fn torus_patch(points: &[DVec3], axis: Axis, major_radius: f64, tol: f64) -> Option<PatchKind> {
+    // Per point: the distance to the spine circle.
+    let tube: Vec<f64> = points
+        .iter()
+        .map(|&p| {
+            let d = p - axis.origin;
+            let radial = (d - axis.direction * d.dot(axis.direction)).normalize_or_zero();
+            (d - radial * major_radius).length()
+        })
+        .collect();
+    let minor = tube.iter().sum::<f64>() / tube.len() as f64;
+    if !minor.is_finite()
+        || minor <= 0.0
+        || minor >= major_radius
+        || tube.iter().any(|t| (t - minor).abs() > 0.25 * tol)
+    {
+        return None;
+    }
+    // The angle about the spine in the meridian plane: (distance from the axis - R, height).
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut first = None;
+    for &p in points {
+        let d = p - axis.origin;
+        let h = d.dot(axis.direction);
+        let s = (d - axis.direction * h).length();
+        let v = h.atan2(s - major_radius);
+        let v0 = *first.get_or_insert(v);
+        let dv = (v - v0 + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        lo = lo.min(dv);
+        hi = hi.max(dv);
+    }
+    (hi - lo <= 2.0 * MAX_PATCH_HALF_ANGLE).then_some(PatchKind::Boundary(BoundarySurface::Torus {
+        axis,
+        major_radius,
+    }))
 }

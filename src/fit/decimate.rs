@@ -56,6 +56,13 @@ pub enum SurfaceRef {
     Cone {
         axis: Axis,
     },
+    Sphere {
+        center: DVec3,
+    },
+    Torus {
+        axis: Axis,
+        major_radius: f64,
+    },
     /// Freeform: triangles are compared with their normal before the collapse.
     Free,
 }
@@ -80,16 +87,45 @@ impl SurfaceRef {
                 }
                 (q / r - axis.direction * (r / h)).try_normalize()
             }
+            SurfaceRef::Sphere { center } => (p - center).try_normalize(),
+            SurfaceRef::Torus { axis, major_radius } => {
+                let d = p - axis.origin;
+                let radial = (d - axis.direction * d.dot(axis.direction)).try_normalize()?;
+                (p - axis.origin - radial * major_radius).try_normalize()
+            }
             SurfaceRef::Free => None,
         }
     }
 
-    fn axis(&self) -> Option<Axis> {
+    /// The angle a control edge from `a` to `b` spans in the surface's angular
+    /// coordinates (the largest, for a torus), which the decoder's unwrapping needs well
+    /// below 180 degrees; `None` for surfaces without angles.
+    fn edge_angle(&self, a: DVec3, b: DVec3) -> Option<f64> {
         match *self {
-            SurfaceRef::Cylinder { axis } | SurfaceRef::Cone { axis } => Some(axis),
-            _ => None,
+            SurfaceRef::Cylinder { axis } | SurfaceRef::Cone { axis } => {
+                Some(angle_about(&axis, a, b))
+            }
+            SurfaceRef::Sphere { center } => Some(angle_between(a - center, b - center)),
+            SurfaceRef::Torus { axis, major_radius } => {
+                let spine = |p: DVec3| {
+                    let d = p - axis.origin;
+                    let radial = d - axis.direction * d.dot(axis.direction);
+                    p - axis.origin - radial.normalize_or_zero() * major_radius
+                };
+                Some(angle_about(&axis, a, b).max(angle_between(spine(a), spine(b))))
+            }
+            SurfaceRef::Plane { .. } | SurfaceRef::Free => None,
         }
     }
+}
+
+/// Angle between two vectors; 0 when one is zero.
+fn angle_between(a: DVec3, b: DVec3) -> f64 {
+    let (la, lb) = (a.length(), b.length());
+    if la < 1e-300 || lb < 1e-300 {
+        return 0.0;
+    }
+    (a.dot(b) / (la * lb)).clamp(-1.0, 1.0).acos()
 }
 
 /// Per-group decimation policy.
@@ -545,9 +581,10 @@ impl<'a> State<'a> {
                     }
                 }
             }
-            if let Some(axis) = rule.surface.axis() {
+            if rule.surface.edge_angle(pv, pv).is_some() {
                 for &w in &t {
-                    if w != u && angle_about(&axis, pv, self.pos(w)) > rule.max_edge_angle {
+                    let spans = rule.surface.edge_angle(pv, self.pos(w));
+                    if w != u && spans.is_some_and(|a| a > rule.max_edge_angle) {
                         return false;
                     }
                 }

@@ -47,7 +47,11 @@ pub enum SurfaceHint {
     Plane,
     Cylinder,
     Cone,
-    /// Sphere, torus, B-spline, revolution, ...: a closed patch.
+    /// A sphere or torus: a boundary patch when the face is narrow enough for one (see
+    /// `fit::classify`), else a closed patch.
+    Sphere,
+    Torus,
+    /// B-spline, revolution, ...: a closed patch.
     Freeform,
     /// Unknown: classify from the geometry.
     Unknown,

@@ -1,7 +1,7 @@
 //! What the fit's rounds refine, group by group and chain by chain, and what each group's
 //! plan implies for the chains around it.
 
-use crate::mesh::{Axis, BoundarySurface, PatchKind};
+use crate::mesh::{BoundarySurface, PatchKind};
 
 /// A closed patch's first decimation threshold, in tolerances.
 pub(super) const INITIAL_CLOSED_COST: f64 = 8.0;
@@ -82,25 +82,24 @@ impl Plan {
     }
 }
 
-/// The chain's frame: cylinder/cone axis of the lowest-index framed group next to it.
-pub(super) fn chain_frame(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<Axis> {
+/// The chain's frame: the surface of the lowest-index framed group next to it.
+pub(super) fn chain_frame(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<BoundarySurface> {
     chain_frame_owner(chain_groups, plans).and_then(|g| match plans[g as usize].kind {
-        PatchKind::Boundary(BoundarySurface::Cylinder { axis })
-        | PatchKind::Boundary(BoundarySurface::Cone { axis }) => Some(axis),
-        _ => None,
+        PatchKind::Boundary(surface) => surface.axis().map(|_| surface),
+        PatchKind::Closed => None,
     })
 }
 
 /// The group whose frame the decoder applies to the chain's crease (the lowest-index
-/// cylinder or cone boundary patch next to it), if any.
+/// boundary patch next to it on a cylinder, cone, sphere or torus), if any.
 pub(super) fn chain_frame_owner(chain_groups: &[u32], plans: &[GroupPlan]) -> Option<u32> {
-    chain_groups.iter().copied().find(|&g| {
-        matches!(
-            plans[g as usize].kind,
-            PatchKind::Boundary(BoundarySurface::Cylinder { .. })
-                | PatchKind::Boundary(BoundarySurface::Cone { .. })
-        )
-    })
+    chain_groups
+        .iter()
+        .copied()
+        .find(|&g| match plans[g as usize].kind {
+            PatchKind::Boundary(surface) => surface.axis().is_some(),
+            PatchKind::Closed => false,
+        })
 }
 
 /// The name notes and reports use for a patch kind.
@@ -110,5 +109,7 @@ pub(super) fn kind_name(k: &PatchKind) -> &'static str {
         PatchKind::Boundary(BoundarySurface::Plane) => "plane",
         PatchKind::Boundary(BoundarySurface::Cylinder { .. }) => "cylinder",
         PatchKind::Boundary(BoundarySurface::Cone { .. }) => "cone",
+        PatchKind::Boundary(BoundarySurface::Sphere { .. }) => "sphere",
+        PatchKind::Boundary(BoundarySurface::Torus { .. }) => "torus",
     }
 }

@@ -83,11 +83,17 @@ impl SurfaceType {
         }
     }
 
-    /// Planes, cylinders and cones are ruled by their boundary curves: S-CODE boundary patches.
+    /// Planes, cylinders, cones, spheres and tori: surfaces with coordinates in which a
+    /// face is spanned by its boundary curves (boundary patches; a sphere or torus face only
+    /// when it is narrow enough, see `fit::classify`).
     pub fn is_boundary_patch_type(&self) -> bool {
         matches!(
             self,
-            SurfaceType::Plane | SurfaceType::Cylinder | SurfaceType::Cone
+            SurfaceType::Plane
+                | SurfaceType::Cylinder
+                | SurfaceType::Cone
+                | SurfaceType::Sphere
+                | SurfaceType::Torus
         )
     }
 }
@@ -264,7 +270,8 @@ mod tests {
             SurfaceType::Other("Weird".into())
         );
         assert!(SurfaceType::Cone.is_boundary_patch_type());
-        assert!(!SurfaceType::Torus.is_boundary_patch_type());
+        assert!(SurfaceType::Torus.is_boundary_patch_type());
+        assert!(!SurfaceType::BSplineSurface.is_boundary_patch_type());
     }
 
     #[test]

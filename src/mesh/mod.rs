@@ -27,9 +27,11 @@ pub struct Axis {
     pub direction: DVec3,
 }
 
-/// The analytic surface under a boundary patch. Only these three are ruled surfaces whose
-/// shape is fixed by their boundary curves (plus the axis), which is why they need no
-/// interior control vertices.
+/// The analytic surface under a boundary patch: a surface with coordinates in which every
+/// affine combination of points on it stays on it (Cartesian for a plane; angles about an
+/// axis for the others), so a patch spanned by its boundary curves needs no interior control
+/// vertices. Spheres and tori carry the frame the coordinates are taken in: a sphere's axis
+/// is a choice of the encoder (its poles away from the patch), a torus's is the surface's.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum BoundarySurface {
     Plane,
@@ -41,13 +43,37 @@ pub enum BoundarySurface {
     Cone {
         axis: Axis,
     },
+    /// `axis.origin` is the centre; longitude is measured about `axis.direction`, latitude
+    /// from the plane perpendicular to it.
+    Sphere {
+        axis: Axis,
+    },
+    /// `axis.origin` is the centre, `axis.direction` the axis of revolution, `major_radius`
+    /// the radius of the circle the tube is swept along.
+    Torus {
+        axis: Axis,
+        major_radius: f64,
+    },
+}
+
+impl BoundarySurface {
+    /// The axis of a surface that has one (every kind but the plane).
+    pub fn axis(&self) -> Option<Axis> {
+        match *self {
+            BoundarySurface::Plane => None,
+            BoundarySurface::Cylinder { axis }
+            | BoundarySurface::Cone { axis }
+            | BoundarySurface::Sphere { axis }
+            | BoundarySurface::Torus { axis, .. } => Some(axis),
+        }
+    }
 }
 
 /// How the decoder refines one CAD face (one group).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub enum PatchKind {
-    /// Loop surface with Hoppe's crease rules over the group's faces (freeform, sphere,
-    /// torus, and any group of a raw-mode mesh).
+    /// Loop surface with Hoppe's crease rules over the group's faces (freeform faces, whole
+    /// spheres and tori without boundary, and any group of a raw-mode mesh).
     #[default]
     Closed,
     /// Only boundary curves are subdivided; the interior is spanned by belts (S-CODE §4.2).

@@ -73,6 +73,8 @@ pub fn hint_for(surface: &SurfaceType) -> SurfaceHint {
         SurfaceType::Plane => SurfaceHint::Plane,
         SurfaceType::Cylinder => SurfaceHint::Cylinder,
         SurfaceType::Cone => SurfaceHint::Cone,
+        SurfaceType::Sphere => SurfaceHint::Sphere,
+        SurfaceType::Torus => SurfaceHint::Torus,
         SurfaceType::Unknown => SurfaceHint::Unknown,
         _ => SurfaceHint::Freeform,
     }

@@ -175,9 +175,10 @@ impl<'a> Supports<'a> {
                 [f.origin, f.axis, f.e1, f.e2]
                     .iter()
                     .flat_map(|p| p.to_array())
-                    .fold(absorb(2, u64::from(f.is_cone)), |h, x| {
-                        absorb(h, x.to_bits())
-                    })
+                    .fold(
+                        absorb(absorb(2, f.kind_bits().0), f.kind_bits().1),
+                        |h, x| absorb(h, x.to_bits()),
+                    )
             }),
         };
         let n_groups = self.by_group.len();

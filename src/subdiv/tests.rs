@@ -683,6 +683,112 @@ fn cylinder_and_cone_patches_stay_on_their_surfaces() {
     }
 }
 
+/// An open 4 x 3 grid of quads in one boundary patch on `surface`, its control points at
+/// the parameters `point(a, b)` for `a`, `b` in 0..=1 (jittered), the patch boundary a
+/// crease with corners at the grid's corners.
+fn framed_grid(surface: BoundarySurface, point: impl Fn(f64, f64) -> DVec3) -> ControlMesh {
+    let (nu, nv) = (4u32, 3u32);
+    let mut rng = Lcg(11);
+    let mut m = ControlMesh::new();
+    let g = m.push_group("patch", PatchKind::Boundary(surface));
+    for j in 0..=nv {
+        for i in 0..=nu {
+            let mut jitter = |k: u32, n: u32| {
+                let inner = k > 0 && k < n;
+                (k as f64 + if inner { 0.3 * (rng.next() - 0.5) } else { 0.0 }) / n as f64
+            };
+            let (a, b) = (jitter(i, nu), jitter(j, nv));
+            m.push_vertex(point(a, b));
+        }
+    }
+    let id = |i: u32, j: u32| j * (nu + 1) + i;
+    for j in 0..nv {
+        for i in 0..nu {
+            m.push_face(&[id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)], g);
+        }
+    }
+    m.corners
+        .extend([id(0, 0), id(nu, 0), id(nu, nv), id(0, nv)]);
+    m
+}
+
+/// Largest `error` of the level-3 points and limit points of `m` refined as it is, and of
+/// its points refined with every patch closed.
+fn framed_errors(m: &ControlMesh, error: impl Fn(DVec3) -> f64) -> (f64, f64) {
+    let n = 3;
+    let r = Refinement::new(m, n).unwrap();
+    let p = r.positions(&m.positions).unwrap();
+    let lim = r.limit_positions(&p, n).unwrap();
+    let worst = p.iter().chain(&lim).map(|&q| error(q)).fold(0.0, f64::max);
+    let mut mc = m.clone();
+    for g in &mut mc.groups {
+        g.patch = PatchKind::Closed;
+    }
+    let rc = Refinement::new(&mc, n).unwrap();
+    let pc = rc.positions(&mc.positions).unwrap();
+    let worst_closed = pc.iter().map(|&q| error(q)).fold(0.0, f64::max);
+    (worst, worst_closed)
+}
+
+#[test]
+fn sphere_and_torus_patches_stay_on_their_surfaces() {
+    let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.5, -0.3, 0.8);
+    let centre = v3(0.4, -1.0, 2.0);
+    let (e1, e2, d) = (rot * DVec3::X, rot * DVec3::Y, rot * DVec3::Z);
+    // A sphere patch 100 x 70 degrees wide, its axis tilted from the frame it was made in.
+    let radius = 1.7;
+    let sphere = framed_grid(
+        BoundarySurface::Sphere {
+            axis: Axis {
+                origin: centre,
+                direction: (d + e1 * 0.3) * 2.0,
+            },
+        },
+        |a, b| {
+            let (lon, lat) = (-0.9 + 1.75 * a, -0.6 + 1.2 * b);
+            centre
+                + (e1 * lon.cos() + e2 * lon.sin()) * (radius * lat.cos())
+                + d * (radius * lat.sin())
+        },
+    );
+    let (worst, worst_closed) =
+        framed_errors(&sphere, |q| ((q - centre).length() - radius).abs() / radius);
+    assert!(worst < 1e-10, "sphere patch off the sphere: {worst}");
+    assert!(
+        worst_closed > 1e-3,
+        "closed refinement unexpectedly exact: {worst_closed}"
+    );
+    // A torus fillet: a quarter turn about the tube, across the seam of the angle about the
+    // axis (u from 160 to 250 degrees).
+    let (major, minor) = (3.0, 0.8);
+    let torus = framed_grid(
+        BoundarySurface::Torus {
+            axis: Axis {
+                origin: centre,
+                direction: d,
+            },
+            major_radius: major,
+        },
+        |a, b| {
+            let (u, v) = (2.8 + 1.6 * a, -0.2 + 1.6 * b);
+            let around = e1 * u.cos() + e2 * u.sin();
+            centre + around * (major + minor * v.cos()) + d * (minor * v.sin())
+        },
+    );
+    let tube = |q: DVec3| {
+        let x = q - centre;
+        let h = x.dot(d);
+        let s = (x - d * h).length();
+        (((s - major).powi(2) + h * h).sqrt() - minor).abs() / minor
+    };
+    let (worst, worst_closed) = framed_errors(&torus, tube);
+    assert!(worst < 1e-10, "torus patch off the torus: {worst}");
+    assert!(
+        worst_closed > 1e-3,
+        "closed refinement unexpectedly exact: {worst_closed}"
+    );
+}
+
 /// Uniform subdivision with boundary patches output as the dense grid.
 fn subdivide_dense(m: &ControlMesh, level: u32) -> (ControlMesh, Option<Vec<DVec3>>) {
     subdivide(

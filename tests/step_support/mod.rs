@@ -160,7 +160,8 @@ pub fn check_step_path_no_larger_than_mesh_path(corpus: &Path, file: &str, effor
 
 /// Encodes corpus STEP `file` at the default tolerance and asserts that the decoded vertices
 /// away from face boundaries lie within 1.05 tolerance of their faces' exact surfaces.
-pub fn check_decoded_analytic_faces_on_exact_surfaces(corpus: &Path, file: &str) {
+/// Returns the encoded file.
+pub fn check_decoded_analytic_faces_on_exact_surfaces(corpus: &Path, file: &str) -> Vec<u8> {
     let path = corpus.join("step").join(file);
     let (model, bytes, report) = encode_step(&path, &ModelEncodeOptions::default()).unwrap();
     assert!(report.within_tolerance, "{file}: {:?}", report.error);
@@ -187,9 +188,10 @@ pub fn check_decoded_analytic_faces_on_exact_surfaces(corpus: &Path, file: &str)
         }
     }
     eprintln!("{file}: {checked} interior vertices, worst {worst:.3} tol");
-    assert!(checked > 1000, "{file}: {checked}");
+    assert!(checked > 500, "{file}: {checked}");
     assert!(
         worst <= 1.05,
         "{file}: {worst:.3} tol from the exact surface"
     );
+    bytes
 }

@@ -708,6 +708,10 @@ fn step_info(args: &InfoArgs) -> Result<()> {
         SurfaceHint::Plane => "boundary patch (plane)",
         SurfaceHint::Cylinder => "boundary patch (cylinder, exact axis)",
         SurfaceHint::Cone => "boundary patch (cone, exact apex and axis)",
+        SurfaceHint::Sphere => "boundary patch (sphere, exact centre) unless a hemisphere or wider",
+        SurfaceHint::Torus => {
+            "boundary patch (torus, exact axis) unless a spindle torus or too wide"
+        }
         SurfaceHint::Freeform => "closed patch",
         SurfaceHint::Unknown => "classified from the triangles",
     };
@@ -853,6 +857,13 @@ pub fn info(args: &InfoArgs) -> Result<()> {
                 PatchKind::Boundary(BoundarySurface::Cone { axis }) => {
                     format!("cone patch, apex/axis {}", fmt_axis(&axis))
                 }
+                PatchKind::Boundary(BoundarySurface::Sphere { axis }) => {
+                    format!("sphere patch, centre/axis {}", fmt_axis(&axis))
+                }
+                PatchKind::Boundary(BoundarySurface::Torus { axis, major_radius }) => format!(
+                    "torus patch, centre/axis {}, major radius {major_radius:.6}",
+                    fmt_axis(&axis)
+                ),
             };
             println!(
                 "  group {i}: {:<24} {:>5} control faces, {patch}",

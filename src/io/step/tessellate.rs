@@ -25,7 +25,7 @@ use super::watch::{Cancel, Guarded, Watched, Workers};
 use super::{Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
-use crate::mesh::{AnalyticSurface, BoundarySurface, ControlMesh, PatchKind, Tolerance};
+use crate::mesh::{AnalyticSurface, Axis, BoundarySurface, ControlMesh, PatchKind, Tolerance};
 
 type MeshedShell = CompressedShell<Point3, PolylineCurve<Point3>, Option<PolygonMesh>>;
 /// One face as a shell of its own, for truck's tessellator.
@@ -978,11 +978,7 @@ impl<'a> WeldedModel<'a> {
             return Err(no_face_error(self.path, &self.skipped));
         }
         let scale = millimetres_per_unit.unwrap_or(1.0);
-        let closed: Vec<bool> = self
-            .faces
-            .iter()
-            .map(|f| matches!(patch_kind(f), PatchKind::Closed))
-            .collect();
+        let closed: Vec<bool> = self.faces.iter().map(keeps_interior_vertices).collect();
         let split = split_doubled_ears(&mut self.mesh, &mut self.pool.positions, &closed);
         if split > 0 {
             notes.push(format!(
@@ -1273,7 +1269,8 @@ fn scale_surface(f: &mut FaceSurface, s: f64) {
 }
 
 /// The patch kind a face's exact surface asks for: boundary patches with the exact axis for
-/// planes, cylinders and cones; closed patches for everything else.
+/// planes, cylinders, cones, spheres and tori (a sphere's axis is the fit's choice, see
+/// `fit::classify`); closed patches for everything else.
 pub(super) fn patch_kind(f: &FaceSurface) -> PatchKind {
     match (&f.surface, f.exact) {
         (SurfaceType::Plane, _) => PatchKind::Boundary(BoundarySurface::Plane),
@@ -1283,8 +1280,32 @@ pub(super) fn patch_kind(f: &FaceSurface) -> PatchKind {
         (SurfaceType::Cone, Some(AnalyticSurface::Cone { axis, .. })) => {
             PatchKind::Boundary(BoundarySurface::Cone { axis })
         }
+        (SurfaceType::Sphere, Some(AnalyticSurface::Sphere { center, .. })) => {
+            PatchKind::Boundary(BoundarySurface::Sphere {
+                axis: Axis {
+                    origin: center,
+                    direction: DVec3::Z,
+                },
+            })
+        }
+        (
+            SurfaceType::Torus,
+            Some(AnalyticSurface::Torus {
+                axis, major_radius, ..
+            }),
+        ) => PatchKind::Boundary(BoundarySurface::Torus { axis, major_radius }),
         _ => PatchKind::Closed,
     }
+}
+
+/// Whether the fit may refine a face as a closed patch (a closed patch, or a sphere or torus
+/// that the fit finds too wide for a boundary patch): [`split_doubled_ears`] prepares those.
+fn keeps_interior_vertices(f: &FaceSurface) -> bool {
+    matches!(
+        patch_kind(f),
+        PatchKind::Closed
+            | PatchKind::Boundary(BoundarySurface::Sphere { .. } | BoundarySurface::Torus { .. })
+    )
 }
 
 /// Whether a face's triangles form an oriented surface whose boundary is exactly its edge
