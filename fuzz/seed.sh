@@ -17,7 +17,7 @@ small() { # files of at most MAX bytes among the arguments that exist
     done
 }
 mkdir -p corpus
-small ../spec/vectors/*.scode > corpus/decode.seeds
+small ../spec/vectors/*.scode ../spec/vectors/v3/*.scode > corpus/decode.seeds
 for t in read_obj read_ply read_stl read_gltf read_off; do
     small seeds/$t/* > corpus/$t.seeds
 done
