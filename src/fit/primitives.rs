@@ -147,6 +147,7 @@ pub fn fit_plane(points: &[DVec3]) -> Option<SurfaceFit> {
 }
 
 /// Best-fit sphere (geometric distances). Needs 4 points not on one plane.
+#[cfg(test)]
 pub fn fit_sphere(points: &[DVec3]) -> Option<SurfaceFit> {
     fit_sphere_impl(points, f64::INFINITY)
 }
@@ -407,6 +408,7 @@ fn lm_cone(
 }
 
 /// Best-fit torus. `normals` initialise the axis (every normal line meets it).
+#[cfg(test)]
 pub fn fit_torus(points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     fit_torus_impl(points, normals, f64::INFINITY)
 }
@@ -554,6 +556,7 @@ pub fn refine(start: &AnalyticSurface, points: &[DVec3]) -> Option<SurfaceFit> {
 }
 
 /// Fits `kind` to the points (normals are needed for cylinder, cone and torus).
+#[cfg(test)]
 pub fn fit_kind(kind: SurfaceKind, points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     match kind {
         SurfaceKind::Plane => fit_plane(points),
@@ -586,6 +589,7 @@ pub(crate) fn fit_kind_within(
 }
 
 /// The first kind of `kinds` (in order) whose fit has a max residual within `tolerance`.
+#[cfg(test)]
 pub fn fit_first_within(
     kinds: &[SurfaceKind],
     points: &[DVec3],
