@@ -33,8 +33,11 @@ cargo fmt --manifest-path tests/embed/Cargo.toml -- --check
 echo "== viewer/pkg built from the current decoder sources"
 viewer/build.sh --check
 
-echo "== decoder-only library (no default features)"
-cargo check -p scode --lib --no-default-features
+echo "== the library alone, without its feature internals (lints, dead code): default features, decoder"
+# Test, bench and example builds turn `internals` on (the crate's dev-dependency on itself),
+# so the clippy run over all targets below never sees the library without it.
+cargo clippy -p scode --lib -- -D warnings
+cargo clippy -p scode --lib --no-default-features -- -D warnings
 
 echo "== the library's default features: none of the command-line tool's dependencies"
 LIB_DEPS=$(cargo tree -p scode --locked -e normal --prefix none)
@@ -50,6 +53,20 @@ cargo check --manifest-path tests/embed/Cargo.toml --target-dir "${CARGO_TARGET_
 EMBED_DEPS=$(cargo tree --manifest-path tests/embed/Cargo.toml --locked -e normal --prefix none)
 if echo "$EMBED_DEPS" | grep -E '^(clap|anyhow|indicatif|plotters|png|mimalloc|truck-[a-z]+|ruststep) '; then
   echo "error: the embedder's build pulls in the dependencies above" >&2
+  exit 1
+fi
+# Without `internals` the internal modules are private: each `use` of
+# tests/embed/examples/internal_module.rs must fail to resolve.
+EMBED_USES=$(grep -c '^use scode::' tests/embed/examples/internal_module.rs)
+if EMBED_ERRORS=$(cargo check --manifest-path tests/embed/Cargo.toml --target-dir "${CARGO_TARGET_DIR:-target}" \
+    --locked --example internal_module --features compile-fail 2>&1); then
+  echo "error: an embedder can name the library's internal modules" >&2
+  exit 1
+fi
+EMBED_REFUSED=$(echo "$EMBED_ERRORS" | grep -cE '^error\[E0(603|432)\]' || true)
+if [ "$EMBED_REFUSED" != "$EMBED_USES" ]; then
+  echo "$EMBED_ERRORS" >&2
+  echo "error: $EMBED_REFUSED of the $EMBED_USES internal paths were refused" >&2
   exit 1
 fi
 

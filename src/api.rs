@@ -353,8 +353,8 @@ pub struct DecodeOptions {
     pub limits: Limits,
     /// The longest edge of the output in model units, for solvers that need an element
     /// size: longer edges are split at their midpoints, the same way for both faces beside
-    /// them, so the surface stays watertight and keeps its groups, sharp edges and corners
-    /// (see [`crate::subdiv::split_to_max_edge`]). `None` (the default) splits nothing.
+    /// them, so the surface stays watertight and keeps its groups, sharp edges and corners.
+    /// `None` (the default) splits nothing.
     pub max_edge: Option<f64>,
     /// With `max_edge`: the smallest angle (degrees, up to 30) of the triangles inside plane
     /// patches, which are triangulated anew by constrained Delaunay refinement inside their

@@ -41,6 +41,8 @@
 //! - `legacy-formats` (default): decoding of format versions 1 and 2.
 //! - `remesh` (default): decoding to a smallest angle ([`DecodeOptions::min_angle`]:
 //!   constrained Delaunay refinement of plane patches).
+//! - `internals` (off): makes the internal modules public. Not a stable interface: for the
+//!   scode command-line tool, viewer, tests and fuzz targets of this repository.
 //!
 //! A decoder alone turns default features off; an embedder that encodes meshes but never
 //! reads STEP adds `encoder`:
@@ -49,43 +51,68 @@
 //!
 //! # Internal modules
 //!
-//! The modules below the API (hidden from this documentation) are public for the `scode`
-//! command-line tool (package `scode-cli`), the WebAssembly viewer, the tests and the
-//! benches; they follow the layers mesh, io, subdiv, fit, codec, metrics, pipeline, and are not a stable interface.
+//! Below the API the crate is layered in modules: mesh, io, subdiv, fit, codec, metrics,
+//! surface, pipeline. They are private to the crate; the feature `internals` makes them
+//! public (hidden from this documentation) for the repository's own users of them: the
+//! `scode` command-line tool (package `scode-cli`), the WebAssembly viewer, the integration
+//! tests, benches, examples and fuzz targets. Items that only those users need are built
+//! with the feature alone. An embedder depends on the API above and leaves the feature off.
 #![forbid(unsafe_code)]
 
-#[doc(hidden)]
-pub mod error;
-#[doc(hidden)]
-pub mod mesh;
-
-#[cfg(feature = "encoder")]
-#[doc(hidden)]
-pub mod io;
-#[doc(hidden)]
-pub mod subdiv;
-
-#[cfg(feature = "encoder")]
-#[doc(hidden)]
-pub mod fit;
-
+// The internal modules: public (hidden from the documentation) with the feature `internals`,
+// private to the crate without it. Each is declared twice, once per visibility, so that
+// tools that follow `mod` items (rustfmt) see every module.
+#[cfg(feature = "internals")]
 #[doc(hidden)]
 pub mod codec;
-#[cfg(feature = "encoder")]
+#[cfg(not(feature = "internals"))]
+pub(crate) mod codec;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod error;
+#[cfg(not(feature = "internals"))]
+pub(crate) mod error;
+#[cfg(all(feature = "encoder", feature = "internals"))]
+#[doc(hidden)]
+pub mod fit;
+#[cfg(all(feature = "encoder", not(feature = "internals")))]
+pub(crate) mod fit;
+#[cfg(all(feature = "encoder", feature = "internals"))]
+#[doc(hidden)]
+pub mod io;
+#[cfg(all(feature = "encoder", not(feature = "internals")))]
+pub(crate) mod io;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod mesh;
+#[cfg(not(feature = "internals"))]
+pub(crate) mod mesh;
+#[cfg(all(feature = "encoder", feature = "internals"))]
 #[doc(hidden)]
 pub mod metrics;
-
-#[doc(hidden)]
-pub mod surface;
-
-#[cfg(feature = "encoder")]
+#[cfg(all(feature = "encoder", not(feature = "internals")))]
+pub(crate) mod metrics;
+#[cfg(all(feature = "encoder", feature = "internals"))]
 #[doc(hidden)]
 pub mod pipeline;
+#[cfg(all(feature = "encoder", not(feature = "internals")))]
+pub(crate) mod pipeline;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod subdiv;
+#[cfg(not(feature = "internals"))]
+pub(crate) mod subdiv;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod surface;
+#[cfg(not(feature = "internals"))]
+pub(crate) mod surface;
 
 mod api;
 
 pub use api::*;
 pub use error::{Error, Result};
+#[cfg(feature = "internals")]
 #[doc(hidden)]
 pub use mesh::ControlMesh;
 pub use mesh::Tolerance;

@@ -18,6 +18,7 @@ pub struct DecodedSurface {
     pub level: u32,
     /// Whether positions are limit positions.
     pub limit: bool,
+    #[cfg(feature = "internals")]
     pub content: Content,
     /// How a surface decoded to a tolerance came out (`None` for a uniform level and for
     /// raw-mode files, which are the stored surface itself).
@@ -43,7 +44,7 @@ pub struct AccuracyReport {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum Detail {
     /// Every base triangle at the coarsest level within the tolerance the file was encoded
-    /// for of the limit surface ([`file_tolerance`]).
+    /// for of the limit surface.
     #[default]
     FileTolerance,
     /// Every base triangle at the coarsest level within this distance of the limit surface
@@ -223,6 +224,7 @@ fn decode_detail(bytes: &[u8], limits: &Limits, opts: &SurfaceOptions) -> Result
         normals,
         level,
         limit,
+        #[cfg(feature = "internals")]
         content,
         accuracy: None,
     })
@@ -232,6 +234,7 @@ fn decode_detail(bytes: &[u8], limits: &Limits, opts: &SurfaceOptions) -> Result
 /// shape a measurement against a reference reads it: a control mesh's level-n limit surface
 /// handed out group by group, so that no array of its tens of millions of triangles exists
 /// (`metrics::hausdorff_by_group`); a raw-mode file's stored mesh as it is.
+#[cfg(feature = "internals")]
 pub enum DefaultSurface {
     /// A raw-mode file's mesh.
     Stored(ControlMesh),
@@ -246,10 +249,12 @@ pub enum DefaultSurface {
 /// control faces times `4^level`), counted as [`check_subdivision`] counts: the level's
 /// limit positions (about half a vertex per triangle) and the coarser level's faces, plus
 /// the refinement that makes them, which is dropped once they are evaluated.
+#[cfg(feature = "internals")]
 pub const MEMORY_PER_GROUPED_TRIANGLE: u64 = 80;
 
 /// Decodes `bytes` to its [`DefaultSurface`], its subdivision checked against `limits`
 /// before it is made.
+#[cfg(feature = "internals")]
 pub fn decode_default_surface(bytes: &[u8], limits: &Limits) -> Result<DefaultSurface> {
     let (decoded, usage) = codec::decode_with_usage(bytes, limits);
     let decoded = decoded?;
@@ -319,7 +324,6 @@ fn decode_to_tolerance(
     limits: &Limits,
     opts: &SurfaceOptions,
 ) -> Result<DecodedSurface> {
-    let content = decoded.header.content;
     let (file_relative, cap) = file_tolerance(&decoded.header);
     let tolerance = match opts.detail {
         Detail::Tolerance(t) => t,
@@ -364,7 +368,8 @@ fn decode_to_tolerance(
         normals: out.normals,
         level: out.levels.iter().copied().max().unwrap_or(0).into(),
         limit: true,
-        content,
+        #[cfg(feature = "internals")]
+        content: decoded.header.content,
         accuracy: Some(AccuracyReport {
             tolerance: out.tolerance,
             bound: out.bound,

@@ -1,11 +1,13 @@
 //! Byte-level helpers: LEB128 varints, a bounds-checked reader, and section framing
 //! (tag, length, optional zlib, CRC-32). See `spec/format.md` §2-§3.
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 use std::io::Write;
 
 use crate::error::{Error, Result};
 
 /// Appends `v` as an unsigned LEB128 varint (7 bits per byte, low first).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     loop {
         let b = (v & 0x7F) as u8;
@@ -143,11 +145,13 @@ pub const TAG_SKIPPABLE: u8 = 0x40;
 /// Mask of the section id inside the tag byte.
 pub const TAG_ID_MASK: u8 = 0x3F;
 /// Payloads smaller than this are never tried with zlib (it cannot win).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 const MIN_DEFLATE_TRY: usize = 24;
 
 /// Appends one section: `tag | len | [raw_len] | payload | crc32`. The payload is deflated
 /// when that makes it smaller (and `allow_deflate`). `crc_start` is where the CRC coverage
 /// begins in `out` (the tag byte, or the file start for the header section).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn put_section(
     out: &mut Vec<u8>,
     id: u8,
@@ -193,6 +197,7 @@ pub fn put_section(
 /// flate2) always writes dynamic blocks, whose code tables cost 30-40 bytes: on a section of a
 /// few hundred bytes (group names: `face_1, face_2, ...` and their order) fixed codes are
 /// smaller by most of that table, and zlib itself would choose them.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn zlib_static_blocks(payload: &[u8]) -> Option<Vec<u8>> {
     use miniz_oxide::deflate::core::{
         compress, create_comp_flags_from_zip_params, CompressionStrategy, CompressorOxide,

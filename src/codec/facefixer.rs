@@ -9,7 +9,9 @@
 
 use super::Budget;
 use crate::error::{Error, Result};
-use crate::mesh::topology::{HalfEdgeMesh, NONE};
+#[cfg(any(feature = "encoder", feature = "internals"))]
+use crate::mesh::topology::HalfEdgeMesh;
+use crate::mesh::topology::NONE;
 
 /// One Face Fixer label. `F(l)`/`H(l)`: a face / hole of degree `l` is fixed to the gate;
 /// `R`, `L`, `S`, `E`: the gate is zipped with its right / left neighbour / an element
@@ -27,6 +29,7 @@ pub enum Label {
 }
 
 /// Result of the encoder's traversal.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub struct Traversal {
     pub labels: Vec<Label>,
     /// Faces of the half-edge mesh (mesh and hole faces) in encoding order, each with the
@@ -36,6 +39,7 @@ pub struct Traversal {
 
 /// Runs the Face Fixer encoder over every connected component (start face: the lowest
 /// unprocessed mesh face, start corner: its first corner).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn encode_traversal(he: &HalfEdgeMesh) -> Traversal {
     let nh = he.origin.len();
     let mut a_next = vec![NONE; nh];

@@ -7,7 +7,9 @@
 use glam::DVec3;
 
 use super::facefixer::Rebuilt;
-use super::rangecoder::{unzigzag, zigzag, BitModel, IntModel, RangeDecoder, RangeEncoder};
+#[cfg(any(feature = "encoder", feature = "internals"))]
+use super::rangecoder::RangeEncoder;
+use super::rangecoder::{unzigzag, zigzag, BitModel, IntModel, RangeDecoder};
 use super::Budget;
 use crate::error::{Error, Result};
 use crate::mesh::topology::NONE;
@@ -26,6 +28,7 @@ pub struct Quantizer {
 impl Quantizer {
     /// Chooses the box for `positions`: f32 storage when that loses (almost) nothing. The
     /// box's extent is the positions' extent times `step_scale` (>= 1), which scales the step.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn for_positions(positions: &[DVec3], bits: u8, step_scale: f64) -> Self {
         let Some(first) = positions.first() else {
             return Quantizer {
@@ -72,6 +75,7 @@ impl Quantizer {
         self.extent / f64::from(self.max_q())
     }
 
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn quantize(&self, p: DVec3) -> [i32; 3] {
         let step = self.step();
         [0, 1, 2].map(|i| {
@@ -95,6 +99,7 @@ impl Quantizer {
 }
 
 /// Largest f32 <= x (x finite and within the f32 range, else the result is not finite).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn f32_round_down(x: f64) -> f64 {
     let f = x as f32;
     let f = if f64::from(f) > x {
@@ -106,6 +111,7 @@ fn f32_round_down(x: f64) -> f64 {
 }
 
 /// Smallest f32 >= x.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn f32_round_up(x: f64) -> f64 {
     let f = x as f32;
     let f = if f64::from(f) < x {
@@ -117,6 +123,7 @@ fn f32_round_up(x: f64) -> f64 {
 }
 
 /// The next representable f32 above (`up`) or below a finite `f`.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn f32_step(f: f32, up: bool) -> f32 {
     if f == 0.0 {
         let tiny = f32::from_bits(1);
@@ -183,12 +190,14 @@ fn bucket(class: u32) -> usize {
     }
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub struct GeomEncoder<'a> {
     pub enc: &'a mut RangeEncoder,
     models: Vec<IntModel>,
     flags: Vec<BitModel>,
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl<'a> GeomEncoder<'a> {
     pub fn new(enc: &'a mut RangeEncoder) -> Self {
         GeomEncoder {
@@ -199,6 +208,7 @@ impl<'a> GeomEncoder<'a> {
     }
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl ResidualCoder for GeomEncoder<'_> {
     fn code(&mut self, ctx: usize, pred: i32, slot: &mut i32) -> Result<u32> {
         let r = *slot - pred;

@@ -24,21 +24,32 @@ mod names;
 mod patches;
 pub mod rangecoder;
 mod ranks;
+#[cfg(feature = "internals")]
 pub mod samples;
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 use std::collections::BTreeSet;
 
 use glam::DVec3;
 
-use self::bytes::{put_section, put_varint, read_section, RawSection, Reader};
-use self::facefixer::{encode_traversal, rebuild, Label, Rebuilt};
-use self::geometry::{ArcAxes, GeomDecoder, GeomEncoder, Quantizer};
-use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
+use self::bytes::{read_section, RawSection, Reader};
+use self::facefixer::{rebuild, Label, Rebuilt};
+use self::geometry::{ArcAxes, GeomDecoder, Quantizer};
+use self::rangecoder::{bits_for, BitModel, FreqModel, IntModel, RangeDecoder};
 use crate::error::{Error, Result};
-use crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh, NONE};
+use crate::mesh::topology::NONE;
 use crate::mesh::{edge_key, BoundarySurface, ControlMesh, Group, PatchKind};
+#[cfg(any(feature = "encoder", feature = "internals"))]
+use {
+    self::bytes::{put_section, put_varint},
+    self::facefixer::encode_traversal,
+    self::geometry::GeomEncoder,
+    self::rangecoder::RangeEncoder,
+    crate::mesh::topology::{cut_non_manifold, HalfEdgeMesh},
+};
 
 pub const FORMAT_VERSION_MAJOR: u8 = 4;
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub const FORMAT_VERSION_MINOR: u8 = 0;
 /// First four bytes of every `.scode` file.
 pub const MAGIC: [u8; 4] = *b"SCOD";
@@ -51,6 +62,7 @@ pub enum Content {
 }
 
 /// Encoder settings.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 #[derive(Clone, Debug, PartialEq)]
 pub struct EncodeOptions {
     /// Bits per coordinate of the position grid, 4..=24 (default 10).
@@ -71,6 +83,7 @@ pub struct EncodeOptions {
     pub grid_covers: Option<[glam::DVec3; 2]>,
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions {
@@ -172,6 +185,7 @@ impl Budget {
         }
     }
 
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn unlimited() -> Self {
         Self::new(u64::MAX)
     }
@@ -268,6 +282,7 @@ pub struct Decoded {
 /// How the encoder renumbered the mesh: the decoded mesh has vertex `vertex[v]` where the
 /// input had `v`, face `face[f]` for input face `f` (its cycle possibly rotated), and group
 /// `group[g]` for input group `g`.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 #[derive(Clone, Debug, PartialEq)]
 pub struct EncodeMap {
     pub vertex: Vec<u32>,
@@ -401,6 +416,7 @@ const SYM_L: usize = 5;
 const SYM_S: usize = 6;
 const SYM_E: usize = 7;
 const SYM_H: usize = 8;
+#[cfg(any(feature = "encoder", feature = "internals"))]
 const SYM_M: usize = 9;
 
 /// Initial counts of every label context (a fixed prior: F3/F4/R common, the rest rare), so
@@ -480,6 +496,7 @@ impl ConnModels {
         self.prev = [self.prev[1], s];
     }
 
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     fn encode_label(&mut self, enc: &mut RangeEncoder, l: Label) {
         let s = match l {
             Label::F(3) => SYM_F3,
@@ -552,6 +569,7 @@ impl ConnModels {
 
     /// Encodes a version-3 group symbol (`seen` groups used so far). The encoder never makes
     /// `Explicit` (versions 1-2 only).
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     fn encode_group(&mut self, enc: &mut RangeEncoder, g: GroupSym, class: usize, seen: u32) {
         debug_assert!(!matches!(g, GroupSym::Explicit(_)));
         let s = match g {
@@ -635,6 +653,7 @@ fn label_edges(label_edge: &[u32]) -> Vec<u32> {
 
 /// A value below `bound` in `bits_for(bound)` direct bits, high part (above 16 bits) first
 /// (spec §4.3; used for merge offsets, §6.2, and explicit group ids, §6.5).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn encode_below(enc: &mut RangeEncoder, v: u32, bound: u32) {
     let b = bits_for(u64::from(bound));
     enc.encode_direct(v >> 16.min(b), b.saturating_sub(16));
@@ -768,6 +787,7 @@ impl Recency {
     }
 
     /// Number of groups used since group `g` was (`g` used before).
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     fn rank_of(&self, g: u32) -> u32 {
         self.used - 1 - self.flags.rank(self.last_face[g as usize] as usize)
     }
@@ -794,6 +814,7 @@ trait BitCoder {
     fn bit(&mut self, model: &mut BitModel, slot: &mut bool) -> Result<()>;
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl BitCoder for RangeEncoder {
     fn bit(&mut self, model: &mut BitModel, slot: &mut bool) -> Result<()> {
         self.encode_bit(model, *slot);
@@ -863,6 +884,7 @@ fn code_creases(
     Ok(crease)
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn zigzag64(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64
 }
@@ -875,6 +897,7 @@ fn unzigzag64(u: u64) -> i64 {
 // Encoder
 
 /// Encodes a mesh. See [`encode_with_map`].
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn encode(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Vec<u8>> {
     encode_with_map(mesh, opts).map(|(b, _)| b)
 }
@@ -884,6 +907,7 @@ pub fn encode(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Vec<u8>> {
 /// Raw meshes (`Content::RawMesh`) with non-manifold edges or vertices are cut apart and
 /// re-merged by the decoder (`fixups` section); a non-manifold control mesh is an error.
 /// Every sharp edge must be an edge of the mesh.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<u8>, EncodeMap)> {
     check_encode_input(mesh, opts)?;
     let bits = opts.quantization_bits;
@@ -989,6 +1013,7 @@ pub fn encode_with_map(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<(Vec<
 
 /// The checks [`encode_with_map`] makes before any work: the options' ranges, and a valid
 /// mesh with a finite extent whose faces have groups.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn check_encode_input(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<()> {
     let bits = opts.quantization_bits;
     if !(4..=24).contains(&bits) {
@@ -1020,6 +1045,7 @@ fn check_encode_input(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<()> {
 /// The half-edge structure the encoder traverses. A non-manifold raw mesh (`raw`) is cut
 /// apart first: then also the cut mesh and the input vertex of each of its vertices, else
 /// `None` and the identity.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn manifold_half_edges(
     mesh: &ControlMesh,
     raw: bool,
@@ -1038,11 +1064,13 @@ fn manifold_half_edges(
 }
 
 /// An error for an encoder invariant that does not hold (a bug, not a bad input).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn internal_error(what: &str) -> Error {
     Error::Mesh(format!("internal encoder error: {what}"))
 }
 
 /// How the rebuilt (coded) structure maps onto the mesh the encoder traversed.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 struct CodedVertices {
     /// Traversed-mesh vertex of every coded vertex: the traversal's vertices in their coded
     /// order, then those the traversal does not reach.
@@ -1056,6 +1084,7 @@ struct CodedVertices {
 /// Maps the rebuilt vertices and faces to those of `he` (mesh of `nw` vertices), whose
 /// traversal entered face `tr_faces[i]` for rebuilt face `i`; the vertices no face reaches
 /// are numbered after the others.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn number_coded_vertices(
     rb: &Rebuilt,
     tr_faces: &[(u32, u32)],
@@ -1102,6 +1131,7 @@ fn number_coded_vertices(
 /// Merges: every coded copy of an input vertex merges into the lowest coded copy. Returns
 /// that representative for each of the `input_vertices` input vertices, and the
 /// `(copy, representative)` pairs, copies ascending.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn merges_of_copies(orig_of_coded: &[u32], input_vertices: usize) -> (Vec<u32>, Vec<(u32, u32)>) {
     let mut rep_of_orig = vec![NONE; input_vertices];
     for (c, &o) in orig_of_coded.iter().enumerate() {
@@ -1119,6 +1149,7 @@ fn merges_of_copies(orig_of_coded: &[u32], input_vertices: usize) -> (Vec<u32>, 
 }
 
 /// The groups as the connectivity section codes them (spec §6.5).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 struct GroupCoding {
     /// Coded id of every input group: by first appearance in encoding order, unused groups
     /// at the end.
@@ -1134,6 +1165,7 @@ struct GroupCoding {
 
 /// Numbers the groups by first appearance in encoding order and finds the symbol that codes
 /// each mesh face's group (`face_source`: the input face of each rebuilt face).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn code_groups(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> GroupCoding {
     let mut group_new = vec![NONE; mesh.groups.len()];
     let mut next_group = 0u32;
@@ -1190,6 +1222,7 @@ fn code_groups(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> GroupCo
 
 /// The connectivity section: the label count, then the labels and (with more than one
 /// group) the group symbols, range coded.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn connectivity_section(
     labels: &[Label],
     group_syms: &[(GroupSym, usize, u32)],
@@ -1213,6 +1246,7 @@ fn connectivity_section(
 
 /// The quantisation grid over the mesh's positions (and the box `opts.grid_covers`, when
 /// given). Fails when the grid's box overflows f64.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn encode_quantizer(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Quantizer> {
     let bits = opts.quantization_bits;
     let quant = match opts.grid_covers {
@@ -1238,6 +1272,7 @@ fn encode_quantizer(mesh: &ControlMesh, opts: &EncodeOptions) -> Result<Quantize
 
 /// The sharp flag of every edge (label order: `edges`), from the mesh's sharp edges between
 /// input vertices. Fails when a sharp edge is not an edge of the mesh.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn sharp_edge_flags(
     mesh: &ControlMesh,
     rb: &Rebuilt,
@@ -1268,6 +1303,7 @@ fn sharp_edge_flags(
 
 /// The geometry section: the grid points `q` of the coded vertices, walked as the current
 /// version does (predictions along the creases `crease_he`, arcs round the groups' axes).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn geometry_section(
     rb: &Rebuilt,
     groups: &GroupCoding,
@@ -1298,6 +1334,7 @@ fn geometry_section(
 }
 
 /// What the header section records besides the mesh's own counts.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 struct HeaderFields<'a> {
     content: Content,
     bits: u8,
@@ -1311,6 +1348,7 @@ struct HeaderFields<'a> {
     names: bool,
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl HeaderFields<'_> {
     /// The header's flag bits.
     fn flags(&self) -> u64 {
@@ -1368,6 +1406,7 @@ impl HeaderFields<'_> {
 
 /// The fixups section: per merge, the gap from the previous copy and how far back its
 /// representative is.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn fixups_section(merges: &[(u32, u32)]) -> Vec<u8> {
     let mut fx = Vec::new();
     let mut prev: i64 = -1;
@@ -1381,6 +1420,7 @@ fn fixups_section(merges: &[(u32, u32)]) -> Vec<u8> {
 
 /// The names section: the input's group names, and the input group of every coded group
 /// (`group_new`: the coded id of every input group).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn names_section(mesh: &ControlMesh, group_new: &[u32]) -> Vec<u8> {
     let input_names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
     let mut input_of_coded = vec![0u32; group_new.len()];
@@ -1392,6 +1432,7 @@ fn names_section(mesh: &ControlMesh, group_new: &[u32]) -> Vec<u8> {
 
 /// The decoded id of every input face: the mesh faces numbered in encoding order
 /// (`face_source`: the input face of each rebuilt face).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn mesh_face_numbering(mesh: &ControlMesh, rb: &Rebuilt, face_source: &[u32]) -> Vec<u32> {
     let mut face = vec![NONE; mesh.face_count()];
     let mut next_face = 0u32;
@@ -1441,6 +1482,7 @@ fn plane_groups_of_faces(face_group: &[u32], kinds: &[PatchKind]) -> Vec<u32> {
 // Decoder
 
 /// Decodes a file. Every malformed input gives `Error::Format` or `Error::LimitsExceeded`.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<Decoded> {
     decode_full::<false>(bytes, limits, &mut Budget::new(limits.max_memory)).map(|(d, _)| d)
 }

@@ -7,10 +7,12 @@
 //! `face_141, face_171, ...`, which then cost a byte a name before deflation instead of the
 //! whole string; the order then makes up most of the section.
 
-use super::bytes::{put_varint, Reader};
-use super::rangecoder::{BitModel, RangeDecoder, RangeEncoder};
+use super::bytes::Reader;
+use super::rangecoder::{BitModel, RangeDecoder};
 use super::ranks::Flags;
-use super::{decode_below, encode_below, unzigzag64, zigzag64, Budget};
+#[cfg(any(feature = "encoder", feature = "internals"))]
+use super::{bytes::put_varint, encode_below, rangecoder::RangeEncoder, zigzag64};
+use super::{decode_below, unzigzag64, Budget};
 use crate::error::Result;
 
 /// Largest number a name may end in to be split as stem + number (18 decimal digits).
@@ -18,6 +20,7 @@ const MAX_NUMBER: u64 = 999_999_999_999_999_999;
 
 /// Splits a name into a stem and the decimal number it ends in, when that number reads back
 /// to the same digits (no leading zero, at most 18 digits).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn split(name: &str) -> (&str, Option<u64>) {
     let digits = name.bytes().rev().take_while(u8::is_ascii_digit).count();
     let (stem, tail) = name.split_at(name.len() - digits);
@@ -46,6 +49,7 @@ fn predicted_rank(unused: &Flags, prev: Option<u32>, left: u32) -> u32 {
 /// (context: the previous bit) says whether the rank is the predicted one; otherwise its
 /// distance after the prediction, `(rank - predicted - 1) mod left`, follows in direct bits.
 /// Input order costs a fraction of a bit a group, an unrelated order about `log2(left)`.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn write(names: &[&str], original_of_coded: &[u32]) -> Vec<u8> {
     let mut enc = RangeEncoder::new();
     let mut hit_models = [BitModel::default(); 2];

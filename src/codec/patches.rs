@@ -14,11 +14,15 @@ use glam::DVec3;
 
 use super::bytes::Reader;
 use super::geometry::{GridAxis, Quantizer};
-use super::rangecoder::{BitModel, FreqModel, IntModel, RangeDecoder, RangeEncoder};
-use super::{unzigzag64, zigzag64};
+use super::rangecoder::{BitModel, FreqModel, IntModel, RangeDecoder};
+use super::unzigzag64;
+#[cfg(any(feature = "encoder", feature = "internals"))]
+use super::{rangecoder::RangeEncoder, zigzag64};
 use crate::error::{Error, Result};
 use crate::mesh::topology::NONE;
-use crate::mesh::{Axis, BoundarySurface, Group, PatchKind};
+#[cfg(any(feature = "encoder", feature = "internals"))]
+use crate::mesh::Group;
+use crate::mesh::{Axis, BoundarySurface, PatchKind};
 
 const PATCH_CLOSED: u8 = 0;
 const PATCH_PLANE: u8 = 1;
@@ -30,6 +34,7 @@ const PATCH_TORUS: u8 = 5;
 pub const KINDS: usize = 6;
 pub const KINDS_V3: usize = 4;
 /// Axis directions are stored as three i16 components scaled by this.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 const DIRECTION_SCALE: f64 = 32767.0;
 /// Length of the move-to-front list of axis directions (version 3).
 const RECENT_DIRECTIONS: usize = 8;
@@ -40,11 +45,13 @@ const MAX_ORIGIN: u64 = 1 << 52;
 const ESCAPE: u32 = u32::MAX - 1;
 
 /// The section (`None` when every group is closed) and the grid axes the decoder will see.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub type EncodedPatches = (Option<Vec<u8>>, Vec<Option<GridAxis>>);
 
 /// Patch kinds per group, and the grid axes of cylinders and cones (for §8.2's arcs).
 pub type DecodedPatches = (Vec<PatchKind>, Vec<Option<GridAxis>>);
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn kind_of(patch: &PatchKind) -> (u8, Option<Axis>) {
     match *patch {
         PatchKind::Closed => (PATCH_CLOSED, None),
@@ -57,6 +64,7 @@ fn kind_of(patch: &PatchKind) -> (u8, Option<Axis>) {
 }
 
 /// A torus's major radius in grid units (version 4).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn quantize_major_radius(patch: &PatchKind, quant: &Quantizer, name: &str) -> Result<i64> {
     let PatchKind::Boundary(BoundarySurface::Torus { major_radius, .. }) = *patch else {
         return Ok(0);
@@ -78,6 +86,7 @@ fn quantize_major_radius(patch: &PatchKind, quant: &Quantizer, name: &str) -> Re
 /// The axis as version 3 stores it: direction as i16 components; the origin in grid units,
 /// for a cylinder moved along the (stored) direction to the point whose dominant coordinate
 /// (largest |component|, lowest index on ties) is the middle of the grid, `2^(bits-1)`.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn quantize_axis(kind: u8, axis: &Axis, quant: &Quantizer, name: &str) -> Result<GridAxisBits> {
     let d = axis.direction;
     let len = d.length();
@@ -200,6 +209,7 @@ impl Models {
     }
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 fn encode_coord(enc: &mut RangeEncoder, model: &mut IntModel, v: i64) {
     let z = zigzag64(v);
     if z < u64::from(ESCAPE) {
@@ -236,6 +246,7 @@ fn decode_coord(dec: &mut RangeDecoder, model: &mut IntModel, field: &'static st
 
 /// Writes the version-4 section (`None` when every group is closed) and returns the grid
 /// axes the decoder will see, per group.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn encode(groups: &[Group], quant: &Quantizer) -> Result<EncodedPatches> {
     let mut axes = Vec::with_capacity(groups.len());
     if groups.iter().all(|g| g.patch == PatchKind::Closed) {

@@ -23,6 +23,7 @@ pub const FREQ_INCREMENT: u32 = 24;
 pub const FREQ_LIMIT: u32 = 1 << 13;
 
 /// Encoder state: `low` holds 33 significant bits (the carry lives in bit 32).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub struct RangeEncoder {
     low: u64,
     range: u32,
@@ -33,12 +34,14 @@ pub struct RangeEncoder {
     first: bool,
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl Default for RangeEncoder {
     fn default() -> Self {
         Self::new()
     }
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl RangeEncoder {
     pub fn new() -> Self {
         RangeEncoder {
@@ -341,6 +344,7 @@ impl FreqModel {
         }
     }
 
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn encode(&mut self, enc: &mut RangeEncoder, s: usize) {
         let cum: u32 = self.counts[..s].iter().sum();
         enc.encode_freq(cum, self.counts[s], self.total);
@@ -374,10 +378,6 @@ impl FreqModel {
         self.update(s);
         Ok((s, count))
     }
-
-    pub fn cost(&self, s: usize) -> f64 {
-        -(f64::from(self.counts[s]) / f64::from(self.total)).log2()
-    }
 }
 
 /// Largest magnitude class an [`IntModel`] codes: values up to 2^32 - 2.
@@ -403,6 +403,7 @@ impl Default for IntModel {
 }
 
 impl IntModel {
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn encode(&mut self, enc: &mut RangeEncoder, v: u32) {
         let x = u64::from(v) + 1;
         let k = 63 - x.leading_zeros() as usize;

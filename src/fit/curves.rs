@@ -6,8 +6,8 @@
 //! curve per chain and both adjacent patches use its control points, which is what makes
 //! the assembled control mesh watertight (design.md). Fitting that curve needs the crease
 //! masks of `src/subdiv/`; this module only provides the topology, a first Douglas-Peucker
-//! control polygon per chain, and the seam [`CreaseCurveEvaluator`] /
-//! [`chain_fit_error`] through which the subdivision code will plug in.
+//! control polygon per chain, and (built for the tests until then) the seam
+//! `CreaseCurveEvaluator` / `chain_fit_error` through which the subdivision code will plug in.
 
 use std::collections::BTreeMap;
 
@@ -118,6 +118,7 @@ pub struct CurveNetwork {
     pub simplify_tolerance: f64,
 }
 
+#[cfg(test)]
 impl CurveNetwork {
     pub fn is_corner(&self, v: u32) -> bool {
         self.corners.binary_search_by_key(&v, |c| c.vertex).is_ok()
@@ -151,6 +152,7 @@ impl CurveNetwork {
 /// subdivision curve of a control polygon whose two end points are corners (fixed).
 /// The fitting stage will implement it with the shared crease masks (one implementation
 /// of each rule); [`PolylineCurve`] is the trivial stand-in used until then.
+#[cfg(test)]
 pub trait CreaseCurveEvaluator {
     /// Dense points on the limit curve, starting at `control[0]` and ending at
     /// `control[last]`, e.g. the limit positions after a few refinement steps.
@@ -159,8 +161,10 @@ pub trait CreaseCurveEvaluator {
 
 /// Stand-in evaluator: the control polygon itself (what the curve would be without
 /// subdivision). Replace with the crease-curve evaluator from `subdiv` when fitting.
+#[cfg(test)]
 pub struct PolylineCurve;
 
+#[cfg(test)]
 impl CreaseCurveEvaluator for PolylineCurve {
     fn dense_curve(&self, control: &[DVec3]) -> Vec<DVec3> {
         control.to_vec()
@@ -170,6 +174,7 @@ impl CreaseCurveEvaluator for PolylineCurve {
 /// Two-sided max distance between the curve evaluated from `control` and the chain
 /// polyline `target` (points of each sampled against the other's segments, plus segment
 /// midpoints). This is the error the curve fitter will drive below its tolerance.
+#[cfg(test)]
 pub fn chain_fit_error(
     control: &[DVec3],
     target: &[DVec3],
@@ -184,6 +189,7 @@ fn point_segment_distance(p: DVec3, a: DVec3, b: DVec3) -> f64 {
     (p - a.lerp(b, t)).length()
 }
 
+#[cfg(test)]
 fn point_polyline_distance(p: DVec3, line: &[DVec3]) -> f64 {
     match line.len() {
         0 => f64::INFINITY,
@@ -196,6 +202,7 @@ fn point_polyline_distance(p: DVec3, line: &[DVec3]) -> f64 {
 }
 
 /// Symmetric max distance between two polylines, sampled at vertices and edge midpoints.
+#[cfg(test)]
 pub fn polyline_hausdorff(a: &[DVec3], b: &[DVec3]) -> f64 {
     let one_sided = |x: &[DVec3], y: &[DVec3]| {
         let mut d: f64 = 0.0;

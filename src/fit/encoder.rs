@@ -177,7 +177,7 @@ pub enum Reference {
     InputMesh,
     /// The input mesh, less each facet's chord error (its estimated distance from the CAD
     /// surface it tessellates): for coarse tessellations, whose facets a smooth surface
-    /// cannot come nearer to than their sagitta ([`FitOptions::chord_allowance`]).
+    /// cannot come nearer to than their sagitta ([`crate::EncodeOptions::chord_allowance`]).
     InputBeyondChord,
     /// A B-rep: faces on analytic surfaces against those surfaces, the others against a
     /// tessellation of the B-rep less its chord error (STEP input).

@@ -25,6 +25,7 @@ impl ExactSurface {
     /// The surface, with unit directions; `None` when a parameter is not finite, a radius
     /// is negative, a cone's half angle is not strictly between 0 and 90 degrees or a
     /// direction is zero (such a surface would measure nothing sensible).
+    #[cfg(any(feature = "step", feature = "internals"))]
     pub fn new(surface: AnalyticSurface) -> Option<ExactSurface> {
         let unit = |a: Axis| -> Option<Axis> {
             let direction = a.direction.try_normalize()?;

@@ -554,6 +554,7 @@ pub fn refine(start: &AnalyticSurface, points: &[DVec3]) -> Option<SurfaceFit> {
 }
 
 /// Fits `kind` to the points (normals are needed for cylinder, cone and torus).
+#[cfg(test)]
 pub fn fit_kind(kind: SurfaceKind, points: &[DVec3], normals: &[DVec3]) -> Option<SurfaceFit> {
     match kind {
         SurfaceKind::Plane => fit_plane(points),
@@ -586,6 +587,7 @@ pub(crate) fn fit_kind_within(
 }
 
 /// The first kind of `kinds` (in order) whose fit has a max residual within `tolerance`.
+#[cfg(test)]
 pub fn fit_first_within(
     kinds: &[SurfaceKind],
     points: &[DVec3],

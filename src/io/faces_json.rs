@@ -12,7 +12,9 @@
 //!   CASCADE `gp_Cone` convention: `radius` is the radius at `location`, growing along
 //!   `z_axis`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+#[cfg(feature = "internals")]
+use std::path::PathBuf;
 
 use glam::DVec3;
 use serde::Deserialize;
@@ -66,6 +68,7 @@ impl SurfaceType {
     }
 
     /// The display name (as in the manifest's histograms).
+    #[cfg(feature = "internals")]
     pub fn name(&self) -> &str {
         match self {
             SurfaceType::Plane => "Plane",
@@ -86,6 +89,7 @@ impl SurfaceType {
     /// Planes, cylinders, cones, spheres and tori: surfaces with coordinates in which a
     /// face is spanned by its boundary curves (boundary patches; a sphere or torus face only
     /// when it is narrow enough, see `fit::classify`).
+    #[cfg(test)]
     pub fn is_boundary_patch_type(&self) -> bool {
         matches!(
             self,
@@ -142,6 +146,7 @@ struct SidecarFace {
 }
 
 /// Reads a `<name>.faces.json` sidecar. Faces come in file order.
+#[cfg(feature = "internals")]
 pub fn read_faces_json(path: &Path) -> Result<Vec<FaceInfo>> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     parse_faces_json(&bytes, path)
@@ -224,6 +229,7 @@ pub fn parse_faces_json(bytes: &[u8], path: &Path) -> Result<Vec<FaceInfo>> {
 /// The sidecar of a corpus mesh, if it exists: `tess/X_coarse.obj` and `tess/X_fine.obj` ->
 /// `tess/X.faces.json`; otherwise (`abc/X.obj`, `tess/X_cadexport.obj`) `X.faces.json` next
 /// to the mesh.
+#[cfg(feature = "internals")]
 pub fn sidecar_path_for(mesh_path: &Path) -> Option<PathBuf> {
     let stem = mesh_path.file_stem()?.to_str()?;
     let dir = mesh_path.parent().unwrap_or_else(|| Path::new(""));

@@ -38,6 +38,7 @@
 use std::fmt;
 use std::path::Path;
 
+#[cfg(feature = "internals")]
 use glam::DVec3;
 
 use crate::error::{Error, Result};
@@ -54,6 +55,7 @@ pub mod step;
 pub mod stl;
 pub mod weld;
 
+#[cfg(feature = "internals")]
 pub use faces_json::{
     face_info_for_groups, read_faces_json, sidecar_path_for, FaceInfo, SurfaceType,
 };
@@ -193,6 +195,7 @@ impl ReadReport {
     /// True when the mesh was used exactly as stored: nothing welded, removed or repaired.
     /// (STL input is never "as stored": its vertices are always welded.) Informational notes
     /// in `repairs` (ignored statements, vertices kept apart) do not count as changes.
+    #[cfg(feature = "internals")]
     pub fn unchanged(&self) -> bool {
         self.welded_vertices == 0
             && self.unreferenced_vertices == 0
@@ -259,11 +262,13 @@ impl Default for ReadOptions {
 }
 
 /// Reads a mesh file with the default [`ReadOptions`]; the format comes from the extension.
+#[cfg(feature = "internals")]
 pub fn read_mesh(path: &Path) -> Result<(ControlMesh, ReadReport)> {
     read_mesh_with(path, &ReadOptions::default())
 }
 
 /// Reads a mesh file; the format comes from the extension.
+#[cfg(feature = "internals")]
 pub fn read_mesh_with(path: &Path, opts: &ReadOptions) -> Result<(ControlMesh, ReadReport)> {
     let format = MeshFormat::from_path(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
@@ -298,6 +303,7 @@ pub fn read_mesh_bytes_with(
 }
 
 /// Options of the mesh writers ([`write_mesh_with`], [`write_mesh_to_with`]).
+#[cfg(feature = "internals")]
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct WriteOptions {
     /// glTF only (other formats refuse it): positions as normalized 16-bit integers under a
@@ -310,11 +316,13 @@ pub struct WriteOptions {
 /// extension. `normals`: optional per-vertex normals (written as `vn` in OBJ, normal
 /// attribute in PLY/glb, ignored for STL which has per-face normals computed from geometry,
 /// and for OFF).
+#[cfg(feature = "internals")]
 pub fn write_mesh(path: &Path, mesh: &ControlMesh, normals: Option<&[DVec3]>) -> Result<()> {
     write_mesh_with(path, mesh, normals, &WriteOptions::default())
 }
 
 /// [`write_mesh`] with `opts`.
+#[cfg(feature = "internals")]
 pub fn write_mesh_with(
     path: &Path,
     mesh: &ControlMesh,
@@ -341,6 +349,7 @@ pub fn write_mesh_with(
 
 /// Writes a mesh in `format` to `writer` with the default [`WriteOptions`]. The mesh must
 /// pass [`ControlMesh::validate`]; `normals`, when given, must have one entry per vertex.
+#[cfg(feature = "internals")]
 pub fn write_mesh_to(
     writer: &mut dyn std::io::Write,
     format: MeshFormat,
@@ -351,6 +360,7 @@ pub fn write_mesh_to(
 }
 
 /// [`write_mesh_to`] with `opts`.
+#[cfg(feature = "internals")]
 pub fn write_mesh_to_with(
     writer: &mut dyn std::io::Write,
     format: MeshFormat,
@@ -364,6 +374,7 @@ pub fn write_mesh_to_with(
 
 /// Refuses what no writer can write: quantization outside glTF, an invalid mesh, a normal
 /// count that is not the vertex count.
+#[cfg(feature = "internals")]
 fn check_writable(
     format: MeshFormat,
     mesh: &ControlMesh,
@@ -389,6 +400,7 @@ fn check_writable(
 }
 
 /// Runs the writer of `format` on a mesh [`check_writable`] accepted.
+#[cfg(feature = "internals")]
 fn write_checked(
     writer: &mut dyn std::io::Write,
     format: MeshFormat,
@@ -409,6 +421,7 @@ fn write_checked(
 
 /// The writers' output buffer: large enough that each write reaches the file in few system
 /// calls, since decoded meshes run to hundreds of megabytes.
+#[cfg(feature = "internals")]
 pub(crate) fn buffered(
     out: &mut dyn std::io::Write,
 ) -> std::io::BufWriter<&mut dyn std::io::Write> {
@@ -417,6 +430,7 @@ pub(crate) fn buffered(
 
 /// `mask[v]` is true for the corner vertices `v` of `mesh`: a lookup per vertex that does
 /// not search the set.
+#[cfg(feature = "internals")]
 pub(crate) fn corner_mask(mesh: &ControlMesh) -> Vec<bool> {
     let mut mask = vec![false; mesh.vertex_count()];
     for &c in &mesh.corners {
@@ -429,6 +443,7 @@ pub(crate) fn corner_mask(mesh: &ControlMesh) -> Vec<bool> {
 
 /// Triangulates face `f` as a fan from its first vertex (used by the STL and glb writers,
 /// which only store triangles).
+#[cfg(feature = "internals")]
 pub(crate) fn fan_triangles(face: &[u32]) -> impl Iterator<Item = [u32; 3]> + '_ {
     (1..face.len().saturating_sub(1)).map(move |i| [face[0], face[i], face[i + 1]])
 }

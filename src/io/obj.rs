@@ -28,6 +28,7 @@
 //! written file reads back to bit-identical f64 positions.
 
 use std::collections::HashMap;
+#[cfg(feature = "internals")]
 use std::io::{self, Write};
 use std::path::Path;
 
@@ -35,6 +36,7 @@ use glam::DVec3;
 
 use super::repair::RawMesh;
 use crate::error::{Error, Result};
+#[cfg(feature = "internals")]
 use crate::mesh::ControlMesh;
 
 /// Parses OBJ text into a [`RawMesh`] (file numbering, nothing welded yet).
@@ -300,6 +302,7 @@ fn resolve(i: i64, n_so_far: i64, line: usize, what: &str, path: &Path) -> Resul
 
 /// Writes `mesh` as OBJ: full-precision `v` lines, optional `vn` (then faces use `v//vn`),
 /// faces under `g` lines, `l` lines for sharp edges and `p` lines for corners.
+#[cfg(feature = "internals")]
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>) -> io::Result<()> {
     let mut w = super::buffered(out);
     writeln!(w, "# written by scode {}", env!("CARGO_PKG_VERSION"))?;

@@ -5,6 +5,7 @@
 //! are ignored), then one face per line (`n i1 ... in`, optional colour ignored). `#` starts a
 //! comment; blank lines are skipped. OFF has no groups, so everything is one unnamed group.
 
+#[cfg(feature = "internals")]
 use std::io::{self, Write};
 use std::path::Path;
 
@@ -12,6 +13,7 @@ use glam::DVec3;
 
 use super::repair::RawMesh;
 use crate::error::{Error, Result};
+#[cfg(feature = "internals")]
 use crate::mesh::ControlMesh;
 
 /// Parses OFF text into a [`RawMesh`].
@@ -160,6 +162,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
 
 /// Writes `mesh` as OFF (positions at full precision; groups, sharp edges and corners are
 /// not representable and are not written).
+#[cfg(feature = "internals")]
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh) -> io::Result<()> {
     let mut w = io::BufWriter::new(out);
     writeln!(w, "OFF")?;

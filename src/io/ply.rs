@@ -18,7 +18,9 @@
 //! names as comments, and a `sharp_edge` element.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::{self, BufReader, Write};
+use std::io::BufReader;
+#[cfg(feature = "internals")]
+use std::io::{self, Write};
 use std::path::Path;
 
 use glam::DVec3;
@@ -30,6 +32,7 @@ use ply_rs_bw::ply::{
 
 use super::repair::RawMesh;
 use crate::error::{Error, Result};
+#[cfg(feature = "internals")]
 use crate::mesh::ControlMesh;
 
 /// Face properties that carry the group, in order of preference.
@@ -384,6 +387,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
 }
 
 /// Writes `mesh` as binary little-endian PLY (see the module docs for the layout).
+#[cfg(feature = "internals")]
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh, normals: Option<&[DVec3]>) -> io::Result<()> {
     let mut w = super::buffered(out);
     let max_degree = mesh.faces().map(<[u32]>::len).max().unwrap_or(0);

@@ -9,14 +9,18 @@
 //! each, with a size check first); ascii goes through `stl_io`. The writer streams binary STL,
 //! with polygons fan-triangulated and face normals computed from the geometry.
 
-use std::io::{self, Cursor, Write};
+use std::io::Cursor;
+#[cfg(feature = "internals")]
+use std::io::{self, Write};
 use std::path::Path;
 
 use glam::DVec3;
 
+#[cfg(feature = "internals")]
 use super::fan_triangles;
 use super::repair::RawMesh;
 use crate::error::{Error, Result};
+#[cfg(feature = "internals")]
 use crate::mesh::ControlMesh;
 
 const HEADER_LEN: usize = 80;
@@ -120,6 +124,7 @@ fn parse_ascii(bytes: &[u8], path: &Path, raw: &mut RawMesh) -> Result<()> {
 /// Writes `mesh` as binary STL: polygons fan-triangulated, positions as f32, face normals
 /// from the geometry (zero for degenerate triangles). Each 50-byte triangle record goes
 /// straight from the mesh's arrays to the output.
+#[cfg(feature = "internals")]
 pub fn write(out: &mut dyn Write, mesh: &ControlMesh) -> io::Result<()> {
     let triangles: usize = mesh.faces().map(|f| f.len().saturating_sub(2)).sum();
     let count = u32::try_from(triangles)

@@ -83,17 +83,20 @@ fn axial(axis: &Axis, p: DVec3) -> (f64, f64, DVec3) {
 impl AnalyticSurface {
     /// The surface moved by a rigid placement: `point` maps positions, `vector` directions
     /// (renormalised); sizes are unchanged.
+    #[cfg(any(feature = "step", feature = "internals"))]
     pub fn placed(self, point: impl Fn(DVec3) -> DVec3, vector: impl Fn(DVec3) -> DVec3) -> Self {
         self.mapped(point, |v| vector(v).normalize_or_zero(), 1.0)
     }
 
     /// The surface with every length times `s` (a change of unit about the origin).
+    #[cfg(any(feature = "step", feature = "internals"))]
     pub fn scaled(self, s: f64) -> Self {
         self.mapped(|p| p * s, |d| d, s)
     }
 
     /// The surface with its points mapped by `point`, its unit directions by `direction`
     /// and its radii times `length`.
+    #[cfg(any(feature = "step", feature = "internals"))]
     fn mapped(
         self,
         point: impl Fn(DVec3) -> DVec3,

@@ -5,12 +5,16 @@
 //! tessellations (raw mode stores the input mesh itself as the control mesh), so readers,
 //! the codec, subdivision and fitting all speak it.
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 mod analytic;
+#[cfg(any(feature = "encoder", feature = "internals"))]
 mod buckets;
 mod tolerance;
 pub mod topology;
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub use analytic::{AnalyticSurface, Residuals, SurfaceKind};
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub use buckets::Buckets;
 pub use tolerance::Tolerance;
 
@@ -127,6 +131,7 @@ pub fn edge_key(a: u32, b: u32) -> (u32, u32) {
 
 /// When the bounding box of `positions` has no finite diagonal, the vertices at the ends of
 /// its longest side (the ones to name in an error).
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub(crate) fn overflowing_extent(positions: &[DVec3]) -> Option<(usize, usize)> {
     let &first = positions.first()?;
     let (mut lo, mut hi) = ([0usize; 3], [0usize; 3]);
@@ -180,6 +185,7 @@ impl ControlMesh {
     }
 
     /// Appends a vertex and returns its index.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn push_vertex(&mut self, p: DVec3) -> u32 {
         self.positions.push(p);
         (self.positions.len() - 1) as u32
@@ -197,6 +203,7 @@ impl ControlMesh {
     }
 
     /// Appends a group and returns its index.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn push_group(&mut self, name: impl Into<String>, patch: PatchKind) -> u32 {
         self.groups.push(Group {
             name: name.into(),
@@ -206,16 +213,19 @@ impl ControlMesh {
     }
 
     /// Marks the edge `a`-`b` sharp.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn set_sharp(&mut self, a: u32, b: u32) {
         self.sharp_edges.insert(edge_key(a, b));
     }
 
+    #[cfg(test)]
     pub fn is_sharp(&self, a: u32, b: u32) -> bool {
         self.sharp_edges.contains(&edge_key(a, b))
     }
 
     /// Flags every edge shared by faces of two different groups sharp: the CAD-face
     /// boundaries of a tessellated B-rep are exactly the creases of its control mesh.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn sharpen_group_boundaries(&mut self) {
         let mut first: std::collections::BTreeMap<(u32, u32), u32> = Default::default();
         let mut sharp = Vec::new();
@@ -237,6 +247,7 @@ impl ControlMesh {
     }
 
     /// True when every face is a triangle.
+    #[cfg(test)]
     pub fn is_triangle_mesh(&self) -> bool {
         self.faces().all(|f| f.len() == 3)
     }
@@ -264,6 +275,7 @@ impl ControlMesh {
     /// (squared, for distances): finite coordinates near 1e154 or beyond make them infinite,
     /// and the encoded file would hold a grid the decoder refuses. (The mesh readers refuse
     /// such files when they read them, naming the line.)
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn check_extent(&self) -> Result<()> {
         let Some((lo, hi)) = overflowing_extent(&self.positions) else {
             return Ok(());

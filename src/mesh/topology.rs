@@ -9,13 +9,16 @@
 //! mesh-boundary half-edges) follow, so after construction **every half-edge has a twin**, which
 //! keeps traversals (Face Fixer, one-ring walks, subdivision) free of boundary special cases.
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 use crate::error::{Error, Result};
+#[cfg(any(feature = "encoder", feature = "internals"))]
 use crate::mesh::{edge_key, ControlMesh};
 
 /// Marker for "no half-edge".
 pub const NONE: u32 = u32::MAX;
 
 /// Oriented 2-manifold half-edge structure with hole faces. See the module docs.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 #[derive(Clone, Debug, Default)]
 pub struct HalfEdgeMesh {
     /// Number of vertices of the source mesh (isolated vertices included).
@@ -44,6 +47,7 @@ pub struct HalfEdgeMesh {
 
 /// How twins are paired when an undirected edge does not have exactly one half-edge in each
 /// direction.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Pairing {
     /// Fail with an error naming the edge.
@@ -52,6 +56,7 @@ enum Pairing {
     Tolerant,
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl HalfEdgeMesh {
     /// Builds the structure, failing with [`Error::Mesh`] on a non-manifold edge (more than two
     /// faces), inconsistently oriented neighbours, or a non-manifold vertex (two surface sheets
@@ -120,6 +125,7 @@ impl HalfEdgeMesh {
     }
 
     /// True for half-edges of hole faces.
+    #[cfg(test)]
     #[inline]
     pub fn is_hole_half_edge(&self, h: u32) -> bool {
         h as usize >= self.real_half_edge_count
@@ -137,6 +143,7 @@ impl HalfEdgeMesh {
     }
 
     /// Number of hole faces = number of mesh boundary loops.
+    #[cfg(test)]
     pub fn boundary_loop_count(&self) -> usize {
         self.face_count() - self.real_face_count
     }
@@ -155,6 +162,7 @@ impl HalfEdgeMesh {
 
     /// Boundary loops as vertex cycles (each cycle follows the mesh boundary half-edges, so
     /// the mesh lies on the left).
+    #[cfg(test)]
     pub fn boundary_loops(&self) -> Vec<Vec<u32>> {
         (self.real_face_count..self.face_count())
             .map(|f| {
@@ -170,6 +178,7 @@ impl HalfEdgeMesh {
 
     /// Connected component id of every mesh face (components numbered by their lowest face),
     /// and the number of components.
+    #[cfg(test)]
     pub fn face_components(&self) -> (Vec<u32>, usize) {
         let nf = self.real_face_count;
         let mut comp = vec![NONE; nf];
@@ -196,6 +205,7 @@ impl HalfEdgeMesh {
     }
 
     /// Outgoing half-edges of vertex `v` in rotation order (including hole half-edges).
+    #[cfg(test)]
     pub fn vertex_out_half_edges(&self, v: u32) -> Vec<u32> {
         let start = self.vertex_out[v as usize];
         let mut out = Vec::new();
@@ -379,6 +389,7 @@ impl HalfEdgeMesh {
 /// corners are carried over (sharp edges and corners are NOT copied to the duplicates; callers
 /// map through the returned table). Non-orientable input (e.g. a Möbius strip) may still fail
 /// to build afterwards.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub fn cut_non_manifold(mesh: &ControlMesh) -> Result<(ControlMesh, Vec<u32>)> {
     let mut he = HalfEdgeMesh::corners(mesh)?;
     he.pair_twins(Pairing::Tolerant)?;

@@ -2,12 +2,16 @@
 
 use glam::DVec3;
 
-use super::sampling::{
-    sample_surface, surface_area, EdgeSamples, SampleCount, SurfaceSample, TriangleSamples,
+use super::sampling::{sample_surface, EdgeSamples, SampleCount, SurfaceSample};
+use super::surface::{ClosestPoint, TriangleSurface};
+use crate::mesh::Tolerance;
+#[cfg(feature = "internals")]
+use {
+    super::sampling::{surface_area, TriangleSamples},
+    super::surface::fan_triangulate,
+    crate::error::Result,
+    crate::mesh::ControlMesh,
 };
-use super::surface::{fan_triangulate, ClosestPoint, TriangleSurface};
-use crate::error::Result;
-use crate::mesh::{ControlMesh, Tolerance};
 
 /// How densely to sample each mesh when measuring distances.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,6 +53,7 @@ impl Default for DistanceOptions {
 }
 
 /// Statistics of the distances from sample points of one mesh to the other surface.
+#[cfg(feature = "internals")]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OneSided {
     pub max: f64,
@@ -65,6 +70,7 @@ pub struct OneSided {
 /// The symmetric values follow the usual Hausdorff convention: the larger of the two
 /// directions (`max` is the sampled Hausdorff distance). `diagonal` is the bounding-box
 /// diagonal of A and B together, for relative errors ([`DistanceReport::relative`]).
+#[cfg(feature = "internals")]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct DistanceReport {
     pub max_a_to_b: f64,
@@ -87,6 +93,7 @@ pub struct DistanceReport {
     pub worst_b_to_a: DVec3,
 }
 
+#[cfg(feature = "internals")]
 impl DistanceReport {
     /// The report of two one-sided measurements, A to B and B to A, of surfaces whose
     /// common bounding-box diagonal is `diagonal`.
@@ -139,6 +146,7 @@ impl DistanceReport {
 const CHUNK: usize = 256;
 
 /// Closest points on `surface` to each of `points`, in the order of `points`.
+#[cfg(feature = "internals")]
 pub fn closest_points(points: &[DVec3], surface: &TriangleSurface) -> Vec<ClosestPoint> {
     closest_points_near(points, surface, f64::MAX)
 }
@@ -197,6 +205,7 @@ pub fn closest_points_near_with<R: Copy + Default + Send>(
 }
 
 /// Distances from each of `points` to `surface`, in the order of `points`.
+#[cfg(feature = "internals")]
 pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> {
     closest_points(points, surface)
         .iter()
@@ -205,6 +214,7 @@ pub fn point_distances(points: &[DVec3], surface: &TriangleSurface) -> Vec<f64> 
 }
 
 /// Statistics of the distances from `points` to `surface` (sequential, ordered reduction).
+#[cfg(feature = "internals")]
 pub fn one_sided_distances(points: &[DVec3], surface: &TriangleSurface) -> OneSided {
     one_sided_of(points, &point_distances(points, surface), points.len())
 }
@@ -212,6 +222,7 @@ pub fn one_sided_distances(points: &[DVec3], surface: &TriangleSurface) -> OneSi
 /// Statistics of the distances `d` of `points` (sequential, ordered reduction): the max over
 /// all, the mean and RMS over the first `area` (the vertices and area-weighted points; edge
 /// points, placed by length, would weigh the edges of long triangles above their area).
+#[cfg(feature = "internals")]
 pub(super) fn one_sided_of(points: &[DVec3], d: &[f64], area: usize) -> OneSided {
     let mut out = OneSided {
         count: d.len(),
@@ -238,6 +249,7 @@ pub(super) fn one_sided_of(points: &[DVec3], d: &[f64], area: usize) -> OneSided
 
 /// Sampled symmetric distance between the surfaces of `a` and `b` (polygons are fan
 /// triangulated). Errors if either mesh is invalid or has no faces.
+#[cfg(feature = "internals")]
 pub fn hausdorff(
     a: &ControlMesh,
     b: &ControlMesh,
@@ -260,18 +272,21 @@ pub fn hausdorff(
 }
 
 /// Triangles of one leaf of [`blocked_surface`]'s index.
+#[cfg(feature = "internals")]
 const LEAF_TRIANGLES: usize = 16;
 
 /// `mesh` fan-triangulated and indexed by runs of consecutive triangles: a decoded
 /// surface (subdivision lists each control face's descendants together) gets a tree many
 /// times smaller than one leaf per triangle, which matters at millions of triangles; a mesh
 /// in any other order stays correct (runs end where their box outgrows a typical triangle's).
+#[cfg(feature = "internals")]
 pub(super) fn blocked_surface(mesh: &ControlMesh) -> Result<TriangleSurface> {
     let (triangles, _) = fan_triangulate(mesh)?;
     TriangleSurface::with_blocks(mesh.positions.clone(), triangles, LEAF_TRIANGLES)
 }
 
 /// `opts`' edge spacing in model units for meshes of joint diagonal `diagonal` (0: none).
+#[cfg(feature = "internals")]
 pub(super) fn edge_spacing(opts: &DistanceOptions, diagonal: f64) -> f64 {
     opts.edge_spacing.map_or(0.0, |t| t.resolve(diagonal))
 }
@@ -307,6 +322,7 @@ pub fn sample_density(opts: &DistanceOptions, reference_area: f64) -> f64 {
     match opts.samples {
         SampleCount::Total(n) if reference_area > 0.0 => n as f64 / reference_area,
         SampleCount::Total(_) => 0.0,
+        #[cfg(feature = "internals")]
         SampleCount::PerArea(d) => d,
     }
 }
@@ -315,6 +331,7 @@ pub fn sample_density(opts: &DistanceOptions, reference_area: f64) -> f64 {
 /// `opts.include_vertices`), its random points at `density` ([`TriangleSamples`]), then the
 /// points of its thin triangles' long edges at `spacing`; and how many come before the
 /// edge points.
+#[cfg(feature = "internals")]
 fn measured_samples(
     s: &TriangleSurface,
     opts: &DistanceOptions,

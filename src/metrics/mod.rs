@@ -5,29 +5,37 @@
 //! report (design.md: "Distances live in `metrics`"). Nothing here depends on `fit` or
 //! `codec`.
 
+#[cfg(feature = "internals")]
 mod by_group;
 mod distance;
+#[cfg(feature = "internals")]
 mod rate;
 mod sampling;
 mod surface;
 
+#[cfg(feature = "internals")]
 pub use by_group::hausdorff_by_group;
+#[cfg(feature = "internals")]
 pub use distance::{
-    closest_points, closest_points_near, closest_points_near_with, edge_spacing_for_tolerance,
-    hausdorff, one_sided_distances, point_distances, DistanceOptions, DistanceReport, OneSided,
+    closest_points, hausdorff, one_sided_distances, point_distances, DistanceReport, OneSided,
     DEFAULT_EDGE_SPACING,
 };
+pub use distance::{
+    closest_points_near, closest_points_near_with, edge_spacing_for_tolerance, DistanceOptions,
+};
 pub(crate) use distance::{reference_samples, sample_density};
+#[cfg(feature = "internals")]
 pub use rate::{measure_against_input, raw_binary_bytes, RateDistortion};
 pub(crate) use sampling::surface_area;
 #[cfg(test)]
 pub(crate) use sampling::SplitMixForTests;
-pub use sampling::{
-    sample_surface, space_filling_order, EdgeSamples, RandomSamples, SampleCount, SurfaceSample,
-    TriangleSamples,
-};
+#[cfg(feature = "internals")]
+pub use sampling::{sample_surface, RandomSamples};
+pub use sampling::{space_filling_order, EdgeSamples, SampleCount, SurfaceSample, TriangleSamples};
 pub(crate) use surface::box_distance;
-pub use surface::{closest_point_on_triangle, segment_parameter, ClosestPoint, TriangleSurface};
+#[cfg(feature = "internals")]
+pub use surface::{closest_point_on_triangle, ClosestPoint};
+pub use surface::{segment_parameter, TriangleSurface};
 
 #[cfg(test)]
 mod tests {

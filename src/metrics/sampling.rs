@@ -8,6 +8,7 @@ pub enum SampleCount {
     /// Exactly this many area-weighted random samples.
     Total(usize),
     /// This many samples per unit area (rounded down, at least one if the mesh has area).
+    #[cfg(feature = "internals")]
     PerArea(f64),
 }
 
@@ -123,9 +124,11 @@ impl<'a> RandomSamples<'a> {
         } else {
             match count {
                 SampleCount::Total(n) => n,
+                #[cfg(feature = "internals")]
                 SampleCount::PerArea(d) if d > 0.0 && d.is_finite() => {
                     ((d * total) as usize).max(1)
                 }
+                #[cfg(feature = "internals")]
                 SampleCount::PerArea(_) => 0,
             }
         };
@@ -142,6 +145,7 @@ impl<'a> RandomSamples<'a> {
         self.count
     }
 
+    #[cfg(feature = "internals")]
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
@@ -270,6 +274,7 @@ impl<'a> TriangleSamples<'a> {
         self.samples.len()
     }
 
+    #[cfg(feature = "internals")]
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
     }
@@ -422,6 +427,7 @@ impl<'a> EdgeSamples<'a> {
         self.start.last().copied().unwrap_or(0)
     }
 
+    #[cfg(feature = "internals")]
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -7,6 +7,7 @@ use parry3d_f64::query::PointQueryWithLocation;
 use parry3d_f64::shape::{TriMesh, TriMeshFlags};
 
 use crate::error::{Error, Result};
+#[cfg(feature = "internals")]
 use crate::mesh::ControlMesh;
 
 /// Result of a closest-point query.
@@ -30,6 +31,7 @@ pub struct ClosestPoint {
 pub struct TriangleSurface {
     index: Index,
     /// By triangle; `None` when every triangle is its own face (no array for the identity).
+    #[cfg(feature = "internals")]
     source_face: Option<Vec<u32>>,
 }
 
@@ -66,7 +68,14 @@ impl TriangleSurface {
     /// Builds the BVH over `triangles` (indices into `positions`). Errors on an empty mesh,
     /// out-of-range indices or non-finite positions.
     pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Result<Self> {
-        Self::with_source(positions, triangles, None)
+        check_triangles(&positions, &triangles)?;
+        let trimesh = TriMesh::with_flags(positions, triangles, TriMeshFlags::empty())
+            .map_err(|e| Error::Mesh(format!("cannot build triangle BVH: {e:?}")))?;
+        Ok(TriangleSurface {
+            index: Index::Triangles(trimesh),
+            #[cfg(feature = "internals")]
+            source_face: None,
+        })
     }
 
     /// Like [`TriangleSurface::new`], with one BVH leaf per `block` consecutive triangles
@@ -119,28 +128,18 @@ impl TriangleSurface {
                 bvh,
                 runs,
             },
+            #[cfg(feature = "internals")]
             source_face: None,
         })
     }
 
-    fn with_source(
-        positions: Vec<DVec3>,
-        triangles: Vec<[u32; 3]>,
-        source_face: Option<Vec<u32>>,
-    ) -> Result<Self> {
-        check_triangles(&positions, &triangles)?;
-        let trimesh = TriMesh::with_flags(positions, triangles, TriMeshFlags::empty())
-            .map_err(|e| Error::Mesh(format!("cannot build triangle BVH: {e:?}")))?;
-        Ok(TriangleSurface {
-            index: Index::Triangles(trimesh),
-            source_face,
-        })
-    }
-
     /// Triangulates every face of `mesh` by a fan from its first vertex and builds the BVH.
+    #[cfg(feature = "internals")]
     pub fn from_control_mesh(mesh: &ControlMesh) -> Result<Self> {
         let (triangles, source) = fan_triangulate(mesh)?;
-        Self::with_source(mesh.positions.clone(), triangles, Some(source))
+        let mut surface = Self::new(mesh.positions.clone(), triangles)?;
+        surface.source_face = Some(source);
+        Ok(surface)
     }
 
     pub fn positions(&self) -> &[DVec3] {
@@ -159,6 +158,7 @@ impl TriangleSurface {
 
     /// Face of the source `ControlMesh` that triangle `t` was cut from (identity for
     /// [`TriangleSurface::new`]).
+    #[cfg(feature = "internals")]
     pub fn source_face(&self, t: u32) -> u32 {
         self.source_face.as_ref().map_or(t, |s| s[t as usize])
     }
@@ -195,6 +195,7 @@ impl TriangleSurface {
     }
 
     /// Distance from `p` to the surface.
+    #[cfg(feature = "internals")]
     pub fn distance(&self, p: DVec3) -> f64 {
         self.closest_point(p).distance
     }
@@ -321,6 +322,7 @@ pub(crate) fn box_distance(lo: DVec3, hi: DVec3, p: DVec3) -> f64 {
 
 /// Fan triangulation of every face (first vertex as apex) with the source face of each
 /// triangle. Errors when an index is out of range.
+#[cfg(feature = "internals")]
 pub(crate) fn fan_triangulate(mesh: &ControlMesh) -> Result<(Vec<[u32; 3]>, Vec<u32>)> {
     let nv = mesh.positions.len();
     let mut tris = Vec::with_capacity(mesh.face_vertices.len());

@@ -2,11 +2,13 @@
 //! `scode report` do ([`measure_file_against_input`]).
 
 use crate::codec::Limits;
-use crate::error::Result;
-use crate::mesh::ControlMesh;
-use crate::metrics::DistanceOptions;
-use crate::metrics::{hausdorff, hausdorff_by_group, DistanceReport};
-use crate::surface::{decode_default_surface, DefaultSurface};
+#[cfg(feature = "internals")]
+use crate::{
+    error::Result,
+    mesh::ControlMesh,
+    metrics::{hausdorff, hausdorff_by_group, DistanceOptions, DistanceReport},
+    surface::{decode_default_surface, DefaultSurface},
+};
 
 /// The file `bytes` against `input`: the surface of its default level (a raw-mode file: its
 /// stored mesh) as A, the input as B, sampled as `opts` says (`scode info --against` and
@@ -15,6 +17,7 @@ use crate::surface::{decode_default_surface, DefaultSurface};
 /// are expected within (the tolerance, when there is one): it only splits the work. A
 /// control mesh is measured group by group ([`hausdorff_by_group`]), so memory holds the
 /// level's positions, not its triangles.
+#[cfg(feature = "internals")]
 pub fn measure_file_against_input(
     bytes: &[u8],
     input: &ControlMesh,

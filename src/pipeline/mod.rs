@@ -13,18 +13,21 @@ use glam::DVec3;
 
 mod check;
 mod search;
+#[cfg(feature = "internals")]
 pub use crate::surface::{
     decode_surface, file_tolerance, AccuracyReport, DecodedSurface, Detail, SurfaceOptions,
     DEFAULT_RELATIVE_TOLERANCE, TOLERANCE_STEPS,
 };
+#[cfg(feature = "internals")]
 pub use check::measure_file_against_input;
 use check::trusted_limits;
-pub use search::{
-    encode_fitted, Effort, LOCAL_REFINEMENT_MAX_TRIANGLES, PLAIN_PLANES_MAX_TRIANGLES,
-    TRAVERSAL_STARTS,
-};
 #[cfg(feature = "step")]
-pub use search::{encode_step, encode_step_bytes, StepTessellation, STEP_TESSELLATIONS};
+pub use search::encode_step_bytes;
+pub use search::{encode_fitted, Effort};
+#[cfg(all(feature = "step", feature = "internals"))]
+pub use search::{encode_step, StepTessellation, STEP_TESSELLATIONS};
+#[cfg(feature = "internals")]
+pub use search::{LOCAL_REFINEMENT_MAX_TRIANGLES, PLAIN_PLANES_MAX_TRIANGLES, TRAVERSAL_STARTS};
 
 /// Fitted control meshes are never quantised coarser than this.
 const MIN_FITTED_BITS: u8 = 6;
@@ -135,6 +138,7 @@ pub fn step_options_for(tolerance: crate::mesh::Tolerance) -> crate::io::step::S
 
 /// Per-group surface hints from the `<name>.faces.json` sidecar next to `input`, matched by
 /// group name; `None` when there is no sidecar.
+#[cfg(feature = "internals")]
 pub fn sidecar_hints(
     input: &Path,
     mesh: &ControlMesh,

@@ -31,13 +31,12 @@ pub enum Effort {
     /// they fail, and a STEP file is tessellated once (analytic faces at the coarser chord,
     /// since they are measured against their exact surfaces). The searches that cost a small
     /// fraction of the fit still run: the quantisation step (whole and quarter bits) and
-    /// [`TRAVERSAL_STARTS`] traversal starts.
+    /// 16 traversal starts.
     #[default]
     Default,
-    /// Every alternative, the smallest file kept: on meshes of at most
-    /// [`LOCAL_REFINEMENT_MAX_TRIANGLES`] / [`PLAIN_PLANES_MAX_TRIANGLES`] triangles the fits
-    /// with closed patches refined only where they fail and with plane patches decimated
-    /// freely, and five tessellations of a STEP file (see [`STEP_TESSELLATIONS`]). Several
+    /// Every alternative, the smallest file kept: on meshes of at most 20 000 / 25 000
+    /// triangles the fits with closed patches refined only where they fail and with plane
+    /// patches decimated freely, and five tessellations of a STEP file. Several
     /// times the time of [`Effort::Default`] for a few percent fewer bytes on some models.
     Max,
 }
@@ -95,7 +94,9 @@ impl FromStr for Effort {
 pub const TRAVERSAL_STARTS: usize = 16;
 
 /// Largest input (triangles) [`Effort::Max`] also fits with local refinement of closed
-/// patches ([`FitOptions::local_refinement`]).
+/// patches ([`FitOptions::local_refinement`]). [`Effort`]'s documentation (public, where this
+/// constant is not) states this number, [`PLAIN_PLANES_MAX_TRIANGLES`] and
+/// [`TRAVERSAL_STARTS`].
 pub const LOCAL_REFINEMENT_MAX_TRIANGLES: usize = 20_000;
 
 /// Largest input (triangles) [`Effort::Max`] also fits with plane patches decimated freely
@@ -258,7 +259,9 @@ struct SurfaceKey {
 }
 
 #[cfg(feature = "step")]
-pub use step::{encode_step, encode_step_bytes, StepTessellation, STEP_TESSELLATIONS};
+pub use step::encode_step_bytes;
+#[cfg(all(feature = "step", feature = "internals"))]
+pub use step::{encode_step, StepTessellation, STEP_TESSELLATIONS};
 
 #[cfg(feature = "step")]
 mod step {
@@ -362,6 +365,7 @@ mod step {
     /// tessellation when its faces differ from it (a face skipped in one of them). When a fit
     /// fails the others' files are kept; when all fail, the first error is returned. The
     /// chosen model's notes say which tessellation it was.
+    #[cfg(feature = "internals")]
     pub fn encode_step(
         path: &Path,
         opts: &ModelEncodeOptions,

@@ -164,6 +164,7 @@ pub fn subdivide_to_tolerance(
     let tolerance = resolve_tolerance(&lazy.limit()[..nv0 as usize], opts)?;
     let plan = match opts.boundary_patches {
         BoundaryPatchOutput::Sparse => SparsePlan::new(r.full(0), &r.base),
+        #[cfg(feature = "internals")]
         BoundaryPatchOutput::Dense => None,
     };
     let m = Measure {

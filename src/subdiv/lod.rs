@@ -18,12 +18,13 @@ use super::Refinement;
 
 /// Level-n face whose corner `c` is corner `c` of level-m face `g` (reference §1.3):
 /// `g 4^(n-m) + c (4^(n-m) - 1) / 3` (the digit c appended n-m times).
+#[cfg(test)]
 pub fn lod_corner_face(g: usize, n: u32, m: u32, c: usize) -> usize {
     let q = 1usize << (2 * (n - m));
     g * q + c * (q - 1) / 3
 }
 
-/// An indexed triangle mesh produced by [`super::subdivide_adaptive`].
+/// An indexed triangle mesh produced by [`super::Refinement::extract_lod`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct AdaptiveMesh {
     pub positions: Vec<DVec3>,
@@ -52,6 +53,7 @@ impl AdaptiveMesh {
 }
 
 /// Extracts the LOD mesh from finest-level positions `pos` (and optional normals).
+#[cfg(feature = "internals")]
 pub(crate) fn extract(
     r: &Refinement,
     pos: &[DVec3],
@@ -103,6 +105,7 @@ pub(crate) fn extract_at(
     let l0 = r.full(0);
     let plan = match mode {
         BoundaryPatchOutput::Sparse => SparsePlan::new(l0, &r.base),
+        #[cfg(feature = "internals")]
         BoundaryPatchOutput::Dense => None,
     };
     let levels = shown_levels(plan.as_ref(), levels);

@@ -11,8 +11,9 @@
 //! and control points; the encoder calls it many times with reused buffers), or get the
 //! linear map itself with [`Refinement::stencils`]. Limit points and normals:
 //! [`Refinement::limit_positions`], [`Refinement::limit_normals`]. Level of detail:
-//! [`Refinement::extract_lod`] with one level per base triangle. [`subdivide`] and
-//! [`subdivide_adaptive`] are the one-call conveniences.
+//! [`Refinement::extract_lod`] with one level per base triangle. [`subdivide`] is the
+//! one-call convenience (and `subdivide_adaptive`, with one level per control face, the
+//! tests').
 //!
 //! Layout: `topology` (level 0 build, classification, one refinement step as index
 //! arithmetic), `masks` (weights), `eval` (mask producers shared by positions, limits,
@@ -40,6 +41,7 @@ mod sparse;
 #[cfg(feature = "encoder")]
 pub(crate) mod support;
 mod topology;
+#[cfg(any(feature = "encoder", feature = "internals"))]
 mod uniform;
 
 #[cfg(test)]
@@ -54,16 +56,24 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
+#[cfg(feature = "internals")]
+pub use accuracy::AccurateSurface;
 pub use accuracy::{
-    subdivide_to_tolerance, AccuracyOptions, AccurateSurface,
-    MEMORY_PER_TRIANGLE as MEMORY_PER_ACCURATE_TRIANGLE,
+    subdivide_to_tolerance, AccuracyOptions, MEMORY_PER_TRIANGLE as MEMORY_PER_ACCURATE_TRIANGLE,
 };
-pub use lod::{lod_corner_face, AdaptiveMesh};
+#[cfg(test)]
+pub use lod::lod_corner_face;
+#[cfg(feature = "internals")]
+pub use lod::AdaptiveMesh;
+#[cfg(feature = "internals")]
 pub use masks::{loop_beta, loop_omega};
 pub use max_edge::split_to_max_edge;
 #[cfg(feature = "remesh")]
-pub use plane_refine::{refine_planes, PlaneRefinement};
+pub use plane_refine::refine_planes;
+#[cfg(all(feature = "remesh", feature = "internals"))]
+pub use plane_refine::PlaneRefinement;
 pub use sparse::BoundaryPatchOutput;
+#[cfg(any(feature = "encoder", feature = "internals"))]
 pub use uniform::UniformSurface;
 
 use masks::{eclass, ValenceTables};
@@ -141,9 +151,11 @@ pub struct LevelView<'a> {
 }
 
 impl<'a> LevelView<'a> {
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     fn full(&self) -> &'a Level {
         self.r.full(self.level)
     }
+    #[cfg(feature = "internals")]
     pub fn level(&self) -> u32 {
         self.level
     }
@@ -154,13 +166,16 @@ impl<'a> LevelView<'a> {
             self.r.levels[self.level as usize].nv
         }
     }
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn face_count(&self) -> usize {
         self.triangles().len() / 3
     }
+    #[cfg(feature = "internals")]
     pub fn edge_count(&self) -> usize {
         self.full().ne()
     }
     /// Triangle corners, 3 per face, counter-clockwise.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn triangles(&self) -> &'a [u32] {
         if self.level == self.r.max_level {
             self.r.finest_faces()
@@ -168,36 +183,44 @@ impl<'a> LevelView<'a> {
             &self.r.levels[self.level as usize].faces
         }
     }
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn triangle(&self, f: usize) -> [u32; 3] {
         let t = self.triangles();
         [t[3 * f], t[3 * f + 1], t[3 * f + 2]]
     }
     /// Edge ids of face f: `(c0c1, c1c2, c2c0)`.
+    #[cfg(feature = "internals")]
     pub fn face_edges(&self, f: usize) -> [u32; 3] {
         let fe = &self.full().face_edges[3 * f..3 * f + 3];
         [fe[0], fe[1], fe[2]]
     }
     /// Edges in their stored orientation.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn edges(&self) -> &'a [[u32; 2]] {
         &self.full().edges
     }
     /// Base (level-0) triangle of face f.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn base_face(&self, f: usize) -> usize {
         f >> (2 * self.level)
     }
     /// Group (CAD face) of face f.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn face_group(&self, f: usize) -> u32 {
         self.r.base.group[self.base_face(f)]
     }
     /// The edge descends from an edge flagged sharp in the control mesh.
+    #[cfg(feature = "internals")]
     pub fn edge_is_sharp(&self, e: usize) -> bool {
         self.full().eclass[e] & eclass::SHARP != 0
     }
     /// The edge is a crease (sharp or mesh boundary).
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn edge_is_crease(&self, e: usize) -> bool {
         self.full().eclass[e] & eclass::CREASE != 0
     }
     /// The edge lies on the mesh boundary.
+    #[cfg(feature = "internals")]
     pub fn edge_is_boundary(&self, e: usize) -> bool {
         self.full().eclass[e] & eclass::BOUNDARY != 0
     }
@@ -210,6 +233,7 @@ impl<'a> LevelView<'a> {
 /// (the masks act on cylindrical coordinates there); for them `exact[i]` is false and the
 /// row holds the Cartesian mask composition (a linearisation that is exact for control points
 /// evenly spaced in angle). All other rows reproduce [`Refinement::positions`] exactly.
+#[cfg(any(feature = "encoder", feature = "internals"))]
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SparseStencils {
     pub offsets: Vec<u32>,
@@ -218,7 +242,9 @@ pub struct SparseStencils {
     pub exact: Vec<bool>,
 }
 
+#[cfg(any(feature = "encoder", feature = "internals"))]
 impl SparseStencils {
+    #[cfg(test)]
     pub fn row_count(&self) -> usize {
         self.offsets.len().saturating_sub(1)
     }
@@ -228,6 +254,7 @@ impl SparseStencils {
         (&self.indices[a..b], &self.weights[a..b])
     }
     /// Applies the map to control points.
+    #[cfg(test)]
     pub fn apply(&self, control: &[DVec3]) -> Vec<DVec3> {
         (0..self.row_count())
             .map(|i| {
@@ -242,6 +269,7 @@ impl SparseStencils {
 
 impl Refinement {
     /// Builds the topology of levels 0..=`max_level` with the default face cap.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn new(mesh: &ControlMesh, max_level: u32) -> Result<Refinement> {
         Self::with_max_faces(mesh, max_level, DEFAULT_MAX_FACES)
     }
@@ -384,17 +412,20 @@ impl Refinement {
     }
 
     /// Number of base (level-0) triangles.
+    #[cfg(feature = "internals")]
     pub fn base_face_count(&self) -> usize {
         self.levels[0].nf()
     }
 
     /// Control-mesh face of base triangle k (polygons are fan-triangulated).
+    #[cfg(feature = "internals")]
     pub fn base_control_face(&self, k: usize) -> usize {
         self.base.control_face[k] as usize
     }
 
     /// Expands per-control-face levels to per-base-triangle levels (every triangle of a
     /// fan-triangulated polygon gets its polygon's level).
+    #[cfg(feature = "internals")]
     pub fn base_levels_from_control(&self, per_control_face: &[u8]) -> Result<Vec<u8>> {
         self.base
             .control_face
@@ -415,6 +446,7 @@ impl Refinement {
     /// filling and stitching (`spec/subdivision.md` §7), boundary patches sparse (§8; both
     /// faces of a belt quad are shown at the finer of their two levels). Reuse one
     /// `Refinement` for many extractions (a viewer changing levels per frame).
+    #[cfg(feature = "internals")]
     pub fn extract_lod(
         &self,
         finest: &[DVec3],
@@ -432,6 +464,7 @@ impl Refinement {
     /// [`Refinement::extract_lod`] with a choice of boundary-patch output (the default is
     /// [`BoundaryPatchOutput::Sparse`]; both faces of a belt quad are shown at the finer of
     /// their two levels).
+    #[cfg(feature = "internals")]
     pub fn extract_lod_with(
         &self,
         finest: &[DVec3],
@@ -488,6 +521,7 @@ impl Refinement {
     }
 
     /// Positions of all vertices of level `m` (subdivided, not limit).
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn positions_at(&self, control: &[DVec3], m: u32) -> Result<Vec<DVec3>> {
         let (mut out, mut scratch) = (Vec::new(), Vec::new());
         self.positions_into(control, m, &mut out, &mut scratch)?;
@@ -542,6 +576,7 @@ impl Refinement {
     }
 
     /// Positions of the finest level.
+    #[cfg(feature = "internals")]
     pub fn positions(&self, control: &[DVec3]) -> Result<Vec<DVec3>> {
         self.positions_at(control, self.max_level())
     }
@@ -579,6 +614,7 @@ impl Refinement {
     /// Per-corner limit normals of the level-`m` triangles (3 per face, in corner order):
     /// at crease and corner vertices each corner gets the normal of its own smooth sector,
     /// so sharp edges shade sharp; elsewhere the vertex normal.
+    #[cfg(feature = "internals")]
     pub fn limit_corner_normals(&self, level_positions: &[DVec3], m: u32) -> Result<Vec<DVec3>> {
         let vertex_normals = self.limit_normals(level_positions, m)?;
         let l = self.checked_level(level_positions, m)?;
@@ -602,6 +638,7 @@ impl Refinement {
     }
 
     /// Finest-level limit positions and normals from control points.
+    #[cfg(feature = "internals")]
     pub fn limit_positions_and_normals(
         &self,
         control: &[DVec3],
@@ -625,6 +662,7 @@ impl Refinement {
 
     /// The linear map from control points to the level-`m` points (`limit`: to their limit
     /// points). See [`SparseStencils`] for rows that involve cylinder/cone frames.
+    #[cfg(any(feature = "encoder", feature = "internals"))]
     pub fn stencils(&self, m: u32, limit: bool) -> Result<SparseStencils> {
         if m > self.max_level() {
             return Err(Error::Parameter(format!(
@@ -755,6 +793,7 @@ pub fn subdivide(
     let sharp_edges = r.finest_sharp_edges();
     let plan = match opts.boundary_patches {
         BoundaryPatchOutput::Sparse => sparse::SparsePlan::new(&r.levels[0], &r.base),
+        #[cfg(feature = "internals")]
         BoundaryPatchOutput::Dense => None,
     };
     let groups = mesh.groups.clone();
@@ -809,6 +848,7 @@ pub fn subdivide(
 /// finest-level (or, with `opts.limit`, limit) positions. A viewer that changes levels often
 /// should build one [`Refinement`] and call [`Refinement::extract_lod`] with per-base-triangle
 /// levels instead.
+#[cfg(test)]
 pub fn subdivide_adaptive(
     mesh: &ControlMesh,
     per_control_face_levels: &[u8],

@@ -26,6 +26,7 @@ pub enum BoundaryPatchOutput {
     #[default]
     Sparse,
     /// The full 1-to-4 grid (every point on the surface, 4^n triangles per control triangle).
+    #[cfg(feature = "internals")]
     Dense,
 }
 

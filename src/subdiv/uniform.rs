@@ -136,6 +136,7 @@ impl UniformSurface {
 
     /// The triangles of group `g` (level-n vertex ids), in the order [`super::subdivide`]
     /// outputs them; `out` is cleared first.
+    #[cfg(feature = "internals")]
     pub fn group_triangles(&self, g: usize, out: &mut Vec<[u32; 3]>) {
         out.clear();
         self.visit_group_triangles(g, |t| {

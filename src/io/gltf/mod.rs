@@ -70,11 +70,13 @@ use serde_json::Value;
 
 use super::repair::RawMesh;
 use super::ReadOptions;
-#[cfg(doc)]
+#[cfg(all(doc, feature = "internals"))]
 use super::WriteOptions;
 use crate::error::{Error, Result};
 
+#[cfg(feature = "internals")]
 mod write;
+#[cfg(feature = "internals")]
 pub use write::{write_glb, write_gltf};
 
 /// Deepest node hierarchy followed (deeper usually means a cycle in a malformed file).
@@ -86,6 +88,7 @@ const NO_FEATURE: u64 = u64::MAX;
 
 /// Parses a `.glb` or `.gltf` file with the default [`ReadOptions`]. `path` names the file
 /// in errors and its folder holds the external buffer files.
+#[cfg(feature = "internals")]
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh> {
     parse_with(bytes, path, &ReadOptions::default())
 }
@@ -1014,6 +1017,7 @@ fn read_indices(
 }
 
 /// Standard base64 with `=` padding.
+#[cfg(feature = "internals")]
 fn base64_encode(bytes: &[u8]) -> String {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::with_capacity(bytes.len().div_ceil(3) * 4);

@@ -169,6 +169,7 @@ pub struct Body {
 }
 
 /// A B-rep edge as a polyline of pool vertices, from one B-rep vertex to the other.
+#[cfg(feature = "internals")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct BrepEdge {
     /// Id of the EDGE_CURVE instance.
@@ -214,17 +215,22 @@ pub struct StepModel {
     pub mesh: ControlMesh,
     /// Surface of each group (same index).
     pub faces: Vec<FaceSurface>,
+    #[cfg(feature = "internals")]
     pub bodies: Vec<Body>,
+    #[cfg(feature = "internals")]
     pub edges: Vec<BrepEdge>,
     pub skipped: Vec<SkippedFace>,
     /// Chordal tolerance the faces were tessellated with (output units).
+    #[cfg(feature = "internals")]
     pub chordal_tolerance: f64,
     /// Scale applied to the file's coordinates (`None`: no length unit found, file units kept).
+    #[cfg(feature = "internals")]
     pub millimetres_per_unit: Option<f64>,
     /// What else the reader noticed (pre-pass rewrites, free shells left out, open edges...).
     pub notes: Vec<String>,
 }
 
+#[cfg(feature = "internals")]
 impl StepModel {
     /// Number of faces by surface type name, in a fixed order.
     pub fn surface_histogram(&self) -> std::collections::BTreeMap<String, usize> {
@@ -237,6 +243,7 @@ impl StepModel {
 }
 
 /// Short name of a surface type for messages.
+#[cfg(feature = "internals")]
 pub fn surface_name(s: &SurfaceType) -> String {
     match s {
         SurfaceType::Plane => "plane".into(),
@@ -255,6 +262,7 @@ pub fn surface_name(s: &SurfaceType) -> String {
 }
 
 /// True for `.step` / `.stp` (any case).
+#[cfg(feature = "internals")]
 pub fn is_step_path(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
@@ -263,6 +271,7 @@ pub fn is_step_path(path: &Path) -> bool {
 
 /// Reads the B-rep solids (or, without solids, the shells) of a STEP file. See the module
 /// documentation for what is supported and how failures are reported.
+#[cfg(feature = "internals")]
 pub fn read_step(path: &Path, opts: &StepOptions) -> Result<StepModel> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     read_step_bytes(path, &bytes, opts)
@@ -278,6 +287,7 @@ pub fn read_step_bytes(path: &Path, bytes: &[u8], opts: &StepOptions) -> Result<
 /// faces once: the parse, the units and the conversion's timeouts are the first entry's,
 /// each tessellation uses its own entry's chordal tolerances and timeouts. All models hold
 /// the same faces, skipped or not, up to faces whose tessellation failed in one of them.
+#[cfg(feature = "internals")]
 pub fn read_step_tessellations(
     path: &Path,
     tessellations: &[StepOptions],

@@ -22,7 +22,9 @@ use truck_topology::compress::{
 use super::brep::{Parsed, ParsedBody, ParsedFace};
 use super::conform;
 use super::watch::{Cancel, Guarded, Watched, Workers};
-use super::{Body, BrepEdge, FaceSurface, SkippedFace, StepModel, StepOptions};
+#[cfg(feature = "internals")]
+use super::BrepEdge;
+use super::{Body, FaceSurface, SkippedFace, StepModel, StepOptions};
 use crate::error::{Error, Result};
 use crate::io::faces_json::SurfaceType;
 use crate::mesh::{AnalyticSurface, Axis, BoundarySurface, ControlMesh, PatchKind, Tolerance};
@@ -970,6 +972,13 @@ impl<'a> WeldedModel<'a> {
     /// notes. An error when no face made it.
     fn finish(
         mut self,
+        #[cfg_attr(
+            not(feature = "internals"),
+            expect(
+                unused_variables,
+                reason = "only the B-rep edges read the parsed bodies"
+            )
+        )]
         bodies: &[ParsedBody],
         mut notes: Vec<String>,
         millimetres_per_unit: Option<f64>,
@@ -995,6 +1004,7 @@ impl<'a> WeldedModel<'a> {
         }
         self.mark_vertex_corners(&new_id);
         self.mesh.sharpen_group_boundaries();
+        #[cfg(feature = "internals")]
         let edges = self.brep_edges(bodies, &new_id);
         for f in &mut self.faces {
             scale_surface(f, scale);
@@ -1014,10 +1024,14 @@ impl<'a> WeldedModel<'a> {
         Ok(StepModel {
             mesh: self.mesh,
             faces: self.faces,
+            #[cfg(feature = "internals")]
             bodies: self.bodies,
+            #[cfg(feature = "internals")]
             edges,
             skipped: self.skipped,
+            #[cfg(feature = "internals")]
             chordal_tolerance: self.tol.chord * scale,
+            #[cfg(feature = "internals")]
             millimetres_per_unit,
             notes,
         })
@@ -1052,6 +1066,7 @@ impl<'a> WeldedModel<'a> {
 
     /// The B-rep edges that faces in the mesh use, as polylines over the mesh's vertices
     /// with the groups on either side.
+    #[cfg(feature = "internals")]
     fn brep_edges(&self, bodies: &[ParsedBody], new_id: &[u32]) -> Vec<BrepEdge> {
         let mut edges = Vec::new();
         for (key, ids) in &self.edge_pool {
