@@ -581,12 +581,10 @@ impl<'a> State<'a> {
                     }
                 }
             }
-            if rule.surface.edge_angle(pv, pv).is_some() {
-                for &w in &t {
-                    let spans = rule.surface.edge_angle(pv, self.pos(w));
-                    if w != u && spans.is_some_and(|a| a > rule.max_edge_angle) {
-                        return false;
-                    }
+            for &w in t.iter().filter(|&&w| w != u) {
+                let spans = rule.surface.edge_angle(pv, self.pos(w));
+                if spans.is_some_and(|a| a > rule.max_edge_angle) {
+                    return false;
                 }
             }
             // Last: the cheaper tests above reject most collapses first.
