@@ -17,7 +17,7 @@ use super::reference::Facets;
 use super::refine::{
     facet_failing, note_failures, refine_failing, relax_refined_groups, ChainReach, Relaxation,
 };
-use super::solve::fit_geometry;
+use super::solve::{fit_geometry, SolveCache};
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind};
 
@@ -125,6 +125,7 @@ impl Rounds<'_> {
         // Set once the model is within tolerance and refined patches are being coarsened again.
         let mut relaxing: Option<Relaxation> = None;
         let mut decimator = FaceDecimator::default();
+        let mut solved = SolveCache::default();
         // The smallest worst excess of a failing round so far, and how many failing rounds
         // since came no nearer.
         let (mut nearest, mut no_gain) = (f64::INFINITY, 0);
@@ -140,7 +141,14 @@ impl Rounds<'_> {
                 built,
                 measured,
                 bytes,
-            } = self.round(plan, level, &mut decimator, reconstruct, report)?;
+            } = self.round(
+                plan,
+                level,
+                &mut decimator,
+                &mut solved,
+                reconstruct,
+                report,
+            )?;
             let err = measured.error;
             let worst = err.max_excess;
             let ok = worst <= tol;
@@ -268,6 +276,7 @@ impl Rounds<'_> {
         plan: &Plan,
         level: u8,
         decimator: &mut FaceDecimator,
+        solved: &mut SolveCache,
         reconstruct: &mut Reconstruct<'_>,
         report: &mut FitReport,
     ) -> Result<Round> {
@@ -289,6 +298,7 @@ impl Rounds<'_> {
             &plan.groups,
             &self.input.group_surfaces,
             self.exact,
+            solved,
         )
         .map_err(|e| with_faces_involved(e, &built.control))?;
         let t_fit = t.elapsed().as_secs_f64();

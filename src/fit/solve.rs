@@ -19,7 +19,105 @@ use super::plan::{chain_frame, GroupPlan};
 use crate::error::Result;
 use crate::mesh::{edge_key, ControlMesh, PatchKind};
 use crate::metrics::TriangleSurface;
-use crate::subdiv::{LevelView, Refinement};
+use crate::subdiv::support::Supports;
+use crate::subdiv::{LevelView, Refinement, SparseStencils};
+
+/// The closed patches' interiors as the previous fit solved them, by group. A patch's
+/// interior is a block of unknowns that shares no row with another patch (its boundary is
+/// sharp, see [`solve_blocks`]), so its solution is a function of its support before the
+/// solve: a patch whose support fingerprint ([`Supports::fingerprints`]) is the one solved
+/// last time gets the same control points without solving again. Refinement rounds change
+/// a few patches at a time; the others are not re-projected and re-solved every round.
+#[derive(Default)]
+pub(super) struct SolveCache {
+    groups: Vec<Option<SolvedPatch>>,
+}
+
+/// One closed patch's solve.
+struct SolvedPatch {
+    /// Its support's fingerprint before the solve.
+    fingerprint: u64,
+    /// Each solved control point: its position before the solve (the bits of its
+    /// coordinates; distinct within a fingerprinted group, so they name the point whatever
+    /// the mesh's numbering) and after, sorted.
+    moved: Vec<([u64; 3], DVec3)>,
+}
+
+/// The bits of a position's coordinates, a key that does not depend on vertex numbering.
+fn position_key(p: DVec3) -> [u64; 3] {
+    p.to_array().map(f64::to_bits)
+}
+
+impl SolveCache {
+    /// Moves the interior control points (`interior[g]`: group `g`'s unknowns) of every
+    /// closed group whose fingerprint is the one cached to their cached solution, and says
+    /// which groups were so reused.
+    fn reuse(
+        &self,
+        positions: &mut [DVec3],
+        fingerprints: &[Option<u64>],
+        interior: &[Vec<usize>],
+    ) -> Vec<bool> {
+        let mut reused = vec![false; interior.len()];
+        for (g, vertices) in interior.iter().enumerate() {
+            let Some(Some(solved)) = self.groups.get(g) else {
+                continue;
+            };
+            if vertices.is_empty()
+                || fingerprints.get(g).copied().flatten() != Some(solved.fingerprint)
+            {
+                continue;
+            }
+            let found: Option<Vec<DVec3>> = vertices
+                .iter()
+                .map(|&v| {
+                    let key = position_key(positions[v]);
+                    let k = solved.moved.binary_search_by(|e| e.0.cmp(&key)).ok()?;
+                    Some(solved.moved[k].1)
+                })
+                .collect();
+            if let Some(found) = found.filter(|f| f.len() == solved.moved.len()) {
+                for (&v, p) in vertices.iter().zip(found) {
+                    positions[v] = p;
+                }
+                reused[g] = true;
+            }
+        }
+        reused
+    }
+
+    /// Keeps the solve of every group of `interior` not `reused`: `before` holds the
+    /// positions of all control points before the solve, `after` after it.
+    fn store(
+        &mut self,
+        fingerprints: &[Option<u64>],
+        interior: &[Vec<usize>],
+        reused: &[bool],
+        before: &[DVec3],
+        after: &[DVec3],
+    ) {
+        self.groups.resize_with(interior.len(), || None);
+        self.groups.truncate(interior.len());
+        for (g, vertices) in interior.iter().enumerate() {
+            if reused[g] {
+                continue;
+            }
+            self.groups[g] = fingerprints
+                .get(g)
+                .copied()
+                .flatten()
+                .filter(|_| !vertices.is_empty())
+                .map(|fingerprint| {
+                    let mut moved: Vec<([u64; 3], DVec3)> = vertices
+                        .iter()
+                        .map(|&v| (position_key(before[v]), after[v]))
+                        .collect();
+                    moved.sort_unstable_by_key(|a| a.0);
+                    SolvedPatch { fingerprint, moved }
+                });
+        }
+    }
+}
 
 /// Where each vertex of the refined level the fit samples lies: on which chain's crease
 /// (the crease samples) and in which group (the interior samples). A vertex on two chains or
@@ -81,6 +179,75 @@ impl SampleSources {
 /// Level of the refined mesh whose vertices' limit positions the fit samples.
 const LEVEL: u32 = 2;
 
+/// A control mesh refined to the level whose vertices' limit positions the fit samples,
+/// with the stencils of those positions and where each sample lies: what every least-squares
+/// iteration of one stage reads.
+struct Sampled {
+    refinement: Refinement,
+    stencils: SparseStencils,
+    sources: SampleSources,
+}
+
+impl Sampled {
+    fn new(control: &ControlMesh, edge_chain: &BTreeMap<(u32, u32), usize>) -> Result<Self> {
+        let refinement = Refinement::new(control, LEVEL)?;
+        let stencils = refinement.stencils(LEVEL, true)?;
+        let sources = SampleSources::new(
+            &refinement.level(LEVEL),
+            refinement.level(0).edges(),
+            edge_chain,
+        );
+        Ok(Sampled {
+            refinement,
+            stencils,
+            sources,
+        })
+    }
+
+    /// Moves the control points `unknowns` of `positions` by linearised least squares with
+    /// re-projected targets: each iteration evaluates the limit positions of the samples and
+    /// asks `target(sample, limit position)` where the sample should be (`None`: not
+    /// fitted).
+    fn solve(
+        &self,
+        positions: &mut [DVec3],
+        unknowns: &[usize],
+        target: impl Fn(usize, DVec3) -> Option<DVec3>,
+    ) -> Result<()> {
+        let mut col = vec![usize::MAX; positions.len()];
+        for (k, &v) in unknowns.iter().enumerate() {
+            col[v] = k;
+        }
+        for _iteration in 0..4 {
+            let level = self.refinement.positions_at(positions, LEVEL)?;
+            let limit = self.refinement.limit_positions(&level, LEVEL)?;
+            let mut rows = Vec::new();
+            for (s, &at) in limit.iter().enumerate() {
+                let Some(target) = target(s, at) else {
+                    continue;
+                };
+                let (idx, w) = self.stencils.row(s);
+                let row: Vec<(usize, f64)> = idx
+                    .iter()
+                    .zip(w)
+                    .filter(|(&k, _)| col.get(k as usize).is_some_and(|&c| c != usize::MAX))
+                    .map(|(&k, &w)| (col[k as usize], w))
+                    .collect();
+                if !row.is_empty() {
+                    rows.push((row, target - at));
+                }
+            }
+            let delta = solve_blocks(&rows, unknowns.len());
+            for (k, &v) in unknowns.iter().enumerate() {
+                if delta[k].is_finite() {
+                    positions[v] += delta[k];
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Step 4: least-squares fit of the Cartesian crease curves, then of closed-patch interiors.
 pub(super) fn fit_geometry(
     built: &mut Built,
@@ -89,28 +256,73 @@ pub(super) fn fit_geometry(
     plans: &[GroupPlan],
     group_surfaces: &[Option<TriangleSurface>],
     exact: &[Option<ExactSurface>],
+    cache: &mut SolveCache,
 ) -> Result<()> {
-    let control = &mut built.control;
-    let refinement = Refinement::new(control, LEVEL)?;
-    let stencils = refinement.stencils(LEVEL, true)?;
-    let view = refinement.level(LEVEL);
-    let nv_l = view.vertex_count();
-    let base = refinement.level(0);
-    let base_edges = base.edges();
-    let SampleSources {
-        chain: sample_chain,
-        multi_chain,
-        group: sample_group,
-        mixed,
-    } = SampleSources::new(&view, base_edges, &built.edge_chain);
-    // Unknowns.
-    let nc = control.vertex_count();
-    let mut on_sharp = vec![false; nc];
+    let Built {
+        control,
+        edge_chain,
+        ..
+    } = built;
+    let mut on_sharp = vec![false; control.vertex_count()];
     for &(a, b) in &control.sharp_edges {
         on_sharp[a as usize] = true;
         on_sharp[b as usize] = true;
     }
-    let chain_frame_of = |c: usize| chain_frame(&net.chains[c].groups, plans);
+    fit_chains(control, edge_chain, &on_sharp, mesh, net, plans, exact)?;
+    fit_closed_interiors(
+        control,
+        edge_chain,
+        &on_sharp,
+        plans,
+        group_surfaces,
+        exact,
+        cache,
+    )
+}
+
+/// The interior control points of the Cartesian chains (crease curves not held by a
+/// cylinder or cone frame), fitted to their chains' polylines.
+fn fit_chains(
+    control: &mut ControlMesh,
+    edge_chain: &BTreeMap<(u32, u32), usize>,
+    on_sharp: &[bool],
+    mesh: &ControlMesh,
+    net: &CurveNetwork,
+    plans: &[GroupPlan],
+    exact: &[Option<ExactSurface>],
+) -> Result<()> {
+    let sampled = Sampled::new(control, edge_chain)?;
+    let SampleSources {
+        chain: sample_chain,
+        multi_chain,
+        ..
+    } = &sampled.sources;
+    let cartesian = |c: usize| chain_frame(&net.chains[c].groups, plans).is_none();
+    let unknowns: Vec<usize> = (0..control.vertex_count())
+        .filter(|&v| {
+            !control.corners.contains(&(v as u32))
+                && on_sharp[v]
+                && sample_chain
+                    .get(v)
+                    .copied()
+                    .flatten()
+                    .is_some_and(cartesian)
+                && !multi_chain[v]
+        })
+        .collect();
+    if unknowns.is_empty() {
+        return Ok(());
+    }
+    let chain_points: Vec<Vec<DVec3>> = net
+        .chains
+        .iter()
+        .map(|c| {
+            c.vertices
+                .iter()
+                .map(|&v| mesh.positions[v as usize])
+                .collect()
+        })
+        .collect();
     // Per chain: the exact surfaces of its faces, when every one of them has one.
     let chain_exact: Vec<Option<Vec<ExactSurface>>> = net
         .chains
@@ -124,113 +336,103 @@ pub(super) fn fit_geometry(
                 .collect()
         })
         .collect();
-    // Stage 1: Cartesian chains. Stage 2: closed interiors.
-    for stage in 0..2 {
-        let mut col = vec![usize::MAX; nc];
-        let mut unknowns = Vec::new();
-        for v in 0..nc {
-            let movable = if stage == 0 {
-                // Interior control point of a Cartesian chain.
-                !control.corners.contains(&(v as u32))
-                    && on_sharp[v]
-                    && sample_chain
-                        .get(v)
-                        .copied()
-                        .flatten()
-                        .is_some_and(|c| chain_frame_of(c).is_none())
-                    && !multi_chain[v]
-            } else {
-                !on_sharp[v]
-                    && !mixed[v]
-                    && sample_group[v]
-                        .is_some_and(|g| matches!(plans[g as usize].kind, PatchKind::Closed))
-            };
-            if movable {
-                col[v] = unknowns.len();
-                unknowns.push(v);
-            }
-        }
-        if unknowns.is_empty() {
-            continue;
-        }
-        let chain_points: BTreeMap<usize, Vec<DVec3>> = if stage == 0 {
-            net.chains
-                .iter()
-                .enumerate()
-                .map(|(i, c)| {
-                    (
-                        i,
-                        c.vertices
-                            .iter()
-                            .map(|&v| mesh.positions[v as usize])
-                            .collect(),
-                    )
-                })
-                .collect()
-        } else {
-            BTreeMap::new()
-        };
-        for _iteration in 0..4 {
-            let level = refinement.positions_at(&control.positions, LEVEL)?;
-            let limit = refinement.limit_positions(&level, LEVEL)?;
-            let mut rows = Vec::new();
-            for s in 0..nv_l {
-                let target = if stage == 0 {
-                    match sample_chain[s] {
-                        Some(c) if !multi_chain[s] && chain_frame_of(c).is_none() => {
-                            // On the edge's polyline, then onto the exact surfaces of
-                            // its faces where the input knows them all: the polyline
-                            // sags from the CAD edge by up to its chord.
-                            let on_line = closest_on_polyline(limit[s], &chain_points[&c]);
-                            chain_exact[c]
-                                .as_deref()
-                                .and_then(|surfaces| onto_all(surfaces, on_line))
-                                .unwrap_or(on_line)
-                        }
-                        _ => continue,
-                    }
-                } else {
-                    match sample_group[s] {
-                        Some(g) if !mixed[s] && sample_chain[s].is_none() => {
-                            match &group_surfaces[g as usize] {
-                                Some(surface)
-                                    if matches!(plans[g as usize].kind, PatchKind::Closed) =>
-                                {
-                                    // On the face's facets, then onto its exact surface
-                                    // where the input knows it: the facets sag from the
-                                    // CAD surface by up to their chord, and the error is
-                                    // measured against the CAD surface too.
-                                    let on_facets = surface.closest_point(limit[s]).point;
-                                    match exact.get(g as usize).copied().flatten() {
-                                        Some(e) => e.project(on_facets),
-                                        None => on_facets,
-                                    }
-                                }
-                                _ => continue,
-                            }
-                        }
-                        _ => continue,
-                    }
-                };
-                let (idx, w) = stencils.row(s);
-                let row: Vec<(usize, f64)> = idx
-                    .iter()
-                    .zip(w)
-                    .filter(|(&k, _)| col[k as usize] != usize::MAX)
-                    .map(|(&k, &w)| (col[k as usize], w))
-                    .collect();
-                if !row.is_empty() {
-                    rows.push((row, target - limit[s]));
-                }
-            }
-            let delta = solve_blocks(&rows, unknowns.len());
-            for (k, &v) in unknowns.iter().enumerate() {
-                if delta[k].is_finite() {
-                    control.positions[v] += delta[k];
-                }
+    sampled.solve(&mut control.positions, &unknowns, |s, at| {
+        let c = sample_chain[s].filter(|&c| !multi_chain[s] && cartesian(c))?;
+        // On the edge's polyline, then onto the exact surfaces of its faces where the input
+        // knows them all: the polyline sags from the CAD edge by up to its chord.
+        let on_line = closest_on_polyline(at, &chain_points[c]);
+        Some(
+            chain_exact[c]
+                .as_deref()
+                .and_then(|surfaces| onto_all(surfaces, on_line))
+                .unwrap_or(on_line),
+        )
+    })
+}
+
+/// The interior control points of the closed patches, fitted to their faces. Patches whose
+/// support is the one solved last time take that solution ([`SolveCache`]); the others are
+/// solved on the submesh around them (their surface there is the whole mesh's), so a round
+/// that changed a few patches refines a few patches.
+fn fit_closed_interiors(
+    control: &mut ControlMesh,
+    edge_chain: &BTreeMap<(u32, u32), usize>,
+    on_sharp: &[bool],
+    plans: &[GroupPlan],
+    group_surfaces: &[Option<TriangleSurface>],
+    exact: &[Option<ExactSurface>],
+    cache: &mut SolveCache,
+) -> Result<()> {
+    let closed = |g: u32| {
+        plans
+            .get(g as usize)
+            .is_some_and(|p| matches!(p.kind, PatchKind::Closed))
+    };
+    // The unknowns of each closed patch: the control points all of whose faces are its
+    // own, off its sharp edges.
+    let mut group_of: Vec<Option<u32>> = vec![None; control.vertex_count()];
+    let mut mixed = vec![false; control.vertex_count()];
+    for (f, &g) in control.face_groups.iter().enumerate() {
+        for &v in control.face(f) {
+            match group_of[v as usize] {
+                Some(old) if old != g => mixed[v as usize] = true,
+                _ => group_of[v as usize] = Some(g),
             }
         }
     }
+    let mut interior = vec![Vec::new(); control.groups.len()];
+    for v in 0..control.vertex_count() {
+        if let Some(g) = group_of[v].filter(|&g| !on_sharp[v] && !mixed[v] && closed(g)) {
+            interior[g as usize].push(v);
+        }
+    }
+    let fingerprints = Supports::new(control).fingerprints()?;
+    let reused = cache.reuse(&mut control.positions, &fingerprints, &interior);
+    let solving: Vec<usize> = (0..interior.len())
+        .filter(|&g| !interior[g].is_empty() && !reused[g])
+        .collect();
+    if solving.is_empty() {
+        return Ok(());
+    }
+    let before = control.positions.clone();
+    let unknowns: Vec<usize> = solving.iter().flat_map(|&g| interior[g].clone()).collect();
+    let part = Supports::new(control).submesh(&solving);
+    let mesh = part.as_ref().unwrap_or(control);
+    let sampled = Sampled::new(mesh, edge_chain)?;
+    let mut positions = mesh.positions.clone();
+    let SampleSources {
+        chain: sample_chain,
+        group: sample_group,
+        mixed: sample_mixed,
+        ..
+    } = &sampled.sources;
+    sampled.solve(&mut positions, &unknowns, |s, at| {
+        let g = sample_group[s].filter(|&g| {
+            !sample_mixed[s] && sample_chain[s].is_none() && closed(g) && !reused[g as usize]
+        })?;
+        // On the face's facets, then onto its exact surface where the input knows it: the
+        // facets sag from the CAD surface by up to their chord, and the error is measured
+        // against the CAD surface too.
+        let on_facets = group_surfaces
+            .get(g as usize)?
+            .as_ref()?
+            .closest_point(at)
+            .point;
+        Some(match exact.get(g as usize).copied().flatten() {
+            Some(e) => e.project(on_facets),
+            None => on_facets,
+        })
+    })?;
+    for &v in &unknowns {
+        control.positions[v] = positions[v];
+    }
+    cache.store(
+        &fingerprints,
+        &interior,
+        &reused,
+        &before,
+        &control.positions,
+    );
     Ok(())
 }
 
@@ -357,4 +559,50 @@ fn solve_increment(rows: &[Row], n_unknowns: usize, mu: f64) -> Vec<DVec3> {
         }
     }
     x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cached_solve_is_reused_only_for_the_same_support_and_points() {
+        let before = vec![DVec3::new(0.0, 0.0, 0.0), DVec3::X, DVec3::Y, DVec3::Z];
+        let mut after = before.clone();
+        after[1] += DVec3::splat(0.25);
+        after[2] -= DVec3::splat(0.5);
+        // Group 0 solved vertices 1 and 2; group 1 (vertex 3) has no fingerprint.
+        let interior = vec![vec![1, 2], vec![3]];
+        let mut cache = SolveCache::default();
+        cache.store(
+            &[Some(7), None],
+            &interior,
+            &[false, false],
+            &before,
+            &after,
+        );
+
+        // Renumbered (the two points swapped), same fingerprint: reused, by position.
+        let mut positions = vec![DVec3::ZERO, DVec3::Y, DVec3::X, DVec3::Z];
+        let reused = cache.reuse(&mut positions, &[Some(7), None], &interior);
+        assert_eq!(reused, vec![true, false]);
+        assert_eq!(positions[1], after[2]);
+        assert_eq!(positions[2], after[1]);
+        assert_eq!(positions[3], DVec3::Z);
+
+        // Another fingerprint, or a point the cache does not hold: solved again.
+        let mut positions = before.clone();
+        assert_eq!(
+            cache.reuse(&mut positions, &[Some(8), None], &interior),
+            vec![false, false]
+        );
+        assert_eq!(positions, before);
+        let mut moved = before.clone();
+        moved[2] = DVec3::new(0.0, 1.0, 1e-12);
+        assert_eq!(
+            cache.reuse(&mut moved, &[Some(7), None], &interior),
+            vec![false, false]
+        );
+        assert_eq!(moved[1], before[1]);
+    }
 }

@@ -285,6 +285,13 @@ fn closest_in_blocks(
         let run = triangles.get(start..end as usize)?;
         for (k, t) in run.iter().enumerate() {
             let [a, b, c] = t.map(|v| positions[v as usize]);
+            // The triangle's box is a lower bound of its distance, a few operations against
+            // the dozens of the exact test; most triangles of a leaf fail it once a near
+            // hit is known.
+            let q = p.max(a.min(b).min(c)).min(a.max(b).max(c));
+            if (p - q).length_squared() >= best {
+                continue;
+            }
             let (q, bc) = closest_point_on_triangle(p, a, b, c);
             let d2 = (p - q).length_squared();
             if d2 < best {
