@@ -22,20 +22,28 @@ use crate::metrics::TriangleSurface;
 use crate::subdiv::support::Supports;
 use crate::subdiv::{LevelView, Refinement, SparseStencils};
 
-/// The closed patches' interiors as the previous fit solved them, by group. A patch's
-/// interior is a block of unknowns that shares no row with another patch (its boundary is
-/// sharp, see [`solve_blocks`]), so its solution is a function of its support before the
-/// solve: a patch whose support fingerprint ([`Supports::fingerprints`]) is the one solved
-/// last time gets the same control points without solving again. Refinement rounds change
-/// a few patches at a time; the others are not re-projected and re-solved every round.
+/// What the previous fit solved, to be reused where nothing it read has changed. The fit's
+/// unknowns fall into blocks that share no least-squares row ([`solve_blocks`]): a closed
+/// patch's interior (its boundary is sharp), and a Cartesian chain's interior control points
+/// (a crease curve reads only points on its creases). A block's solution is then a function
+/// of the supports of the groups around it before the solve, which
+/// [`Supports::fingerprints`] identifies: a block whose groups have the fingerprints they
+/// had when it was solved gets the same control points without solving again. Refinement
+/// rounds change a few patches at a time; the rest of the model is not re-projected and
+/// re-solved every round.
 #[derive(Default)]
 pub(super) struct SolveCache {
-    groups: Vec<Option<SolvedPatch>>,
+    chains: SolvedBlocks,
+    patches: SolvedBlocks,
 }
 
-/// One closed patch's solve.
-struct SolvedPatch {
-    /// Its support's fingerprint before the solve.
+/// Solved blocks by index (chain or group).
+#[derive(Default)]
+struct SolvedBlocks(Vec<Option<SolvedBlock>>);
+
+/// One block's solve.
+struct SolvedBlock {
+    /// What identifies its inputs: the fingerprint of its groups' supports before the solve.
     fingerprint: u64,
     /// Each solved control point: its position before the solve (the bits of its
     /// coordinates; distinct within a fingerprinted group, so they name the point whatever
@@ -48,23 +56,22 @@ fn position_key(p: DVec3) -> [u64; 3] {
     p.to_array().map(f64::to_bits)
 }
 
-impl SolveCache {
-    /// Moves the interior control points (`interior[g]`: group `g`'s unknowns) of every
-    /// closed group whose fingerprint is the one cached to their cached solution, and says
-    /// which groups were so reused.
+impl SolvedBlocks {
+    /// Moves the unknowns of every block (`unknowns[b]`) whose fingerprint is the one cached
+    /// to their cached solution, and says which blocks were so reused.
     fn reuse(
         &self,
         positions: &mut [DVec3],
         fingerprints: &[Option<u64>],
-        interior: &[Vec<usize>],
+        unknowns: &[Vec<usize>],
     ) -> Vec<bool> {
-        let mut reused = vec![false; interior.len()];
-        for (g, vertices) in interior.iter().enumerate() {
-            let Some(Some(solved)) = self.groups.get(g) else {
+        let mut reused = vec![false; unknowns.len()];
+        for (b, vertices) in unknowns.iter().enumerate() {
+            let Some(Some(solved)) = self.0.get(b) else {
                 continue;
             };
             if vertices.is_empty()
-                || fingerprints.get(g).copied().flatten() != Some(solved.fingerprint)
+                || fingerprints.get(b).copied().flatten() != Some(solved.fingerprint)
             {
                 continue;
             }
@@ -80,30 +87,30 @@ impl SolveCache {
                 for (&v, p) in vertices.iter().zip(found) {
                     positions[v] = p;
                 }
-                reused[g] = true;
+                reused[b] = true;
             }
         }
         reused
     }
 
-    /// Keeps the solve of every group of `interior` not `reused`: `before` holds the
+    /// Keeps the solve of every block of `unknowns` not `reused`: `before` holds the
     /// positions of all control points before the solve, `after` after it.
     fn store(
         &mut self,
         fingerprints: &[Option<u64>],
-        interior: &[Vec<usize>],
+        unknowns: &[Vec<usize>],
         reused: &[bool],
         before: &[DVec3],
         after: &[DVec3],
     ) {
-        self.groups.resize_with(interior.len(), || None);
-        self.groups.truncate(interior.len());
-        for (g, vertices) in interior.iter().enumerate() {
-            if reused[g] {
+        self.0.resize_with(unknowns.len(), || None);
+        self.0.truncate(unknowns.len());
+        for (b, vertices) in unknowns.iter().enumerate() {
+            if reused[b] {
                 continue;
             }
-            self.groups[g] = fingerprints
-                .get(g)
+            self.0[b] = fingerprints
+                .get(b)
                 .copied()
                 .flatten()
                 .filter(|_| !vertices.is_empty())
@@ -113,10 +120,18 @@ impl SolveCache {
                         .map(|&v| (position_key(before[v]), after[v]))
                         .collect();
                     moved.sort_unstable_by_key(|a| a.0);
-                    SolvedPatch { fingerprint, moved }
+                    SolvedBlock { fingerprint, moved }
                 });
         }
     }
+}
+
+/// One value for the fingerprints of `groups` (`None` if one of them has none), in order.
+fn combined_fingerprint(groups: &[u32], fingerprints: &[Option<u64>]) -> Option<u64> {
+    groups.iter().try_fold(0x9E37_79B9_7F4A_7C15u64, |h, &g| {
+        let f = fingerprints.get(g as usize).copied().flatten()?;
+        Some((h ^ f).wrapping_mul(0xBF58_476D_1CE4_E5B9).rotate_left(31))
+    })
 }
 
 /// Where each vertex of the refined level the fit samples lies: on which chain's crease
@@ -268,7 +283,9 @@ pub(super) fn fit_geometry(
         on_sharp[a as usize] = true;
         on_sharp[b as usize] = true;
     }
-    fit_chains(control, edge_chain, &on_sharp, mesh, net, plans, exact)?;
+    fit_chains(
+        control, edge_chain, &on_sharp, mesh, net, plans, exact, cache,
+    )?;
     fit_closed_interiors(
         control,
         edge_chain,
@@ -281,7 +298,10 @@ pub(super) fn fit_geometry(
 }
 
 /// The interior control points of the Cartesian chains (crease curves not held by a
-/// cylinder or cone frame), fitted to their chains' polylines.
+/// cylinder or cone frame), fitted to their chains' polylines. Chains whose groups' supports
+/// are the ones solved last time take that solution ([`SolveCache`]); the others are solved
+/// on the submesh of their groups.
+#[allow(clippy::too_many_arguments)]
 fn fit_chains(
     control: &mut ControlMesh,
     edge_chain: &BTreeMap<(u32, u32), usize>,
@@ -290,29 +310,63 @@ fn fit_chains(
     net: &CurveNetwork,
     plans: &[GroupPlan],
     exact: &[Option<ExactSurface>],
+    cache: &mut SolveCache,
 ) -> Result<()> {
-    let sampled = Sampled::new(control, edge_chain)?;
-    let SampleSources {
-        chain: sample_chain,
-        multi_chain,
-        ..
-    } = &sampled.sources;
     let cartesian = |c: usize| chain_frame(&net.chains[c].groups, plans).is_none();
-    let unknowns: Vec<usize> = (0..control.vertex_count())
-        .filter(|&v| {
-            !control.corners.contains(&(v as u32))
-                && on_sharp[v]
-                && sample_chain
-                    .get(v)
-                    .copied()
-                    .flatten()
-                    .is_some_and(cartesian)
-                && !multi_chain[v]
-        })
+    // The chain of each control point on one (as the refined level's crease samples see
+    // it: the chain of its sharp edges, none when they belong to two).
+    let nc = control.vertex_count();
+    let mut vertex_chain: Vec<Option<usize>> = vec![None; nc];
+    let mut multi_chain = vec![false; nc];
+    for &(a, b) in &control.sharp_edges {
+        let Some(&c) = edge_chain.get(&edge_key(a, b)) else {
+            continue;
+        };
+        for v in [a as usize, b as usize] {
+            match vertex_chain[v] {
+                Some(old) if old != c => multi_chain[v] = true,
+                _ => vertex_chain[v] = Some(c),
+            }
+        }
+    }
+    let mut by_chain = vec![Vec::new(); net.chains.len()];
+    for v in 0..nc {
+        let Some(c) = vertex_chain[v] else { continue };
+        if !control.corners.contains(&(v as u32)) && on_sharp[v] && !multi_chain[v] && cartesian(c)
+        {
+            by_chain[c].push(v);
+        }
+    }
+    let group_fingerprints = Supports::new(control).fingerprints()?;
+    let fingerprints: Vec<Option<u64>> = net
+        .chains
+        .iter()
+        .map(|c| combined_fingerprint(&c.groups, &group_fingerprints))
         .collect();
-    if unknowns.is_empty() {
+    let reused = cache
+        .chains
+        .reuse(&mut control.positions, &fingerprints, &by_chain);
+    let solving: Vec<bool> = (0..by_chain.len())
+        .map(|c| !by_chain[c].is_empty() && !reused[c])
+        .collect();
+    if !solving.contains(&true) {
         return Ok(());
     }
+    let mut groups: Vec<usize> = (0..solving.len())
+        .filter(|&c| solving[c])
+        .flat_map(|c| net.chains[c].groups.iter().map(|&g| g as usize))
+        .collect();
+    groups.sort_unstable();
+    groups.dedup();
+    let before = control.positions.clone();
+    let unknowns: Vec<usize> = (0..solving.len())
+        .filter(|&c| solving[c])
+        .flat_map(|c| by_chain[c].iter().copied())
+        .collect();
+    let part = Supports::new(control).submesh(&groups);
+    let sub = part.as_ref().unwrap_or(control);
+    let sampled = Sampled::new(sub, edge_chain)?;
+    let mut positions = sub.positions.clone();
     let chain_points: Vec<Vec<DVec3>> = net
         .chains
         .iter()
@@ -336,8 +390,13 @@ fn fit_chains(
                 .collect()
         })
         .collect();
-    sampled.solve(&mut control.positions, &unknowns, |s, at| {
-        let c = sample_chain[s].filter(|&c| !multi_chain[s] && cartesian(c))?;
+    let SampleSources {
+        chain: sample_chain,
+        multi_chain: sample_multi,
+        ..
+    } = &sampled.sources;
+    sampled.solve(&mut positions, &unknowns, |s, at| {
+        let c = sample_chain[s].filter(|&c| !sample_multi[s] && solving[c])?;
         // On the edge's polyline, then onto the exact surfaces of its faces where the input
         // knows them all: the polyline sags from the CAD edge by up to its chord.
         let on_line = closest_on_polyline(at, &chain_points[c]);
@@ -347,7 +406,18 @@ fn fit_chains(
                 .and_then(|surfaces| onto_all(surfaces, on_line))
                 .unwrap_or(on_line),
         )
-    })
+    })?;
+    for &v in &unknowns {
+        control.positions[v] = positions[v];
+    }
+    cache.chains.store(
+        &fingerprints,
+        &by_chain,
+        &reused,
+        &before,
+        &control.positions,
+    );
+    Ok(())
 }
 
 /// The interior control points of the closed patches, fitted to their faces. Patches whose
@@ -387,7 +457,9 @@ fn fit_closed_interiors(
         }
     }
     let fingerprints = Supports::new(control).fingerprints()?;
-    let reused = cache.reuse(&mut control.positions, &fingerprints, &interior);
+    let reused = cache
+        .patches
+        .reuse(&mut control.positions, &fingerprints, &interior);
     let solving: Vec<usize> = (0..interior.len())
         .filter(|&g| !interior[g].is_empty() && !reused[g])
         .collect();
@@ -426,7 +498,7 @@ fn fit_closed_interiors(
     for &v in &unknowns {
         control.positions[v] = positions[v];
     }
-    cache.store(
+    cache.patches.store(
         &fingerprints,
         &interior,
         &reused,
@@ -574,7 +646,7 @@ mod tests {
         // Group 0 solved vertices 1 and 2; group 1 (vertex 3) has no fingerprint.
         let interior = vec![vec![1, 2], vec![3]];
         let mut cache = SolveCache::default();
-        cache.store(
+        cache.patches.store(
             &[Some(7), None],
             &interior,
             &[false, false],
@@ -584,7 +656,9 @@ mod tests {
 
         // Renumbered (the two points swapped), same fingerprint: reused, by position.
         let mut positions = vec![DVec3::ZERO, DVec3::Y, DVec3::X, DVec3::Z];
-        let reused = cache.reuse(&mut positions, &[Some(7), None], &interior);
+        let reused = cache
+            .patches
+            .reuse(&mut positions, &[Some(7), None], &interior);
         assert_eq!(reused, vec![true, false]);
         assert_eq!(positions[1], after[2]);
         assert_eq!(positions[2], after[1]);
@@ -593,14 +667,16 @@ mod tests {
         // Another fingerprint, or a point the cache does not hold: solved again.
         let mut positions = before.clone();
         assert_eq!(
-            cache.reuse(&mut positions, &[Some(8), None], &interior),
+            cache
+                .patches
+                .reuse(&mut positions, &[Some(8), None], &interior),
             vec![false, false]
         );
         assert_eq!(positions, before);
         let mut moved = before.clone();
         moved[2] = DVec3::new(0.0, 1.0, 1e-12);
         assert_eq!(
-            cache.reuse(&mut moved, &[Some(7), None], &interior),
+            cache.patches.reuse(&mut moved, &[Some(7), None], &interior),
             vec![false, false]
         );
         assert_eq!(moved[1], before[1]);
