@@ -14,6 +14,8 @@
 //! The other direction samples the reference tessellation, moves every sample of an exact
 //! face onto its surface, and measures the samples' distance to the decoded surface.
 
+use std::collections::BTreeSet;
+
 use glam::DVec3;
 
 use scode::error::{Error, Result};
@@ -43,6 +45,8 @@ pub struct BrepReference {
     /// Chordal tolerance of the exactly measured faces' facets (model units): how far a
     /// projection may land from them and still be on the face.
     chord: f64,
+    /// Names of faces the reference leaves out ([`BrepReference::leave_out`]).
+    left_out: BTreeSet<String>,
 }
 
 impl BrepReference {
@@ -77,7 +81,16 @@ impl BrepReference {
             triangle_group,
             exact,
             chord: chord.max(0.0),
+            left_out: BTreeSet::new(),
         })
+    }
+
+    /// Leaves out of every measurement the decoded faces (groups) of these names: faces the
+    /// reference lacks because some tessellation of the part could not make them, which a
+    /// codec that encoded another tessellation may still have (it is charged neither for
+    /// having them nor, since the reference lacks them, for not having them).
+    pub fn leave_out(&mut self, names: impl IntoIterator<Item = String>) {
+        self.left_out.extend(names);
     }
 
     /// How each face (group) is measured.
@@ -123,6 +136,30 @@ impl BrepReference {
     /// [`scode::metrics::hausdorff`] measures two meshes (same sample counts and seeds,
     /// `decoded` as A); `diagonal` is the reference's.
     pub fn measure(&self, decoded: &ControlMesh) -> Result<DistanceReport> {
+        let kept;
+        let left_out = |g: u32| {
+            decoded
+                .groups
+                .get(g as usize)
+                .is_some_and(|group| self.left_out.contains(&group.name))
+        };
+        let decoded = if decoded.face_groups.iter().any(|&g| left_out(g)) {
+            let mut m = ControlMesh {
+                positions: decoded.positions.clone(),
+                groups: decoded.groups.clone(),
+                ..ControlMesh::default()
+            };
+            for f in 0..decoded.face_count() {
+                let g = decoded.face_groups[f];
+                if !left_out(g) {
+                    m.push_face(decoded.face(f), g);
+                }
+            }
+            kept = m;
+            &kept
+        } else {
+            decoded
+        };
         let opts = DistanceOptions::default();
         let dec = TriangleSurface::from_control_mesh(decoded)?;
         let from_decoded: Vec<DVec3> = sample_surface(
@@ -339,5 +376,25 @@ mod tests {
         assert!(d < 1e-9, "{d}");
         let e = BrepReference::new(part(8, 4, false), &[None], 0.1);
         assert!(e.is_err());
+    }
+
+    #[test]
+    fn faces_left_out_of_the_reference_are_not_measured() {
+        let mut reference = BrepReference::new(part(48, 24, false), &exact(), 0.1).unwrap();
+        // The decoded part has a face the reference lacks: a patch 3 above the cylinder.
+        let mut decoded = part(48, 24, false);
+        decoded.groups[1].name = "kept".into();
+        decoded.groups.push(Group {
+            name: "extra".into(),
+            ..Group::default()
+        });
+        grid(&mut decoded, 2, (4, 4), |u, v| {
+            DVec3::new(u - 0.5, v - 0.5, H_CYL + 3.0)
+        });
+        let before = reference.measure(&decoded).unwrap();
+        assert!(before.max_a_to_b > 2.0, "{before:?}");
+        reference.leave_out(["extra".to_string()]);
+        let after = reference.measure(&decoded).unwrap();
+        assert!(after.max_a_to_b < 0.1, "{after:?}");
     }
 }

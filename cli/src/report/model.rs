@@ -8,7 +8,7 @@
 //! equal-error pairing finds the smallest file of each baseline at each accuracy whatever
 //! tessellation it came from.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -22,7 +22,7 @@ use super::run::{
 use super::steps::Setting;
 use scode::io;
 use scode::io::step::{read_step_tessellations, surface_name, StepModel, StepOptions};
-use scode::mesh::{ControlMesh, Tolerance};
+use scode::mesh::{edge_key, ControlMesh, Tolerance};
 use scode::metrics::raw_binary_bytes;
 use scode::pipeline::{bits_for_tolerance, step_options_for};
 
@@ -184,9 +184,11 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
     let nominal =
         read(step_options_for(Tolerance::DEFAULT)).map_err(|e| format!("cannot read: {e}"))?;
     let mut skipped: Vec<String> = nominal.skipped.iter().map(|f| f.to_string()).collect();
-    let (reference, faces, description) = if opts.reference.unwrap_or(Reference::Brep)
-        == Reference::Brep
-    {
+    // Faces any read skipped (a face's tessellation may fail at one chordal tolerance and
+    // not at another): left out of the reference and of every baseline's mesh, so that
+    // every codec and the ruler cover the same faces.
+    let mut skipped_faces: BTreeSet<u64> = nominal.skipped.iter().map(|f| f.face_id).collect();
+    let reference_read = if opts.reference.unwrap_or(Reference::Brep) == Reference::Brep {
         let (r, chord, failures) = match read_reference(opts, &read) {
             Ok(found) => found,
             // The default tessellation is the last resort: its chordal tolerance is in
@@ -198,45 +200,71 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
             ),
         };
         skipped.extend(r.skipped.iter().map(|f| f.to_string()));
-        let (reference, faces, mut description) = brep_reference(&r, chord)?;
-        if !failures.is_empty() {
-            description.push_str(&format!(
-                " (finer reference tessellations failed: {})",
-                failures.join("; ")
-            ));
-        }
-        (Some(reference), faces, description)
+        skipped_faces.extend(r.skipped.iter().map(|f| f.face_id));
+        Some((r, chord, failures))
     } else {
-        let d = format!(
-            "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
-            scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * scode::pipeline::STEP_CHORD_FRACTION
-        );
-        (None, Vec::new(), d)
+        None
     };
     let mut chords = opts.tessellation_chords.clone();
     chords.sort_by(|a, b| b.total_cmp(a));
-    let mut inputs: Vec<(Option<f64>, ControlMesh)> = Vec::new();
-    let mut description = description;
+    let mut tessellations: Vec<(f64, StepModel)> = Vec::new();
+    let mut stopped = None;
     for c in chords {
         match read(at(c)) {
             Ok(m) => {
                 skipped.extend(m.skipped.iter().map(|f| f.to_string()));
-                inputs.push((Some(c), m.mesh));
+                skipped_faces.extend(m.skipped.iter().map(|f| f.face_id));
+                tessellations.push((c, m));
             }
             Err(e) => {
                 // A finer tessellation takes longer still: the series ends here.
-                description.push_str(&format!(
+                stopped = Some(format!(
                     "; the baselines' tessellations stop above chordal tolerance {c:.1e} ({e})"
                 ));
                 break;
             }
         }
     }
+    let (reference, faces, mut description) = match reference_read {
+        Some((r, chord, failures)) => {
+            let (mut reference, faces, mut description) =
+                brep_reference(&without_faces(&r, &skipped_faces), chord)?;
+            // scode encodes the nominal tessellation: the faces it has that another read
+            // skipped are not measured.
+            reference.leave_out(
+                nominal
+                    .faces
+                    .iter()
+                    .zip(&nominal.mesh.groups)
+                    .filter(|(f, _)| skipped_faces.contains(&f.face_id))
+                    .map(|(_, g)| g.name.clone()),
+            );
+            if !failures.is_empty() {
+                description.push_str(&format!(
+                    " (finer reference tessellations failed: {})",
+                    failures.join("; ")
+                ));
+            }
+            (Some(reference), faces, description)
+        }
+        None => {
+            let d = format!(
+                "the part tessellated by scode at chordal tolerance {:.1e} of the diagonal",
+                scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * scode::pipeline::STEP_CHORD_FRACTION
+            );
+            (None, Vec::new(), d)
+        }
+    };
+    description.extend(stopped);
+    let inputs: Vec<(Option<f64>, ControlMesh)> = tessellations
+        .iter()
+        .map(|(c, m)| (Some(*c), without_faces(m, &skipped_faces).mesh))
+        .collect();
     skipped.sort();
     skipped.dedup();
     if !skipped.is_empty() {
         description.push_str(&format!(
-            "; faces the reader skipped (missing from the meshes and the reference): {}",
+            "; faces some tessellation of the part lacks (left out of the reference and of every codec's measurement): {}",
             skipped.join("; ")
         ));
     }
@@ -248,6 +276,61 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
         reference: description,
         faces,
     })
+}
+
+/// `model` without the faces whose ids are in `dropped` (their groups removed, the others
+/// renumbered in order; vertices kept, so the part's diagonal stays).
+fn without_faces(model: &StepModel, dropped: &BTreeSet<u64>) -> StepModel {
+    let keep: Vec<bool> = model
+        .faces
+        .iter()
+        .map(|f| !dropped.contains(&f.face_id))
+        .collect();
+    if keep.iter().all(|&k| k) || keep.len() != model.mesh.groups.len() {
+        return model.clone();
+    }
+    let mut renumbered = vec![u32::MAX; keep.len()];
+    let mut mesh = ControlMesh {
+        positions: model.mesh.positions.clone(),
+        corners: model.mesh.corners.clone(),
+        ..ControlMesh::default()
+    };
+    for (g, group) in model.mesh.groups.iter().enumerate() {
+        if keep[g] {
+            renumbered[g] = mesh.groups.len() as u32;
+            mesh.groups.push(group.clone());
+        }
+    }
+    for f in 0..model.mesh.face_count() {
+        let g = model.mesh.face_groups[f] as usize;
+        if keep.get(g).copied().unwrap_or(false) {
+            mesh.push_face(model.mesh.face(f), renumbered[g]);
+        }
+    }
+    // A sharp edge stays where a kept face still has it.
+    let kept_edges: BTreeSet<(u32, u32)> = (0..mesh.face_count())
+        .flat_map(|f| {
+            let face = mesh.face(f);
+            (0..face.len()).map(move |i| edge_key(face[i], face[(i + 1) % face.len()]))
+        })
+        .collect();
+    mesh.sharp_edges = model
+        .mesh
+        .sharp_edges
+        .intersection(&kept_edges)
+        .copied()
+        .collect();
+    StepModel {
+        mesh,
+        faces: model
+            .faces
+            .iter()
+            .zip(&keep)
+            .filter(|(_, &k)| k)
+            .map(|(f, _)| f.clone())
+            .collect(),
+        ..model.clone()
+    }
 }
 
 /// The reference tessellation: at the tightest accuracy / [`REFERENCE_CHORD_DIVISOR`],
