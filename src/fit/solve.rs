@@ -343,30 +343,6 @@ fn fit_chains(
         .iter()
         .map(|c| combined_fingerprint(&c.groups, &group_fingerprints))
         .collect();
-    let reused = cache
-        .chains
-        .reuse(&mut control.positions, &fingerprints, &by_chain);
-    let solving: Vec<bool> = (0..by_chain.len())
-        .map(|c| !by_chain[c].is_empty() && !reused[c])
-        .collect();
-    if !solving.contains(&true) {
-        return Ok(());
-    }
-    let mut groups: Vec<usize> = (0..solving.len())
-        .filter(|&c| solving[c])
-        .flat_map(|c| net.chains[c].groups.iter().map(|&g| g as usize))
-        .collect();
-    groups.sort_unstable();
-    groups.dedup();
-    let before = control.positions.clone();
-    let unknowns: Vec<usize> = (0..solving.len())
-        .filter(|&c| solving[c])
-        .flat_map(|c| by_chain[c].iter().copied())
-        .collect();
-    let part = Supports::new(control).submesh(&groups);
-    let sub = part.as_ref().unwrap_or(control);
-    let sampled = Sampled::new(sub, edge_chain)?;
-    let mut positions = sub.positions.clone();
     let chain_points: Vec<Vec<DVec3>> = net
         .chains
         .iter()
@@ -390,34 +366,26 @@ fn fit_chains(
                 .collect()
         })
         .collect();
-    let SampleSources {
-        chain: sample_chain,
-        multi_chain: sample_multi,
-        ..
-    } = &sampled.sources;
-    sampled.solve(&mut positions, &unknowns, |s, at| {
-        let c = sample_chain[s].filter(|&c| !sample_multi[s] && solving[c])?;
-        // On the edge's polyline, then onto the exact surfaces of its faces where the input
-        // knows them all: the polyline sags from the CAD edge by up to its chord.
-        let on_line = closest_on_polyline(at, &chain_points[c]);
-        Some(
-            chain_exact[c]
-                .as_deref()
-                .and_then(|surfaces| onto_all(surfaces, on_line))
-                .unwrap_or(on_line),
-        )
-    })?;
-    for &v in &unknowns {
-        control.positions[v] = positions[v];
-    }
-    cache.chains.store(
+    solve_changed_blocks(
+        control,
+        edge_chain,
+        &mut cache.chains,
         &fingerprints,
         &by_chain,
-        &reused,
-        &before,
-        &control.positions,
-    );
-    Ok(())
+        |c| net.chains[c].groups.iter().map(|&g| g as usize).collect(),
+        |sources, solving, s, at| {
+            let c = sources.chain[s].filter(|&c| !sources.multi_chain[s] && solving[c])?;
+            // On the edge's polyline, then onto the exact surfaces of its faces where the
+            // input knows them all: the polyline sags from the CAD edge by up to its chord.
+            let on_line = closest_on_polyline(at, &chain_points[c]);
+            Some(
+                chain_exact[c]
+                    .as_deref()
+                    .and_then(|surfaces| onto_all(surfaces, on_line))
+                    .unwrap_or(on_line),
+            )
+        },
+    )
 }
 
 /// The interior control points of the closed patches, fitted to their faces. Patches whose
@@ -457,54 +425,73 @@ fn fit_closed_interiors(
         }
     }
     let fingerprints = Supports::new(control).fingerprints()?;
-    let reused = cache
-        .patches
-        .reuse(&mut control.positions, &fingerprints, &interior);
-    let solving: Vec<usize> = (0..interior.len())
-        .filter(|&g| !interior[g].is_empty() && !reused[g])
+    solve_changed_blocks(
+        control,
+        edge_chain,
+        &mut cache.patches,
+        &fingerprints,
+        &interior,
+        |g| vec![g],
+        |sources, solving, s, at| {
+            let g = sources.group[s].filter(|&g| {
+                !sources.mixed[s] && sources.chain[s].is_none() && solving[g as usize]
+            })?;
+            // On the face's facets, then onto its exact surface where the input knows it:
+            // the facets sag from the CAD surface by up to their chord, and the error is
+            // measured against the CAD surface too.
+            let on_facets = group_surfaces
+                .get(g as usize)?
+                .as_ref()?
+                .closest_point(at)
+                .point;
+            Some(match exact.get(g as usize).copied().flatten() {
+                Some(e) => e.project(on_facets),
+                None => on_facets,
+            })
+        },
+    )
+}
+
+/// Solves the blocks of unknowns `blocks` (`fingerprints` identifying their inputs) that
+/// `solved` does not hold a solution of, on the submesh of their groups (`groups_of`), and
+/// keeps their solutions. `target(sources, solving, sample, limit position)` is
+/// [`Sampled::solve`]'s target, given where the samples of the mesh solved on lie and which
+/// blocks are being solved.
+fn solve_changed_blocks(
+    control: &mut ControlMesh,
+    edge_chain: &BTreeMap<(u32, u32), usize>,
+    solved: &mut SolvedBlocks,
+    fingerprints: &[Option<u64>],
+    blocks: &[Vec<usize>],
+    groups_of: impl Fn(usize) -> Vec<usize>,
+    target: impl Fn(&SampleSources, &[bool], usize, DVec3) -> Option<DVec3>,
+) -> Result<()> {
+    let reused = solved.reuse(&mut control.positions, fingerprints, blocks);
+    let solving: Vec<bool> = (0..blocks.len())
+        .map(|b| !blocks[b].is_empty() && !reused[b])
         .collect();
-    if solving.is_empty() {
+    if !solving.contains(&true) {
         return Ok(());
     }
+    let solved_now = || (0..blocks.len()).filter(|&b| solving[b]);
+    let mut groups: Vec<usize> = solved_now().flat_map(&groups_of).collect();
+    groups.sort_unstable();
+    groups.dedup();
+    let unknowns: Vec<usize> = solved_now()
+        .flat_map(|b| blocks[b].iter().copied())
+        .collect();
     let before = control.positions.clone();
-    let unknowns: Vec<usize> = solving.iter().flat_map(|&g| interior[g].clone()).collect();
-    let part = Supports::new(control).submesh(&solving);
+    let part = Supports::new(control).submesh(&groups);
     let mesh = part.as_ref().unwrap_or(control);
     let sampled = Sampled::new(mesh, edge_chain)?;
     let mut positions = mesh.positions.clone();
-    let SampleSources {
-        chain: sample_chain,
-        group: sample_group,
-        mixed: sample_mixed,
-        ..
-    } = &sampled.sources;
     sampled.solve(&mut positions, &unknowns, |s, at| {
-        let g = sample_group[s].filter(|&g| {
-            !sample_mixed[s] && sample_chain[s].is_none() && closed(g) && !reused[g as usize]
-        })?;
-        // On the face's facets, then onto its exact surface where the input knows it: the
-        // facets sag from the CAD surface by up to their chord, and the error is measured
-        // against the CAD surface too.
-        let on_facets = group_surfaces
-            .get(g as usize)?
-            .as_ref()?
-            .closest_point(at)
-            .point;
-        Some(match exact.get(g as usize).copied().flatten() {
-            Some(e) => e.project(on_facets),
-            None => on_facets,
-        })
+        target(&sampled.sources, &solving, s, at)
     })?;
     for &v in &unknowns {
         control.positions[v] = positions[v];
     }
-    cache.patches.store(
-        &fingerprints,
-        &interior,
-        &reused,
-        &before,
-        &control.positions,
-    );
+    solved.store(fingerprints, blocks, &reused, &before, &control.positions);
     Ok(())
 }
 
