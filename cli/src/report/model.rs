@@ -602,4 +602,50 @@ mod tests {
         assert!(jobs.iter().all(|(s, i)| s.is_scode() == i.is_none()));
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    #[test]
+    fn a_face_left_out_goes_with_its_triangles_and_edges() {
+        // Three faces in a strip of triangles, with sharp edges between them.
+        let mut mesh = ControlMesh::new();
+        for i in 0..5 {
+            mesh.push_vertex(glam::DVec3::new(f64::from(i), f64::from(i % 2), 0.0));
+        }
+        let mut faces = Vec::new();
+        for (g, id) in [11u64, 22, 33].into_iter().enumerate() {
+            mesh.push_group(format!("face_{}", g + 1), scode::mesh::PatchKind::Closed);
+            let g = g as u32;
+            mesh.push_face(&[g, g + 1, g + 2], g);
+            faces.push(scode::io::step::FaceSurface {
+                face_id: id,
+                surface_id: 0,
+                body: 0,
+                surface: scode::io::SurfaceType::Plane,
+                entity: "PLANE".into(),
+                exact: None,
+                revolution_axis: None,
+            });
+        }
+        mesh.sharp_edges = [(1, 2), (1, 3), (2, 3)].into_iter().collect();
+        let model = StepModel {
+            mesh,
+            faces,
+            ..StepModel::default()
+        };
+        let kept = without_faces(&model, &[22].into_iter().collect());
+        let names: Vec<&str> = kept.mesh.groups.iter().map(|g| g.name.as_str()).collect();
+        assert_eq!(names, ["face_1", "face_3"]);
+        assert_eq!(
+            kept.faces.iter().map(|f| f.face_id).collect::<Vec<_>>(),
+            [11, 33]
+        );
+        assert_eq!(kept.mesh.face_groups, [0, 1]);
+        assert_eq!(kept.mesh.face(1), [2, 3, 4]);
+        // Vertices stay (the part's size does not change); (1, 3) was only face 2's edge.
+        assert_eq!(kept.mesh.positions.len(), 5);
+        assert_eq!(
+            kept.mesh.sharp_edges,
+            [(1, 2), (2, 3)].into_iter().collect()
+        );
+        assert_eq!(without_faces(&model, &BTreeSet::new()).mesh.groups.len(), 3);
+    }
 }
