@@ -627,7 +627,7 @@ impl Measure<'_> {
         let s = self.sample_level(m);
         let q = 1usize << (2 * m);
         let group = self.r.base.group[k];
-        let (mut around, mut ring, mut near) = (Vec::new(), Vec::new(), NearScratch::default());
+        let (mut around, mut ring) = (Vec::new(), Vec::new());
         let mut points = Vec::new();
         let mut err2 = self.floor * self.floor;
         for f in k * q..(k + 1) * q {
@@ -647,10 +647,10 @@ impl Measure<'_> {
                 }
                 // From the surface to the output: the sample to its own triangle, or to the
                 // nearest around it in the same CAD face.
-                if point_triangle_distance_squared(p, &t) > err2 {
+                let own = point_triangle_distance_squared(p, &t);
+                if own > err2 {
                     if ring.is_empty() {
                         faces_around(lm, f, &mut around);
-                        ring.push(t);
                         ring.extend(
                             around
                                 .iter()
@@ -658,12 +658,12 @@ impl Measure<'_> {
                                 .map(|&g| tri(g as usize)),
                         );
                     }
-                    err2 = err2.max(nearest(p, &ring, err2.sqrt()));
+                    err2 = err2.max(nearest(p, own, &ring, err2.sqrt()));
                 }
                 // From the output to the samples' mesh: the output's point over the sample
                 // to the sample level's triangles at the sample.
                 if op2 > err2 {
-                    err2 = err2.max(self.nearest_sample_triangle(o, x, s, limit, err2, &mut near));
+                    err2 = err2.max(self.nearest_sample_triangle(o, x, s, limit, err2));
                 }
             }
             if err2 > stop_above * stop_above {
@@ -728,8 +728,8 @@ impl Measure<'_> {
     /// their limit points) at vertex `x` of level `s - 1` or `s`, the children of the
     /// level-`(s - 1)` faces at it; or any value at most `within2` once one is that near (the
     /// caller only needs to know it is no further). `p` lies near the limit point of `x`, so
-    /// the children with `x` as a corner are tried first: the search usually stops at one of
-    /// them. Each triangle is made only when it is reached.
+    /// the children with `x` as a corner are tried first, and the others only when none of
+    /// those is that near: the search usually stops at one of the first.
     fn nearest_sample_triangle(
         &self,
         p: DVec3,
@@ -737,49 +737,38 @@ impl Measure<'_> {
         s: u32,
         limit: &[DVec3],
         within2: f64,
-        scratch: &mut NearScratch,
     ) -> f64 {
         let last = self.r.full(s - 1);
-        let NearScratch { at, rest } = scratch;
-        at.clear();
-        rest.clear();
-        let mut children = |g: u32| {
-            for t in child_faces(last, g as usize).chunks_exact(3) {
-                let t = [t[0], t[1], t[2]];
-                if t.contains(&x) {
-                    at.push(t);
-                } else {
-                    rest.push(t);
-                }
-            }
-        };
-        if (x as usize) < last.nv {
-            // Each face at an old vertex once: the one on the counter-clockwise side of each
-            // ring edge (none after the last edge of a boundary vertex's ring).
-            for &e in last.ring(x as usize) {
-                let g = wedge_face(last, x, e);
-                if g != NONE {
-                    children(g);
-                }
-            }
+        // The faces at x: at an old vertex each face once, the one on the counter-clockwise
+        // side of each ring edge (none after the last edge of a boundary vertex's ring); at
+        // a new vertex the faces of its edge.
+        let (ring, edge): (&[u32], [u32; 2]) = if (x as usize) < last.nv {
+            (last.ring(x as usize), [NONE; 2])
         } else {
-            let d = x as usize - last.nv;
-            for g in last.edge_faces[d] {
-                if g != NONE {
-                    children(g);
-                }
-            }
-        }
+            (&[], last.edge_faces[x as usize - last.nv])
+        };
+        let faces = ring
+            .iter()
+            .map(|&e| wedge_face(last, x, e))
+            .chain(edge)
+            .filter(|&g| g != NONE);
         let mut best = f64::INFINITY;
-        for t in at.iter().chain(rest.iter()) {
-            let tri = [
-                limit[t[0] as usize],
-                limit[t[1] as usize],
-                limit[t[2] as usize],
-            ];
-            best = best.min(point_triangle_distance_squared(p, &tri));
-            if best <= within2 {
-                return best;
+        for with_x in [true, false] {
+            for g in faces.clone() {
+                for t in child_faces(last, g as usize).chunks_exact(3) {
+                    if t.contains(&x) != with_x {
+                        continue;
+                    }
+                    let tri = [
+                        limit[t[0] as usize],
+                        limit[t[1] as usize],
+                        limit[t[2] as usize],
+                    ];
+                    best = best.min(point_triangle_distance_squared(p, &tri));
+                    if best <= within2 {
+                        return best;
+                    }
+                }
             }
         }
         best
@@ -1127,10 +1116,14 @@ impl Measure<'_> {
     }
 }
 
-/// The squared distance from `p` to the nearest of `tris`, or any value at most `below²`
-/// once one is that near (the caller only needs to know it is no further).
-fn nearest(p: DVec3, tris: &[[DVec3; 3]], below: f64) -> f64 {
-    let mut best = f64::INFINITY;
+/// The squared distance from `p` to the nearest of a triangle at squared distance `first`
+/// and `tris`, or any value at most `below²` once one is that near (the caller only needs to
+/// know it is no further).
+fn nearest(p: DVec3, first: f64, tris: &[[DVec3; 3]], below: f64) -> f64 {
+    let mut best = first;
+    if best <= below * below {
+        return best;
+    }
     for t in tris {
         best = best.min(point_triangle_distance_squared(p, t));
         if best <= below * below {
@@ -1145,14 +1138,6 @@ fn nearest(p: DVec3, tris: &[[DVec3; 3]], below: f64) -> f64 {
 struct SampleScratch {
     around: Vec<u32>,
     points: Vec<(u32, [f64; 3])>,
-}
-
-/// Buffers [`Measure::nearest_sample_triangle`] reuses: the candidate triangles with the
-/// sample vertex as a corner, and the others.
-#[derive(Default)]
-struct NearScratch {
-    at: Vec<[u32; 3]>,
-    rest: Vec<[u32; 3]>,
 }
 
 /// The face on the counter-clockwise side of edge `e` of vertex `v`'s ring (`NONE` past a
