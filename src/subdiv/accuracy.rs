@@ -185,7 +185,7 @@ pub fn subdivide_to_tolerance(
     mesh_out.corners = mesh
         .corners
         .iter()
-        .filter_map(|&c| remap.get(c as usize).copied().filter(|&x| x != u32::MAX))
+        .filter_map(|&c| remap.get(c as usize))
         .collect();
     let flipped = well_shaped_planes(&mut mesh_out, FLIP_SHARE * tolerance);
     Ok(AccurateSurface {
@@ -1046,7 +1046,7 @@ impl Measure<'_> {
         lazy: &mut LazyLimits,
         levels: &[u8],
         opts: &AccuracyOptions,
-    ) -> Result<(lod::AdaptiveMesh, Vec<u32>)> {
+    ) -> Result<(lod::AdaptiveMesh, lod::Remap)> {
         let mut want = Vec::new();
         for (k, &m) in levels.iter().enumerate() {
             want.clear();
@@ -1067,8 +1067,11 @@ impl Measure<'_> {
             )?;
             // The output's vertices are those asked for above; should the extraction read
             // one more, it is evaluated and the output made again.
-            let missing: Vec<u32> = (0..nv as u32)
-                .filter(|&v| remap[v as usize] != u32::MAX && !lazy.has(v, opts.normals))
+            let missing: Vec<u32> = remap
+                .used()
+                .iter()
+                .copied()
+                .filter(|&v| !lazy.has(v, opts.normals))
                 .collect();
             if missing.is_empty() {
                 return Ok((out, remap));
@@ -1084,7 +1087,7 @@ impl Measure<'_> {
         &self,
         levels: &[u8],
         top: u32,
-        remap: &[u32],
+        remap: &lod::Remap,
     ) -> std::collections::BTreeSet<(u32, u32)> {
         let l0 = self.l0();
         let mut out = std::collections::BTreeSet::new();
@@ -1103,7 +1106,6 @@ impl Measure<'_> {
             while j <= 1usize << top {
                 let v = remap
                     .get(lod::edge_vertex(l0, &self.level_nv, top, e, j) as usize)
-                    .copied()
                     .unwrap_or(u32::MAX);
                 if prev != u32::MAX && v != u32::MAX {
                     out.insert(edge_key(prev, v));
