@@ -185,7 +185,7 @@ pub fn subdivide_to_tolerance(
     mesh_out.corners = mesh
         .corners
         .iter()
-        .filter_map(|&c| remap.get(c as usize).copied().filter(|&x| x != u32::MAX))
+        .filter_map(|&c| remap.get(c as usize))
         .collect();
     let flipped = well_shaped_planes(&mut mesh_out, FLIP_SHARE * tolerance);
     Ok(AccurateSurface {
@@ -551,12 +551,21 @@ impl Measure<'_> {
         let q = 1usize << (2 * m);
         for f in k * q..(k + 1) * q {
             self.vertices_over(f, m, s, scratch, out);
-            faces_around(lm, f, &mut scratch.around);
-            for i in 0..scratch.around.len() {
-                let g = scratch.around[i] as usize;
-                if g >> (2 * m) != k && !asked[g >> (2 * m)] {
-                    self.vertices_over(g, m, s, scratch, out);
+            // Most faces around belong to base triangles asked for themselves: only the
+            // others are gathered (and sorted, to take each once).
+            scratch.around.clear();
+            for &v in &lm.faces[3 * f..3 * f + 3] {
+                for &e in lm.ring(v as usize) {
+                    let g = wedge_face(lm, v, e);
+                    if g != NONE && g as usize >> (2 * m) != k && !asked[g as usize >> (2 * m)] {
+                        scratch.around.push(g);
+                    }
                 }
+            }
+            scratch.around.sort_unstable();
+            scratch.around.dedup();
+            for i in 0..scratch.around.len() {
+                self.vertices_over(scratch.around[i] as usize, m, s, scratch, out);
             }
         }
     }
@@ -618,7 +627,7 @@ impl Measure<'_> {
         let s = self.sample_level(m);
         let q = 1usize << (2 * m);
         let group = self.r.base.group[k];
-        let (mut around, mut ring, mut faces) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut around, mut ring) = (Vec::new(), Vec::new());
         let mut points = Vec::new();
         let mut err2 = self.floor * self.floor;
         for f in k * q..(k + 1) * q {
@@ -628,12 +637,20 @@ impl Measure<'_> {
             self.points_over(m, f, s - m, &mut points);
             for &(x, b) in &points {
                 let p = limit[x as usize];
+                // The output's point over the sample lies on t, so both distances below are
+                // at most its distance from the sample: when that is within err2 neither can
+                // raise it (most samples, once err2 has grown to the triangle's error).
+                let o = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
+                let op2 = (o - p).length_squared();
+                if op2 <= err2 {
+                    continue;
+                }
                 // From the surface to the output: the sample to its own triangle, or to the
                 // nearest around it in the same CAD face.
-                if point_triangle_distance_squared(p, &t) > err2 {
+                let own = point_triangle_distance_squared(p, &t);
+                if own > err2 {
                     if ring.is_empty() {
                         faces_around(lm, f, &mut around);
-                        ring.push(t);
                         ring.extend(
                             around
                                 .iter()
@@ -641,20 +658,12 @@ impl Measure<'_> {
                                 .map(|&g| tri(g as usize)),
                         );
                     }
-                    err2 = err2.max(nearest(p, &ring, err2.sqrt()));
+                    err2 = err2.max(nearest(p, own, &ring, err2.sqrt()));
                 }
                 // From the output to the samples' mesh: the output's point over the sample
                 // to the sample level's triangles at the sample.
-                let o = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
-                if (o - p).length_squared() > err2 {
-                    err2 = err2.max(self.nearest_sample_triangle(
-                        o,
-                        x,
-                        s,
-                        limit,
-                        err2.sqrt(),
-                        &mut faces,
-                    ));
+                if op2 > err2 {
+                    err2 = err2.max(self.nearest_sample_triangle(o, x, s, limit, err2));
                 }
             }
             if err2 > stop_above * stop_above {
@@ -715,43 +724,50 @@ impl Measure<'_> {
         }
     }
 
-    /// [`nearest`] from `p` among the level-`s` triangles (corners at their limit points) at
-    /// vertex `x` of level `s - 1` or `s`, the children of the level-`(s - 1)` faces at it,
-    /// taken in the order of those faces' ids. Each triangle is made only when it is reached:
-    /// the search usually stops at one of the first.
+    /// The squared distance from `p` to the nearest of the level-`s` triangles (corners at
+    /// their limit points) at vertex `x` of level `s - 1` or `s`, the children of the
+    /// level-`(s - 1)` faces at it; or any value at most `within2` once one is that near (the
+    /// caller only needs to know it is no further). `p` lies near the limit point of `x`, so
+    /// the children with `x` as a corner are tried first, and the others only when none of
+    /// those is that near: the search usually stops at one of the first.
     fn nearest_sample_triangle(
         &self,
         p: DVec3,
         x: u32,
         s: u32,
         limit: &[DVec3],
-        below: f64,
-        faces: &mut Vec<u32>,
+        within2: f64,
     ) -> f64 {
         let last = self.r.full(s - 1);
-        faces.clear();
-        if (x as usize) < last.nv {
-            for &e in last.ring(x as usize) {
-                faces.extend(last.edge_faces[e as usize].iter().filter(|&&g| g != NONE));
-            }
-            faces.sort_unstable();
-            faces.dedup();
+        // The faces at x: at an old vertex each face once, the one on the counter-clockwise
+        // side of each ring edge (none after the last edge of a boundary vertex's ring); at
+        // a new vertex the faces of its edge.
+        let (ring, edge): (&[u32], [u32; 2]) = if (x as usize) < last.nv {
+            (last.ring(x as usize), [NONE; 2])
         } else {
-            let d = x as usize - last.nv;
-            faces.extend(last.edge_faces[d].iter().filter(|&&g| g != NONE));
-        }
+            (&[], last.edge_faces[x as usize - last.nv])
+        };
+        let faces = ring
+            .iter()
+            .map(|&e| wedge_face(last, x, e))
+            .chain(edge)
+            .filter(|&g| g != NONE);
         let mut best = f64::INFINITY;
-        for &g in faces.iter() {
-            let c = child_faces(last, g as usize);
-            for t in c.chunks_exact(3) {
-                let tri = [
-                    limit[t[0] as usize],
-                    limit[t[1] as usize],
-                    limit[t[2] as usize],
-                ];
-                best = best.min(point_triangle_distance_squared(p, &tri));
-                if best <= below * below {
-                    return best;
+        for with_x in [true, false] {
+            for g in faces.clone() {
+                for t in child_faces(last, g as usize).chunks_exact(3) {
+                    if t.contains(&x) != with_x {
+                        continue;
+                    }
+                    let tri = [
+                        limit[t[0] as usize],
+                        limit[t[1] as usize],
+                        limit[t[2] as usize],
+                    ];
+                    best = best.min(point_triangle_distance_squared(p, &tri));
+                    if best <= within2 {
+                        return best;
+                    }
                 }
             }
         }
@@ -1030,7 +1046,7 @@ impl Measure<'_> {
         lazy: &mut LazyLimits,
         levels: &[u8],
         opts: &AccuracyOptions,
-    ) -> Result<(lod::AdaptiveMesh, Vec<u32>)> {
+    ) -> Result<(lod::AdaptiveMesh, lod::Remap)> {
         let mut want = Vec::new();
         for (k, &m) in levels.iter().enumerate() {
             want.clear();
@@ -1051,8 +1067,11 @@ impl Measure<'_> {
             )?;
             // The output's vertices are those asked for above; should the extraction read
             // one more, it is evaluated and the output made again.
-            let missing: Vec<u32> = (0..nv as u32)
-                .filter(|&v| remap[v as usize] != u32::MAX && !lazy.has(v, opts.normals))
+            let missing: Vec<u32> = remap
+                .used()
+                .iter()
+                .copied()
+                .filter(|&v| !lazy.has(v, opts.normals))
                 .collect();
             if missing.is_empty() {
                 return Ok((out, remap));
@@ -1068,7 +1087,7 @@ impl Measure<'_> {
         &self,
         levels: &[u8],
         top: u32,
-        remap: &[u32],
+        remap: &lod::Remap,
     ) -> std::collections::BTreeSet<(u32, u32)> {
         let l0 = self.l0();
         let mut out = std::collections::BTreeSet::new();
@@ -1087,7 +1106,6 @@ impl Measure<'_> {
             while j <= 1usize << top {
                 let v = remap
                     .get(lod::edge_vertex(l0, &self.level_nv, top, e, j) as usize)
-                    .copied()
                     .unwrap_or(u32::MAX);
                 if prev != u32::MAX && v != u32::MAX {
                     out.insert(edge_key(prev, v));
@@ -1100,10 +1118,14 @@ impl Measure<'_> {
     }
 }
 
-/// The squared distance from `p` to the nearest of `tris`, or any value at most `below²`
-/// once one is that near (the caller only needs to know it is no further).
-fn nearest(p: DVec3, tris: &[[DVec3; 3]], below: f64) -> f64 {
-    let mut best = f64::INFINITY;
+/// The squared distance from `p` to the nearest of a triangle at squared distance `first`
+/// and `tris`, or any value at most `below²` once one is that near (the caller only needs to
+/// know it is no further).
+fn nearest(p: DVec3, first: f64, tris: &[[DVec3; 3]], below: f64) -> f64 {
+    let mut best = first;
+    if best <= below * below {
+        return best;
+    }
     for t in tris {
         best = best.min(point_triangle_distance_squared(p, t));
         if best <= below * below {
@@ -1118,6 +1140,18 @@ fn nearest(p: DVec3, tris: &[[DVec3; 3]], below: f64) -> f64 {
 struct SampleScratch {
     around: Vec<u32>,
     points: Vec<(u32, [f64; 3])>,
+}
+
+/// The face on the counter-clockwise side of edge `e` of vertex `v`'s ring (`NONE` past a
+/// boundary): going round the ring, each face at `v` once.
+#[inline]
+fn wedge_face(l: &Level, v: u32, e: u32) -> u32 {
+    let ef = l.edge_faces[e as usize];
+    if l.edges[e as usize][0] == v {
+        ef[0]
+    } else {
+        ef[1]
+    }
 }
 
 /// The faces of level `l` around the corners of face `f` (other than `f`), into `out`.

@@ -238,7 +238,8 @@ pub(crate) fn eval_normal(
     wedge: Option<usize>,
 ) -> DVec3 {
     let c = l.vertex_class(v);
-    // The ring on the stack (valences above 32 are rare enough to allocate).
+    // The ring and its points on the stack (valences above 32 are rare enough to allocate):
+    // every rule below reads the points several times.
     let (mut small, mut large) = ([0u32; 32], Vec::new());
     let it = l.ring_edges(v);
     let ring: &[u32] = if it.len() <= small.len() {
@@ -254,6 +255,16 @@ pub(crate) fn eval_normal(
     if ring.is_empty() {
         return DVec3::ZERO;
     }
+    let (mut small_pts, mut large_pts) = ([DVec3::ZERO; 32], Vec::new());
+    let pts: &[DVec3] = if ring.len() <= small_pts.len() {
+        for (q, &e) in small_pts.iter_mut().zip(ring) {
+            *q = p[l.other_end(e, v as u32) as usize];
+        }
+        &small_pts[..ring.len()]
+    } else {
+        large_pts.extend(ring.iter().map(|&e| p[l.other_end(e, v as u32) as usize]));
+        &large_pts
+    };
     let pv = p[v];
     let is_boundary = l.edge_faces(ring[0] as usize)[1] == NONE;
     let nw = if is_boundary {
@@ -261,26 +272,17 @@ pub(crate) fn eval_normal(
     } else {
         ring.len()
     };
-    let ring_pt = |i: usize| p[l.other_end(ring[i % ring.len()], v as u32) as usize];
-    // area-weighted face normal sum of the wedges [i0, i0 + n)
-    let fan_normal = |pts: &dyn Fn(usize) -> DVec3, centre: DVec3, i0: usize, n: usize| {
-        let mut s = DVec3::ZERO;
-        for i in i0..i0 + n {
-            s += (pts(i) - centre).cross(pts(i + 1) - centre);
-        }
-        s
-    };
+    let ring_pt = |i: usize| pts[i % pts.len()];
     if vclass::is_smooth_rule(c) && !is_boundary {
         let k = ring.len();
         let (mut t1, mut t2) = (DVec3::ZERO, DVec3::ZERO);
-        for i in 0..k {
+        for (i, &q) in pts.iter().enumerate() {
             let (co, s) = t.cos_sin(k, i);
-            let q = ring_pt(i);
             t1 += q * co;
             t2 += q * s;
         }
         let n = t1.cross(t2);
-        let n = if n.dot(fan_normal(&ring_pt, pv, 0, nw)) < 0.0 {
+        let n = if n.dot(fan_normal(&mut |i| ring_pt(i), pv, 0, nw)) < 0.0 {
             -n
         } else {
             n
@@ -288,7 +290,7 @@ pub(crate) fn eval_normal(
         return normalize_or_zero(n);
     }
     if c == vclass::FIXED || !(vclass::is_crease(c) || c == vclass::CORNER) {
-        let fan = fan_normal(&ring_pt, pv, 0, nw);
+        let fan = fan_normal(&mut |i| ring_pt(i), pv, 0, nw);
         let framed = (0..nw).find_map(|i| face_frame(base, j, wedge_face(l, v, ring[i])));
         if let Some(fr) = framed {
             let n = fr.surface_normal(pv);
@@ -298,14 +300,59 @@ pub(crate) fn eval_normal(
         }
         return normalize_or_zero(fan);
     }
+    crease_normal(l, t, base, j, p, v, wedge, ring, nw, &mut |i| ring_pt(i))
+}
+
+/// Area-weighted normal sum of the wedges `[i0, i0 + n)` of the fan of points `pts(i)` about
+/// `centre`.
+#[inline]
+fn fan_normal(pts: &mut impl FnMut(usize) -> DVec3, centre: DVec3, i0: usize, n: usize) -> DVec3 {
+    let mut s = DVec3::ZERO;
+    for i in i0..i0 + n {
+        s += (pts(i) - centre).cross(pts(i + 1) - centre);
+    }
+    s
+}
+
+/// [`eval_normal`] of a crease or corner vertex `v` with ring `ring` (`nw` wedges) and ring
+/// points `ring_pt`.
+#[allow(clippy::too_many_arguments)]
+fn crease_normal(
+    l: &impl Connectivity,
+    t: &ValenceTables,
+    base: &Base,
+    j: u32,
+    p: &[DVec3],
+    v: usize,
+    wedge: Option<usize>,
+    ring: &[u32],
+    nw: usize,
+    ring_pt: &mut impl FnMut(usize) -> DVec3,
+) -> DVec3 {
+    let c = l.vertex_class(v);
+    let pv = p[v];
     // Crease / corner: one step later (reference §5.2-5.3).
     let vp = eval_vertex(l, t, base, p, v);
-    let q = |i: usize| eval_edge(l, base, p, ring[i % ring.len()] as usize);
+    // The next level's points on the ring edges, each made once: the sectors read each
+    // several times (their fans, tangents and neighbours).
+    let (mut small, mut large) = ([None; 32], Vec::new());
+    let made: &mut [Option<DVec3>] = if ring.len() <= small.len() {
+        &mut small[..ring.len()]
+    } else {
+        large.resize(ring.len(), None);
+        &mut large
+    };
+    let mut q = |i: usize| {
+        let i = i % ring.len();
+        *made[i].get_or_insert_with(|| eval_edge(l, base, p, ring[i] as usize))
+    };
+    // The limit point, made once for every framed boundary-patch sector.
+    let mut limit = None;
     let is_crease_edge =
         |i: usize| l.edge_class(ring[i % ring.len()] as usize) & eclass::CREASE != 0;
     let Some(start) = (0..ring.len()).find(|&i| is_crease_edge(i)) else {
         // a tagged corner without creases: no curve tangents; use the fan normal
-        return normalize_or_zero(fan_normal(&ring_pt, pv, 0, nw));
+        return normalize_or_zero(fan_normal(ring_pt, pv, 0, nw));
     };
     let mut total = DVec3::ZERO;
     let mut i = 0;
@@ -316,7 +363,7 @@ pub(crate) fn eval_normal(
         while i + nt < nw && !is_crease_edge(s0 + nt) {
             nt += 1;
         }
-        let fan = fan_normal(&q, vp, s0, nt);
+        let fan = fan_normal(&mut q, vp, s0, nt);
         let framed = face_frame(base, j, wedge_face(l, v, ring[s0 % ring.len()]));
         let in_bp = {
             let f = wedge_face(l, v, ring[s0 % ring.len()]) as usize;
@@ -325,7 +372,7 @@ pub(crate) fn eval_normal(
         let mut n = DVec3::ZERO;
         if let (true, Some(fr)) = (in_bp, framed) {
             // analytic normal at the vertex's limit point
-            n = fr.surface_normal(eval_limit(l, t, base, p, v));
+            n = fr.surface_normal(*limit.get_or_insert_with(|| eval_limit(l, t, base, p, v)));
         } else if in_bp {
             n = fan;
         } else if c == vclass::CORNER {

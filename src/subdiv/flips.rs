@@ -62,7 +62,10 @@ pub(crate) fn flip_to_well_shaped_within(
 ) -> usize {
     let can = |t: usize| flippable.get(groups[t] as usize).copied().unwrap_or(false);
     // Edge -> the triangles on either side (and the slot of the edge in each).
-    let mut sides: HashMap<(u32, u32), [(u32, u8); 2]> = HashMap::new();
+    // Sized for the edges of a closed mesh (3 per 2 triangles) up front: growing it rehashes
+    // every key again.
+    let mut sides: HashMap<(u32, u32), [(u32, u8); 2]> =
+        HashMap::with_capacity(tris.len() / 2 * 3 + 3);
     let none = (u32::MAX, 0u8);
     for (t, tri) in tris.iter().enumerate() {
         for s in 0..3 {

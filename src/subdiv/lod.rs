@@ -99,7 +99,7 @@ pub(crate) fn extract_at(
     normals: Option<&[DVec3]>,
     levels: &[u8],
     mode: BoundaryPatchOutput,
-) -> Result<(AdaptiveMesh, Vec<u32>)> {
+) -> Result<(AdaptiveMesh, Remap)> {
     check_extract_input(r, top, pos, levels)?;
     let n = top;
     let l0 = r.full(0);
@@ -484,33 +484,71 @@ impl Displaced<'_> {
     }
 }
 
+/// The map from vertex ids to output vertex ids that [`extract_at`] returns.
+pub(crate) struct Remap {
+    /// The output id + 1 of every used vertex, 0 for the others: allocated zeroed (`vec![0;
+    /// n]` asks the allocator for zeroed memory rather than writing it), so that only the
+    /// pages holding used vertices are ever written (a level's ids run to millions, an
+    /// output to thousands).
+    plus_one: Vec<u32>,
+    /// The used vertices, in id order.
+    used: Vec<u32>,
+}
+
+impl Remap {
+    /// The output vertex of vertex `v`, if the output uses it.
+    #[inline]
+    pub fn get(&self, v: usize) -> Option<u32> {
+        self.plus_one.get(v).and_then(|&x| x.checked_sub(1))
+    }
+
+    /// The vertices the output uses, in id order.
+    pub fn used(&self) -> &[u32] {
+        &self.used
+    }
+
+    /// Forgets the vertices from `n` on.
+    fn truncate(&mut self, n: usize) {
+        self.plus_one.truncate(n);
+        let keep = self.used.partition_point(|&v| (v as usize) < n);
+        self.used.truncate(keep);
+    }
+}
+
 /// The output mesh of [`extract_at`]: keeps the used vertices of `disp` (gap-filled
 /// positions) in index order, then the stitching centroids (vertex ids from `disp.len()` on,
 /// the mean of their three corners), and renumbers `tris`. Returns the mesh and the map from
-/// old to new vertex ids (`u32::MAX` for vertices not used).
+/// old to new vertex ids.
 fn compact(
     disp: &Displaced<'_>,
     normals: Option<&[DVec3]>,
     centroids: &[[u32; 3]],
     mut tris: Vec<[u32; 3]>,
     groups: Vec<u32>,
-) -> (AdaptiveMesh, Vec<u32>) {
+) -> (AdaptiveMesh, Remap) {
     let total = disp.len() + centroids.len();
-    let mut remap = vec![u32::MAX; total];
+    // The used vertices in id order, from a bit per id (a word covers 64 ids: the scan
+    // reads a small fraction of what an array of ids would).
+    let mut seen = vec![0u64; total.div_ceil(64)];
     for t in &tris {
         for &v in t {
-            remap[v as usize] = 0;
+            seen[v as usize / 64] |= 1 << (v % 64);
         }
     }
-    let mut positions = Vec::new();
-    let mut out_normals = normals.map(|_| Vec::new());
-    let mut next = 0u32;
-    for v in 0..total {
-        if remap[v] == u32::MAX {
-            continue;
+    let mut used = Vec::new();
+    for (w, &word) in seen.iter().enumerate() {
+        let mut bits = word;
+        while bits != 0 {
+            used.push((64 * w) as u32 + bits.trailing_zeros());
+            bits &= bits - 1;
         }
-        remap[v] = next;
-        next += 1;
+    }
+    let mut plus_one = vec![0u32; total];
+    let mut positions = Vec::with_capacity(used.len());
+    let mut out_normals = normals.map(|_| Vec::with_capacity(used.len()));
+    for (next, &v) in used.iter().enumerate() {
+        let v = v as usize;
+        plus_one[v] = next as u32 + 1;
         if v < disp.len() {
             positions.push(disp.at(v));
             if let (Some(on), Some(nn)) = (out_normals.as_mut(), normals) {
@@ -526,7 +564,7 @@ fn compact(
     }
     for t in &mut tris {
         for v in t.iter_mut() {
-            *v = remap[*v as usize];
+            *v = plus_one[*v as usize] - 1;
         }
     }
     let mesh = AdaptiveMesh {
@@ -535,5 +573,5 @@ fn compact(
         triangles: tris,
         face_groups: groups,
     };
-    (mesh, remap)
+    (mesh, Remap { plus_one, used })
 }

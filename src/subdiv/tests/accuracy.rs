@@ -53,7 +53,12 @@ fn extraction_below_the_finest_level_matches_a_shallower_refinement() {
                 let (got, remap) =
                     lod::extract_at(&deep, top, &p, None, &levels, Default::default()).unwrap();
                 assert_eq!(got, want, "{name} at top level {top}");
-                assert_eq!(remap.len(), p.len());
+                // The map covers the level's vertices, numbered in id order.
+                for (i, &v) in remap.used().iter().enumerate() {
+                    assert!((v as usize) < p.len());
+                    assert_eq!(remap.get(v as usize), Some(i as u32));
+                }
+                assert_eq!(remap.get(p.len()), None);
             }
         }
     }
