@@ -52,6 +52,7 @@
 
 use glam::DVec3;
 
+use super::eval::wedge_face;
 use super::lazy::LazyLimits;
 use super::next_level::child_faces;
 use super::sparse::{base_edge_chain, SparsePlan, DENSE};
@@ -552,18 +553,9 @@ impl Measure<'_> {
         for f in k * q..(k + 1) * q {
             self.vertices_over(f, m, s, scratch, out);
             // Most faces around belong to base triangles asked for themselves: only the
-            // others are gathered (and sorted, to take each once).
-            scratch.around.clear();
-            for &v in &lm.faces[3 * f..3 * f + 3] {
-                for &e in lm.ring(v as usize) {
-                    let g = wedge_face(lm, v, e);
-                    if g != NONE && g as usize >> (2 * m) != k && !asked[g as usize >> (2 * m)] {
-                        scratch.around.push(g);
-                    }
-                }
-            }
-            scratch.around.sort_unstable();
-            scratch.around.dedup();
+            // others are gathered.
+            let other = |g: u32| g as usize >> (2 * m) != k && !asked[g as usize >> (2 * m)];
+            faces_around(lm, f, other, &mut scratch.around);
             for i in 0..scratch.around.len() {
                 self.vertices_over(scratch.around[i] as usize, m, s, scratch, out);
             }
@@ -650,7 +642,7 @@ impl Measure<'_> {
                 let own = point_triangle_distance_squared(p, &t);
                 if own > err2 {
                     if ring.is_empty() {
-                        faces_around(lm, f, &mut around);
+                        faces_around(lm, f, |_| true, &mut around);
                         ring.extend(
                             around
                                 .iter()
@@ -749,7 +741,7 @@ impl Measure<'_> {
         };
         let faces = ring
             .iter()
-            .map(|&e| wedge_face(last, x, e))
+            .map(|&e| wedge_face(last, x as usize, e))
             .chain(edge)
             .filter(|&g| g != NONE);
         let mut best = f64::INFINITY;
@@ -1142,27 +1134,16 @@ struct SampleScratch {
     points: Vec<(u32, [f64; 3])>,
 }
 
-/// The face on the counter-clockwise side of edge `e` of vertex `v`'s ring (`NONE` past a
-/// boundary): going round the ring, each face at `v` once.
-#[inline]
-fn wedge_face(l: &Level, v: u32, e: u32) -> u32 {
-    let ef = l.edge_faces[e as usize];
-    if l.edges[e as usize][0] == v {
-        ef[0]
-    } else {
-        ef[1]
-    }
-}
-
-/// The faces of level `l` around the corners of face `f` (other than `f`), into `out`.
-fn faces_around(l: &Level, f: usize, out: &mut Vec<u32>) {
+/// The faces of level `l` around the corners of face `f` that `keep` keeps (`f` never), each
+/// once, into `out` in id order. Each corner's ring gives each face at it once (the face on
+/// one side of each ring edge).
+fn faces_around(l: &Level, f: usize, keep: impl Fn(u32) -> bool, out: &mut Vec<u32>) {
     out.clear();
     for &v in &l.faces[3 * f..3 * f + 3] {
         for &e in l.ring(v as usize) {
-            for g in l.edge_faces[e as usize] {
-                if g != NONE && g as usize != f {
-                    out.push(g);
-                }
+            let g = wedge_face(l, v as usize, e);
+            if g != NONE && g as usize != f && keep(g) {
+                out.push(g);
             }
         }
     }

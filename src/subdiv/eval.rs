@@ -215,7 +215,7 @@ fn face_frame(base: &Base, j: u32, f: u32) -> Option<&Frame> {
 
 /// Face of wedge `i` of `v`'s ring (between ring edges i and i+1).
 #[inline]
-fn wedge_face(l: &impl Connectivity, v: usize, e: u32) -> u32 {
+pub(crate) fn wedge_face(l: &impl Connectivity, v: usize, e: u32) -> u32 {
     let [a, _] = l.edge_ends(e as usize);
     let ef = l.edge_faces(e as usize);
     if a as usize == v {
