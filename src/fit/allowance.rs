@@ -42,9 +42,13 @@ pub(crate) struct OwnFaces<'a> {
     /// how far its own triangles need searching; a group without one is searched everywhere.
     pub max_allowance: &'a [f64],
     /// Indexed by group: the face's exact surface when the input knows it (STEP faces), or
-    /// empty. A decoded point's excess against a group with one is at least its distance to
-    /// that surface ([`ExactSurface`] says why).
+    /// empty. A decoded point of a group with one is measured against that surface where it
+    /// lies over the face ([`OwnFaces::against`]).
     pub exact: &'a [Option<ExactSurface>],
+    /// Indexed by group: how far the group's facets may lie from the B-rep face they
+    /// tessellate (the tessellation's chordal tolerance), or empty when the facets are the
+    /// reference themselves.
+    pub facet_chord: &'a [f64],
 }
 
 impl OwnFaces<'_> {
@@ -56,13 +60,41 @@ impl OwnFaces<'_> {
         }
     }
 
+    /// The excess of `p` against group `g`, given its excess `facet_excess` against the
+    /// group's nearest facet (its distance less that facet's allowance).
+    ///
+    /// Without an exact surface that is the answer: a B-rep face's facets carry the
+    /// negative allowance `-c` (`c` its chordal tolerance), so the excess is an upper bound
+    /// of the distance to the face, whose points all lie within `c` of the facets. With one
+    /// (the facets then carry no allowance) the distance to the exact surface is the
+    /// distance to the face where `p`'s projection lies over the face, which is taken to be
+    /// where the projection (or `p` itself) is within `c` of the facets; elsewhere `p` is
+    /// beyond the face's outline (a plane patch's chord across a hole's arc), and only the
+    /// facets bound its distance: `facet_excess + c`.
+    fn against(&self, p: DVec3, g: usize, facet_excess: f64) -> f64 {
+        let Some(Some(s)) = self.exact.get(g) else {
+            return facet_excess;
+        };
+        let c = self.facet_chord.get(g).copied().unwrap_or(0.0);
+        let e = s.distance(p);
+        if facet_excess <= c {
+            return e;
+        }
+        let over_face = match self.surfaces.get(g) {
+            Some(Some(facets)) => facets.closest_point_within(s.project(p), c).is_some(),
+            _ => false,
+        };
+        if over_face {
+            e
+        } else {
+            (facet_excess + c).max(e)
+        }
+    }
+
     /// Excess over the chord allowance of a decoded point `p` of group `group`, given its
     /// excess `nearest_excess` against the nearest input triangle (of group
     /// `nearest_group`): the smaller of the excess against that triangle's group and against
-    /// `group`'s own input triangles. Against one group it is a distance to one of its
-    /// triangles minus that triangle's allowance, raised to the distance to the group's exact
-    /// surface where there is one, so the result is never below the excess over the input
-    /// thickened by its allowances (the minimum over all triangles).
+    /// `group`'s own input triangles, each as [`OwnFaces::against`] measures it.
     pub fn excess(
         &self,
         p: DVec3,
@@ -71,14 +103,13 @@ impl OwnFaces<'_> {
         nearest_excess: f64,
         chord: &[f64],
     ) -> f64 {
-        let nearest_excess = nearest_excess.max(self.exact_distance(p, nearest_group));
+        let nearest_excess = self.against(p, nearest_group, nearest_excess);
         if nearest_excess <= 0.0 || nearest_group == group {
             // Only positive excesses are reported, and the nearest triangle of the own
             // group is also its nearest own triangle: skip the second query.
             return nearest_excess;
         }
-        let own_exact = self.exact_distance(p, group);
-        if own_exact >= nearest_excess {
+        if self.exact_distance(p, group) >= nearest_excess {
             return nearest_excess;
         }
         let (Some(Some(surface)), Some(ids)) =
@@ -87,14 +118,21 @@ impl OwnFaces<'_> {
             return nearest_excess;
         };
         // An own triangle farther than `nearest_excess` plus the largest allowance cannot
-        // beat `nearest_excess`, so search only that far (padded for rounding): a hit within
-        // it is the same closest point as an unbounded search finds.
+        // beat `nearest_excess` (nor, on an exact surface, farther than that plus the
+        // facets' chord, whose projections are off the face), so search only that far
+        // (padded for rounding): a hit within it is the same closest point as an unbounded
+        // search finds.
+        let exact_chord = match self.exact.get(group) {
+            Some(Some(_)) => self.facet_chord.get(group).copied().unwrap_or(0.0),
+            _ => 0.0,
+        };
         let bound = self
             .max_allowance
             .get(group)
-            .map(|&a| (nearest_excess + a) * (1.0 + 1e-9) + 1e-300)
+            .map(|&a| (nearest_excess + a + exact_chord) * (1.0 + 1e-9) + 1e-300)
             .filter(|b| b.is_finite());
         let hit = match bound {
+            Some(b) if b <= 0.0 => return nearest_excess,
             Some(b) => match surface.closest_point_within(p, b) {
                 Some(hit) => hit,
                 None => return nearest_excess,
@@ -106,7 +144,7 @@ impl OwnFaces<'_> {
             .and_then(|&t| chord.get(t as usize))
             .copied()
             .unwrap_or(0.0);
-        nearest_excess.min((hit.distance - allowance).max(own_exact))
+        nearest_excess.min(self.against(p, group, hit.distance - allowance))
     }
 }
 
@@ -430,6 +468,7 @@ mod tests {
             triangles: &ids,
             max_allowance: &[1.0, 0.0],
             exact: &[],
+            facet_chord: &[],
         };
         let q = DVec3::new(1.0, 1.0, 1.2);
         // Against the nearest triangle (group 1): 0.3 - 0 = 0.3; against its own: 1.2 - 1.
@@ -445,7 +484,8 @@ mod tests {
     #[test]
     fn exact_surface_charges_the_concave_side_of_a_sagging_facet() {
         // A sphere of radius 10 about the origin and one facet of it: a chord plane at
-        // z = 9 (sagitta 1 at its middle, which is its allowance).
+        // z = 9 (sagitta 1 at its middle, the facets' chordal tolerance). A B-rep's facets
+        // on an exact surface carry no allowance.
         let h = 19f64.sqrt(); // (h, 0, 9) is on the sphere
         let p = vec![
             DVec3::new(h, 0.0, 9.0),
@@ -454,26 +494,71 @@ mod tests {
         ];
         let own = [Some(TriangleSurface::new(p, vec![[0, 1, 2]]).unwrap())];
         let ids = [vec![0u32]];
-        let chord = [1.0];
+        let chord = [0.0];
         let exact = [ExactSurface::new(crate::mesh::AnalyticSurface::Sphere {
             center: DVec3::ZERO,
             radius: 10.0,
         })];
-        let with = OwnFaces {
+        let faces = OwnFaces {
             surfaces: &own,
             triangles: &ids,
-            max_allowance: &[1.0],
+            max_allowance: &[0.0],
             exact: &exact,
+            facet_chord: &[1.0],
         };
-        let without = OwnFaces { exact: &[], ..with };
-        // Below the facet, 1.5 inside it: 2.5 from the sphere. Against the facet only the
-        // excess is 1.5 - 1 = 0.5; the sphere says 2.5.
+        // Below the facet, 1.5 inside it: 2.5 from the sphere, whose point above it is
+        // over the face.
         let q = DVec3::new(0.0, 0.0, 7.5);
-        assert!((without.excess(q, 0, 0, 0.5, &chord) - 0.5).abs() < 1e-12);
-        assert!((with.excess(q, 0, 0, 0.5, &chord) - 2.5).abs() < 1e-12);
-        // Above the facet, on the sphere: no excess either way.
+        assert!((faces.excess(q, 0, 0, 1.5, &chord) - 2.5).abs() < 1e-12);
+        // Above the facet, on the sphere: no excess.
         let q = DVec3::new(0.0, 0.0, 10.0);
-        assert!(without.excess(q, 0, 0, 0.0, &chord) <= 0.0);
-        assert!(with.excess(q, 0, 0, 0.0, &chord).abs() < 1e-12);
+        assert!(faces.excess(q, 0, 0, 1.0, &chord).abs() < 1e-12);
+    }
+
+    /// A plane face (the square [0, 4]^2 at z = 0, facets of chordal tolerance 0.1): a point
+    /// over the face is its height above the plane away; one beyond the face's outline (a
+    /// plane patch's chord across a hole's arc) is not on the face however near the plane,
+    /// and is charged its distance to the facets plus their chord; a face without an exact
+    /// surface is charged its facets' chord on top of the distance.
+    #[test]
+    fn a_point_beyond_a_faces_outline_is_charged_the_facets_and_their_chord() {
+        let p = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(4.0, 0.0, 0.0),
+            DVec3::new(4.0, 4.0, 0.0),
+            DVec3::new(0.0, 4.0, 0.0),
+        ];
+        let own = [Some(
+            TriangleSurface::new(p, vec![[0, 1, 2], [0, 2, 3]]).unwrap(),
+        )];
+        let ids = [vec![0u32, 1]];
+        let exact = [ExactSurface::new(crate::mesh::AnalyticSurface::Plane {
+            point: DVec3::ZERO,
+            normal: DVec3::Z,
+        })];
+        let plane = OwnFaces {
+            surfaces: &own,
+            triangles: &ids,
+            max_allowance: &[0.0],
+            exact: &exact,
+            facet_chord: &[0.1],
+        };
+        let none = [0.0, 0.0];
+        let at = |q: DVec3| {
+            let d = own[0].as_ref().unwrap().closest_point(q).distance;
+            plane.excess(q, 0, 0, d, &none)
+        };
+        assert!((at(DVec3::new(2.0, 2.0, 0.3)) - 0.3).abs() < 1e-12);
+        assert!((at(DVec3::new(5.0, 2.0, 0.0)) - 1.1).abs() < 1e-12);
+        // Within the chord of the outline: taken as over the face.
+        assert!(at(DVec3::new(4.05, 2.0, 0.0)).abs() < 1e-12);
+        // The same face without its exact surface: its facets carry the allowance -0.1.
+        let freeform = OwnFaces {
+            exact: &[],
+            ..plane
+        };
+        let minus_chord = [-0.1, -0.1];
+        let q = DVec3::new(2.0, 2.0, 0.3);
+        assert!((freeform.excess(q, 0, 0, 0.3 + 0.1, &minus_chord) - 0.4).abs() < 1e-12);
     }
 }

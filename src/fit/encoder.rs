@@ -35,7 +35,7 @@ use super::domain::PlaneDomain;
 pub use super::exact::ExactSurface;
 use super::plan::{kind_name, Plan};
 use super::quantise::{smallest_file, Quantised};
-use super::reference::{reference_facets, triangulated, Allowances, Facets};
+use super::reference::{reference_facets, triangulated, Allowances, FacetAllowance, Facets};
 use super::rounds::Rounds;
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind, Tolerance};
@@ -114,20 +114,27 @@ pub struct FitOptions {
     /// (see `Relaxation`). Costs one or two more rounds.
     pub relax: bool,
     /// By input group: the face's exact surface where the input knows it (a STEP face's
-    /// plane, cylinder, cone, sphere or torus), else `None`; empty for none at all. The
-    /// decoded surface of a group is then held within the tolerance of that surface too,
-    /// not only of its facets (see [`ExactSurface`]), and a closed patch is fitted onto it
-    /// (as are creases whose faces all have one).
+    /// plane, cylinder, cone, sphere or torus), else `None`; empty for none at all. The input
+    /// is then a B-rep's tessellation ([`Reference::Brep`]): the decoded surface of a group
+    /// with an exact surface is held within the tolerance of that surface where it lies over
+    /// the face (see `facet_chord` for the rest), and a closed patch is fitted onto it (as
+    /// are creases whose faces all have one).
     pub exact_surfaces: Vec<Option<ExactSurface>>,
+    /// By input group, with `exact_surfaces`: how far the measured facets (the input's, or
+    /// `reference`'s) may lie from the B-rep face they tessellate, their chordal tolerance
+    /// in model units. A face without an exact surface is held to the tolerance less this
+    /// (its facets plus their chord bound its distance to the B-rep); a face with one is
+    /// held to the tolerance of its exact surface where it lies over the face, and where it
+    /// strays beyond the face's outline, of its facets plus their chord. Empty: 0.
+    pub facet_chord: Vec<f64>,
     /// Measure beyond the input's own chord error: each input facet's estimated distance
     /// from the CAD surface it tessellates (from its vertex normals, and from the analytic
     /// surface of cylinder and cone faces) is allowed on top of the tolerance. Off by default,
     /// so that the tolerance bounds the plain distance to the input, as any mesh tool
     /// measures it; on for a coarse tessellation of a smooth part, whose facets no smooth
     /// surface comes nearer to than their sagitta (without it, the fit stores such faces as
-    /// their facets: [`FitReport::faceted_groups`]). Implied by `exact_surfaces` (STEP input):
-    /// the tessellation then stands in for the B-rep it approximates to within its chord
-    /// error.
+    /// their facets: [`FitReport::faceted_groups`]). With `exact_surfaces` (STEP input) the
+    /// B-rep is measured instead (`facet_chord`), and this is not read.
     pub chord_allowance: bool,
     /// A finer tessellation of the same faces (the same groups, by name, in the same order)
     /// to measure the decoded surface against instead of the input; the fit still starts
@@ -150,6 +157,7 @@ impl Default for FitOptions {
             keep_planes_on_faces: true,
             relax: true,
             exact_surfaces: Vec::new(),
+            facet_chord: Vec::new(),
             chord_allowance: false,
             reference: None,
         }
@@ -163,8 +171,9 @@ pub struct FitError {
     pub rms: f64,
     pub mean: f64,
     /// The quantity the tolerance bounds: the largest distance to the reference as
-    /// [`FitReport::reference`] says (the plain distance to the input, or the distance
-    /// beyond its facets' own chord error).
+    /// [`FitReport::reference`] says (the plain distance to the input, the distance beyond
+    /// its facets' own chord error, or the distance to the B-rep). Against a B-rep, `max`,
+    /// `rms` and `mean` are of distances to the B-rep too.
     pub max_excess: f64,
 }
 
@@ -179,8 +188,10 @@ pub enum Reference {
     /// surface it tessellates): for coarse tessellations, whose facets a smooth surface
     /// cannot come nearer to than their sagitta ([`crate::EncodeOptions::chord_allowance`]).
     InputBeyondChord,
-    /// A B-rep: faces on analytic surfaces against those surfaces, the others against a
-    /// tessellation of the B-rep less its chord error (STEP input).
+    /// A B-rep (STEP input): faces on analytic surfaces against those surfaces where the
+    /// decoded surface lies over the face, the others (and points beyond a face's outline)
+    /// against a tessellation of the B-rep plus its chordal tolerance, an upper bound of the
+    /// distance to the B-rep ([`FitOptions::facet_chord`]).
     Brep,
 }
 
@@ -191,7 +202,7 @@ impl Reference {
             Reference::InputMesh => "the input mesh",
             Reference::InputBeyondChord => "the input mesh beyond its facets' chord error",
             Reference::Brep => {
-                "the B-rep (exact surfaces; other faces beyond their tessellation's chord error)"
+                "the B-rep (exact surfaces; other faces as their facets plus their chord)"
             }
         }
     }
@@ -296,17 +307,26 @@ pub fn fit_model(
         Some(r) => (r, None),
         None => (&input, Some(&chains.net)),
     };
-    // With exact surfaces the input is a tessellation of a B-rep, which stands in for it
-    // less its chord error.
-    let chord_allowance = report.reference != Reference::InputMesh;
-    let allowances = Allowances::new(measured, net, &kinds, chord_allowance)?;
-    report.timings.push(("curves", t.elapsed().as_secs_f64()));
     // A segmented input's groups are not the input's: no exact surfaces then.
     let exact: &[Option<ExactSurface>] = if faces.segmented {
         &[]
     } else {
         &opts.exact_surfaces
     };
+    let rule = match report.reference {
+        Reference::InputMesh => FacetAllowance::Plain,
+        Reference::InputBeyondChord => FacetAllowance::Estimated,
+        Reference::Brep => FacetAllowance::Brep {
+            exact,
+            facet_chord: if faces.segmented {
+                &[]
+            } else {
+                &opts.facet_chord
+            },
+        },
+    };
+    let allowances = Allowances::new(measured, net, &kinds, rule)?;
+    report.timings.push(("curves", t.elapsed().as_secs_f64()));
     let exact_faces = exact.iter().flatten().count();
     if exact_faces > 0 {
         report.notes.push(format!(
@@ -325,11 +345,13 @@ pub fn fit_model(
         chains.net.chains.len(),
         tol,
     );
-    // Faceting meets a tolerance held to the input mesh itself, which the facets are; a
-    // B-rep's exact surfaces are their chord error away from them, and beyond the chord
-    // error smooth patches get there.
+    // Faceting meets a tolerance held to the input mesh itself, which the facets are, and
+    // one held to a B-rep whose facets are within their chordal tolerance of it (which the
+    // STEP tessellation keeps well below the tolerance): the last resort of a face no smooth
+    // patch gets within the tolerance of. Beyond estimated chord errors smooth patches get
+    // there.
     for group in &mut plan.groups {
-        group.facetable = report.reference == Reference::InputMesh;
+        group.facetable = report.reference != Reference::InputBeyondChord;
     }
     let rounds = Rounds {
         faces: &faces,

@@ -184,6 +184,10 @@ pub(crate) struct ErrorMeter<'a> {
     chord: &'a [f64],
     /// Each input face on its own, for the decoded->input excess ([`OwnFaces::excess`]).
     own_faces: OwnFaces<'a>,
+    /// The input is a B-rep's tessellation: the excess is the distance to the B-rep (as
+    /// [`OwnFaces::against`] bounds it), which the reported distances are too; the plain
+    /// distance to the facets is no distance the user can check.
+    brep: bool,
     /// Random decoded samples per unit area and their seed ([`TriangleSamples`]): a face's
     /// points depend on its triangles alone, so an unchanged face keeps its samples.
     density: f64,
@@ -276,8 +280,18 @@ impl<'a> ErrorMeter<'a> {
         tol: f64,
     ) -> Self {
         let edge_spacing = edge_spacing_for_tolerance(tol, mesh.diagonal());
-        let (input_samples, input_area_samples) =
+        let (mut input_samples, input_area_samples) =
             reference_samples(&mesh.positions, triangles, opts, edge_spacing);
+        // A face with an exact surface is that surface: its facets' samples are moved onto
+        // it, the points whose distance to the decoded surface the tolerance bounds.
+        if !own_faces.exact.is_empty() {
+            for s in &mut input_samples {
+                let g = mesh.face_groups[s.triangle as usize] as usize;
+                if let Some(Some(e)) = own_faces.exact.get(g) {
+                    s.point = e.project(s.point);
+                }
+            }
+        }
         let mut group_boxes = vec![(DVec3::INFINITY, DVec3::NEG_INFINITY); mesh.groups.len()];
         for (t, g) in triangles.iter().zip(&mesh.face_groups) {
             let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
@@ -295,6 +309,7 @@ impl<'a> ErrorMeter<'a> {
             input_area_samples,
             input_surface,
             chord,
+            brep: !own_faces.exact.is_empty() || !own_faces.facet_chord.is_empty(),
             own_faces,
             density,
             seed: opts.seed,
@@ -331,6 +346,16 @@ impl<'a> ErrorMeter<'a> {
                     .map_or(0.0, |s| chord_error(s.positions(), s.triangles()))
             })
             .collect()
+    }
+
+    /// The distance a sample reports, given its `excess` and its `plain` distance to the
+    /// facets: the plain one, but against a B-rep the excess ([`ErrorMeter::brep`]).
+    fn shown(&self, excess: f64, plain: f64) -> f64 {
+        if self.brep {
+            excess.max(0.0)
+        } else {
+            plain
+        }
     }
 
     /// The excess of a decoded point of group `g` whose nearest input triangle is `hit`
@@ -658,7 +683,10 @@ impl<'a> ErrorMeter<'a> {
             |i| samples.point(i),
             self.input_surface,
             2.0 * self.tol,
-            |_, p, h| [self.out_excess(p, g, h.triangle, h.distance), h.distance],
+            |_, p, h| {
+                let e = self.out_excess(p, g, h.triangle, h.distance);
+                [e, self.shown(e, h.distance)]
+            },
         );
         let (mut worst, mut over_tolerance) = (None, Vec::new());
         for (i, &[e, _]) in measured.iter().enumerate() {
@@ -696,8 +724,14 @@ impl<'a> ErrorMeter<'a> {
             (max, (sq / n).sqrt(), sum / n)
         };
         let area_in = self.input_area_samples.min(in_hits.len());
-        let (_, rms_in, mean_in) = stats(&mut in_hits[..area_in].iter().map(|h| h.distance));
-        let max_in = in_hits.iter().map(|h| h.distance).fold(0.0f64, f64::max);
+        let shown_in: Vec<f64> = self
+            .input_samples
+            .iter()
+            .zip(in_hits)
+            .map(|(s, h)| self.shown(h.distance - self.chord[s.triangle as usize], h.distance))
+            .collect();
+        let (_, rms_in, mean_in) = stats(&mut shown_in[..area_in].iter().copied());
+        let max_in = shown_in.iter().copied().fold(0.0f64, f64::max);
         let (_, rms_out, mean_out) = stats(&mut groups.iter().flat_map(|g| {
             let mut shared = g.shared.iter().copied().peekable();
             g.samples[..g.area_samples.min(g.samples.len())]
@@ -939,6 +973,7 @@ mod tests {
             triangles: &[],
             max_allowance: &[],
             exact: &[],
+            facet_chord: &[],
         };
         ErrorMeter::new(input, tris, surface, chord, own_faces, &sampling, 0.01)
     }

@@ -36,41 +36,78 @@ impl Facets {
     }
 }
 
+/// How a reference's facets stand for the surface they tessellate.
+#[derive(Clone, Copy)]
+pub(super) enum FacetAllowance<'a> {
+    /// They are the reference: the plain distance is measured.
+    Plain,
+    /// Each facet's estimated chord error (from its vertex normals, the analytic surface of
+    /// cylinder and cone faces, and curved edges' sagitta) is allowed on top
+    /// ([`super::encoder::FitOptions::chord_allowance`]).
+    Estimated,
+    /// A B-rep's tessellation: a face with an exact surface is measured against it (its
+    /// facets carry no allowance and say only where the face is), any other face against
+    /// its facets plus their chordal tolerance `facet_chord[g]` (an allowance of minus
+    /// that), which bounds the distance to the face from above.
+    Brep {
+        exact: &'a [Option<ExactSurface>],
+        facet_chord: &'a [f64],
+    },
+}
+
 /// The whole-model side of a reference: one closest-point structure over all its
 /// triangles, each triangle's chord allowance and each group's largest.
 pub(super) struct Allowances {
     surface: TriangleSurface,
     chord: Vec<f64>,
     group_max_chord: Vec<f64>,
+    /// By group, the facets' chordal tolerance of a B-rep's tessellation (else empty).
+    facet_chord: Vec<f64>,
 }
 
 impl Allowances {
-    /// The allowances of `facets` for faces of the patch kinds `kinds`; with the curve
-    /// network of the same mesh, triangles along curved chains get their edges' sagitta too.
-    /// Without `chord_allowance` every allowance is zero: the plain distance is measured
-    /// ([`super::encoder::FitOptions::chord_allowance`]).
+    /// The allowances of `facets` for faces of the patch kinds `kinds`, as `rule` says;
+    /// with the curve network of the same mesh, estimated allowances of triangles along
+    /// curved chains get their edges' sagitta too.
     pub fn new(
         facets: &Facets,
         net: Option<&CurveNetwork>,
         kinds: &[PatchKind],
-        chord_allowance: bool,
+        rule: FacetAllowance,
     ) -> Result<Self> {
         let surface = TriangleSurface::new(facets.mesh.positions.clone(), facets.tris.clone())?;
-        let chord = if chord_allowance {
-            let mut chord = super::allowance::chord_allowance(&facets.mesh, &facets.tris);
-            if let Some(net) = net {
-                add_curved_edge_allowance(&facets.mesh, &facets.tris, net, &mut chord);
+        let mut facet_chord = Vec::new();
+        let chord = match rule {
+            FacetAllowance::Plain => vec![0.0; facets.tris.len()],
+            FacetAllowance::Estimated => {
+                let mut chord = super::allowance::chord_allowance(&facets.mesh, &facets.tris);
+                if let Some(net) = net {
+                    add_curved_edge_allowance(&facets.mesh, &facets.tris, net, &mut chord);
+                }
+                add_analytic_surface_allowance(
+                    &facets.mesh.positions,
+                    &facets.tris,
+                    &facets.mesh.face_groups,
+                    kinds,
+                    &mut chord,
+                );
+                chord
             }
-            add_analytic_surface_allowance(
-                &facets.mesh.positions,
-                &facets.tris,
-                &facets.mesh.face_groups,
-                kinds,
-                &mut chord,
-            );
-            chord
-        } else {
-            vec![0.0; facets.tris.len()]
+            FacetAllowance::Brep {
+                exact,
+                facet_chord: c,
+            } => {
+                facet_chord = c.to_vec();
+                facets
+                    .mesh
+                    .face_groups
+                    .iter()
+                    .map(|&g| match exact.get(g as usize) {
+                        Some(Some(_)) => 0.0,
+                        _ => -c.get(g as usize).copied().unwrap_or(0.0),
+                    })
+                    .collect()
+            }
         };
         let group_max_chord = facets
             .group_tris
@@ -81,6 +118,7 @@ impl Allowances {
             surface,
             chord,
             group_max_chord,
+            facet_chord,
         })
     }
 
@@ -103,6 +141,7 @@ impl Allowances {
                 triangles: &facets.group_tris,
                 max_allowance: &self.group_max_chord,
                 exact,
+                facet_chord: &self.facet_chord,
             },
             sampling,
             tol,

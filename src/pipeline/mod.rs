@@ -103,6 +103,25 @@ pub fn step_exact_surfaces(
         .collect()
 }
 
+/// Per group of a STEP model tessellated with `analytic_factor`
+/// ([`crate::io::step::StepOptions::analytic_chordal_factor`]), for
+/// [`FitOptions::facet_chord`]: the chordal tolerance its facets were made with (faces with an
+/// exact analytic surface at the analytic factor times the model's).
+#[cfg(feature = "step")]
+pub fn step_facet_chords(model: &crate::io::step::StepModel, analytic_factor: f64) -> Vec<f64> {
+    model
+        .faces
+        .iter()
+        .map(|f| {
+            if f.exact.is_some() {
+                model.chordal_tolerance * analytic_factor.max(1.0)
+            } else {
+                model.chordal_tolerance
+            }
+        })
+        .collect()
+}
+
 /// Chordal tolerance of the STEP tessellation, as a fraction of the encode tolerance: the
 /// facets' own chord error takes a small part of the error budget of faces measured against
 /// their facets alone (B-splines and other freeform surfaces).

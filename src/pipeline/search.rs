@@ -273,8 +273,8 @@ mod step {
     use crate::io::step::{read_step_tessellations_bytes, StepModel};
     use crate::mesh::ControlMesh;
     use crate::pipeline::{
-        same_faces, step_exact_surfaces, step_hints, step_options_for, ModelEncodeOptions,
-        STEP_CHORD_FRACTION, STEP_COARSE_CHORD_FRACTION,
+        same_faces, step_exact_surfaces, step_facet_chords, step_hints, step_options_for,
+        ModelEncodeOptions, STEP_CHORD_FRACTION, STEP_COARSE_CHORD_FRACTION,
     };
 
     /// One way [`encode_step`] tessellates a STEP file.
@@ -395,23 +395,26 @@ mod step {
         let mut best: Option<(StepModel, Vec<u8>, FitReport)> = None;
         let mut first_error = None;
         let mut fitted_meshes: Vec<ControlMesh> = Vec::new();
-        // The first tessellation's mesh, the reference of those measured against it.
-        let mut fine: Option<ControlMesh> = None;
+        // The first tessellation's mesh and its faces' chordal tolerances, the reference of
+        // those measured against it.
+        let mut fine: Option<(ControlMesh, Vec<f64>)> = None;
         for (v, mut model) in variants.iter().zip(models) {
             if fitted_meshes.contains(&model.mesh) {
                 continue;
             }
-            let reference = match (v.against_fine, &fine) {
-                (false, _) => None,
-                (true, Some(f)) if same_faces(f, &model.mesh) => Some(f.clone()),
+            let own_chord = step_facet_chords(&model, v.analytic_factor);
+            let (reference, facet_chord) = match (v.against_fine, &fine) {
+                (false, _) => (None, own_chord.clone()),
+                (true, Some((f, c))) if same_faces(f, &model.mesh) => (Some(f.clone()), c.clone()),
                 (true, _) => continue,
             };
             let mut opts = opts.clone();
             opts.fit.exact_surfaces = step_exact_surfaces(&model);
+            opts.fit.facet_chord = facet_chord;
             opts.fit.reference = reference;
             let fitted = encode_fitted(&model.mesh, &step_hints(&model), &opts);
             if fine.is_none() {
-                fine = Some(model.mesh.clone());
+                fine = Some((model.mesh.clone(), own_chord));
             }
             fitted_meshes.push(model.mesh.clone());
             match fitted {

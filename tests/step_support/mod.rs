@@ -118,7 +118,8 @@ pub fn check_encodes_within_tolerance(corpus: &Path, file: &str) {
 /// `effort`, and asserts that the STEP path needs no more control vertices and makes a file
 /// no larger, up to the bytes that face order and triangulation move: the two readers list a
 /// model's faces in different orders, and the decimation may split a plane's polygon by other
-/// diagonals, which moves even files with the same control vertices by a few bytes.
+/// diagonals, which moves even files with the same control vertices by a few bytes, and
+/// the bit per coordinate the STEP path's B-rep outlines may cost its quantisation.
 pub fn check_step_path_no_larger_than_mesh_path(corpus: &Path, file: &str, effort: Effort) {
     let stem = Path::new(file).file_stem().unwrap().to_str().unwrap();
     let fine_path = fine_tessellation(corpus, stem).expect("fine tessellation");
@@ -132,9 +133,8 @@ pub fn check_step_path_no_larger_than_mesh_path(corpus: &Path, file: &str, effor
     let (_, step_bytes, report) = encode_step(&corpus.join("step").join(file), &opts).unwrap();
     assert!(report.within_tolerance, "{file}: {:?}", report.error);
     let hints = sidecar_hints(&fine_path, &fine).unwrap().unwrap().1;
-    // Both held to the CAD surface as well as their input tells it: the mesh path beyond its
-    // facets' chord error, as the STEP path is beyond its own tessellation's.
-    opts.fit.chord_allowance = true;
+    // Both held to within the tolerance of the part: the STEP path of its B-rep, the mesh
+    // path of a fine tessellation of it (the plain distance).
     let (mesh_bytes, mesh_report) = encode_fitted(&fine, &hints, &opts).unwrap();
     eprintln!(
         "{file} at effort {effort}: STEP path {} bytes, {} control vertices; mesh path {} bytes, {} control vertices",
@@ -149,7 +149,9 @@ pub fn check_step_path_no_larger_than_mesh_path(corpus: &Path, file: &str, effor
         report.control_vertices,
         mesh_report.control_vertices
     );
-    let order_slack = 2 + mesh_bytes.len() / 25;
+    // The STEP path holds decoded points beyond a face's outline to the facets plus their
+    // chord, which may cost it one quantisation bit per coordinate over the mesh path.
+    let order_slack = 2 + mesh_bytes.len() / 25 + (3 * report.control_vertices).div_ceil(8);
     assert!(
         step_bytes.len() <= mesh_bytes.len() + order_slack,
         "{file} at effort {effort}: STEP path {} bytes, mesh path {} bytes",

@@ -77,7 +77,9 @@ pub enum Command {
     /// pool, B-rep edges as sharp chains, B-rep vertices as corners) at a fraction of the
     /// tolerance, its surface type decides the patch kind, and faces on planes, cylinders,
     /// cones, spheres and tori are fitted onto their exact surfaces and held to the
-    /// tolerance of them. The file is tessellated once (analytic faces more coarsely,
+    /// tolerance of them; the other faces, and decoded points beyond a face's outline, are
+    /// held to it as the facets' distance plus their chordal tolerance, so the printed error
+    /// bounds the distance to the B-rep. The file is tessellated once (analytic faces more coarsely,
     /// since their exact surfaces are the reference); --effort max fits five
     /// tessellations and keeps the smallest file (--verbose says which). Faces the
     /// reader cannot handle are named; the file is only encoded without them with
@@ -303,7 +305,7 @@ pub struct EncodeArgs {
     /// input mesh, which `scode info --against` and any mesh tool measure. Use it for coarse
     /// tessellations of smooth parts: a smooth surface cannot come nearer to a facet than its
     /// sagitta, so without it such faces are stored as their facets (more bytes). A STEP file is always measured against its B-rep (exact surfaces, and the
-    /// tessellation less its chord error for the other faces).
+    /// tessellation plus its chordal tolerance for the other faces).
     #[arg(long)]
     pub chord_allowance: bool,
     /// How hard to search for a smaller file. `default` fits once, with choices decided

@@ -221,7 +221,6 @@ pub struct StepModel {
     pub edges: Vec<BrepEdge>,
     pub skipped: Vec<SkippedFace>,
     /// Chordal tolerance the faces were tessellated with (output units).
-    #[cfg(feature = "internals")]
     pub chordal_tolerance: f64,
     /// Scale applied to the file's coordinates (`None`: no length unit found, file units kept).
     #[cfg(feature = "internals")]

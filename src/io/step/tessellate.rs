@@ -39,27 +39,49 @@ fn dv(p: &Point3) -> DVec3 {
     DVec3::new(p.x, p.y, p.z)
 }
 
-/// Bounding-box diagonal of the B-rep vertices and sampled edge curves (file units).
+/// Bounding-box diagonal of the B-rep vertices and sampled edge curves, each body where its
+/// placement puts it as the tessellation does (file units): a relative chordal tolerance is
+/// a fraction of the diagonal of the model the encoder measures. An edge curve is sampled
+/// only when its parameter range runs from one of its vertices to the other: a reader may
+/// give an edge its whole underlying curve (a full circle under an arc, a long line), which
+/// the tessellation trims to the vertices, and whose other points would make the diagonal,
+/// and so the chord, larger than the tessellated model's.
 fn brep_diagonal(parsed: &Parsed) -> f64 {
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     for b in &parsed.bodies {
+        let place = |p: &Point3| b.placement.transform_point3(dv(p));
         for p in &b.vertices {
-            lo = lo.min(dv(p));
-            hi = hi.max(dv(p));
+            let p = place(p);
+            lo = lo.min(p);
+            hi = hi.max(p);
         }
         for e in &b.edges {
             let (t0, t1) = e.curve.range_tuple();
             if !(t0.is_finite() && t1.is_finite()) {
                 continue;
             }
-            for k in 0..=16 {
-                let p = e.curve.subs(t0 + (t1 - t0) * k as f64 / 16.0);
-                let p = dv(&p);
-                if p.is_finite() {
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
+            let samples: Vec<DVec3> = (0..=16)
+                .map(|k| place(&e.curve.subs(t0 + (t1 - t0) * k as f64 / 16.0)))
+                .collect();
+            let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
+                continue;
+            };
+            let (Some(a), Some(c)) = (b.vertices.get(e.vertices.0), b.vertices.get(e.vertices.1))
+            else {
+                continue;
+            };
+            let (a, c) = (place(a), place(c));
+            let span = samples.iter().fold(0.0f64, |m, p| m.max(p.distance(first)));
+            let near = |p: DVec3, q: DVec3| p.distance(q) <= 1e-3 * span + 1e-12;
+            let from_vertex_to_vertex =
+                (near(first, a) && near(last, c)) || (near(first, c) && near(last, a));
+            if !from_vertex_to_vertex {
+                continue;
+            }
+            for p in samples.into_iter().filter(|p| p.is_finite()) {
+                lo = lo.min(p);
+                hi = hi.max(p);
             }
         }
     }
