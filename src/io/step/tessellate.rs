@@ -1051,7 +1051,6 @@ impl<'a> WeldedModel<'a> {
             #[cfg(feature = "internals")]
             edges,
             skipped: self.skipped,
-            #[cfg(feature = "internals")]
             chordal_tolerance: self.tol.chord * scale,
             #[cfg(feature = "internals")]
             millimetres_per_unit,
