@@ -36,7 +36,14 @@ pub(crate) struct LazyLimits<'a> {
     support: Vec<Vec<u32>>,
     /// Whether the vertices in `todo` were asked for with their normals.
     todo_normals: bool,
+    /// Entries in `todo` and `support` (at most about [`QUEUE_LIMIT`]).
+    queued: usize,
 }
+
+/// Queue entries after which [`LazyLimits::ask`] evaluates what is queued: the queues stay
+/// a few megabytes whatever a caller asks for at once, so their memory is a fixed charge
+/// (the result is the same whenever the queues are run).
+pub(crate) const QUEUE_LIMIT: usize = 1 << 20;
 
 /// `n` zero vectors, allocated zeroed rather than written (`vec![DVec3::ZERO; n]` writes
 /// every element): the pages never written are never mapped.
@@ -101,6 +108,7 @@ impl<'a> LazyLimits<'a> {
             todo: vec![Vec::new(); top as usize + 1],
             support: vec![Vec::new(); top as usize + 1],
             todo_normals: false,
+            queued: 0,
         }
     }
 
@@ -163,16 +171,22 @@ impl<'a> LazyLimits<'a> {
             let b = self.birth(v);
             self.todo[b as usize].push(v);
             let (r, ring) = (self.r, &mut self.support[b as usize]);
+            let before = ring.len();
             if b < top {
                 support_into(r.full(b), &r.tables, v, normals, ring);
             } else {
                 support_into(&Self::finest(r), &r.tables, v, normals, ring);
+            }
+            self.queued += 1 + ring.len() - before;
+            if self.queued > QUEUE_LIMIT {
+                self.run();
             }
         }
     }
 
     /// Evaluates what [`Self::ask`] queued.
     pub fn run(&mut self) {
+        self.queued = 0;
         let top = self.r.max_level();
         let normals = self.todo_normals;
         let mut support = std::mem::take(&mut self.support);

@@ -25,6 +25,7 @@
 //! than over base faces and needs no stitching of per-face results.
 
 mod accuracy;
+mod charge;
 mod eval;
 mod flips;
 mod frame;
@@ -58,9 +59,7 @@ use crate::mesh::ControlMesh;
 
 #[cfg(feature = "internals")]
 pub use accuracy::AccurateSurface;
-pub use accuracy::{
-    subdivide_to_tolerance, AccuracyOptions, MEMORY_PER_TRIANGLE as MEMORY_PER_ACCURATE_TRIANGLE,
-};
+pub use accuracy::{subdivide_to_tolerance, subdivide_to_tolerance_within, AccuracyOptions};
 #[cfg(test)]
 pub use lod::lod_corner_face;
 #[cfg(feature = "internals")]

@@ -347,3 +347,52 @@ fn limits_evaluated_on_demand_match_a_full_evaluation() {
         }
     }
 }
+
+#[test]
+fn gap_filling_does_not_raise_a_flat_region_whose_edge_points_slide_along_their_chords() {
+    // A flat grid of uneven triangles with every vertex a corner (as dense CAD
+    // tessellations fitted face by face come out) and one vertex lifted. Next to a corner
+    // the limit points along an edge are spaced unevenly, so gap filling slides a finer
+    // triangle's edge vertices far along the coarser side's chord, within the plane: the
+    // surface shown does not move. Only the lifted vertex's neighbourhood needs fine levels;
+    // measured by how far its corners move, every flat triangle next to a finer one was
+    // raised in turn, until the whole grid was at the finest level.
+    let n = 14;
+    let mut rng = Lcg(11);
+    let mut m = grid(
+        n,
+        n,
+        |i, j| if (i, j) == (n / 2, n / 2) { 0.6 } else { 0.0 },
+    );
+    for (idx, p) in m.positions.iter_mut().enumerate() {
+        let (i, j) = (idx % (n + 1), idx / (n + 1));
+        if i > 0 && i < n && j > 0 && j < n {
+            p.x += 0.35 * (rng.next() - 0.5);
+            p.y += 0.35 * (rng.next() - 0.5);
+        }
+    }
+    m.corners = (0..m.vertex_count() as u32).collect();
+    let opts = AccuracyOptions {
+        tolerance: Tolerance::Absolute(1e-3),
+        max_level: 3,
+        ..Default::default()
+    };
+    let out = subdivide_to_tolerance(&m, &opts).unwrap();
+    out.mesh.validate().unwrap();
+    let raised = out.levels.iter().filter(|&&l| l > 0).count();
+    // The lifted vertex's surface reaches two rings of triangles (its ring's vertices move
+    // too), about 40 of the 392.
+    assert!(
+        raised <= 80,
+        "{raised} of {} base triangles above level 0: {:?}",
+        out.levels.len(),
+        out.levels
+    );
+    // Away from the lifted vertex the output is the plane itself.
+    let c = m.positions[n / 2 * (n + 2)];
+    for p in &out.mesh.positions {
+        if (p.truncate() - c.truncate()).length() > 3.0 {
+            assert!(p.z.abs() < 1e-12, "{p}");
+        }
+    }
+}
