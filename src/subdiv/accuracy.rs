@@ -62,7 +62,7 @@
 use glam::DVec3;
 
 use super::eval::wedge_face;
-use super::lazy::LazyLimits;
+use super::lazy::{LazyLimits, Paged, Prefix};
 use super::next_level::child_faces;
 use super::sparse::{base_edge_chain, SparsePlan, DENSE};
 use super::topology::{Level, NONE};
@@ -124,6 +124,7 @@ pub struct AccurateSurface {
 /// Subdivides `mesh` so that every base triangle is shown at the coarsest level (at most
 /// `opts.max_level`) whose output is within the tolerance of the limit surface (the rule is
 /// the module's documentation), crack-free, at limit positions.
+#[cfg(any(test, feature = "internals"))]
 pub fn subdivide_to_tolerance(
     mesh: &ControlMesh,
     opts: &AccuracyOptions,
@@ -176,10 +177,12 @@ pub fn subdivide_to_tolerance_within(
         super::charge::measurement_bytes(&counts, n.max(1)),
     )?;
     let r = Refinement::with_max_faces(mesh, n.max(1), opts.max_faces.saturating_mul(4))?;
-    let mut lazy = LazyLimits::new(&r, &mesh.positions);
+    let mut lazy = LazyLimits::new(&r, &mesh.positions, charge);
     let nv0 = mesh.positions.len() as u32;
     lazy.evaluate(&(0..nv0).collect::<Vec<u32>>(), false);
-    let tolerance = resolve_tolerance(&lazy.limit()[..nv0 as usize], opts)?;
+    lazy.check()?;
+    let base_limits: Vec<DVec3> = (0..nv0 as usize).map(|i| lazy.limit()[i]).collect();
+    let tolerance = resolve_tolerance(&base_limits, opts)?;
     let plan = match opts.boundary_patches {
         BoundaryPatchOutput::Sparse => SparsePlan::new(r.full(0), &r.base),
         #[cfg(feature = "internals")]
@@ -197,7 +200,8 @@ pub fn subdivide_to_tolerance_within(
     // The flips of plane patches afterwards may move the surface by a small share of the
     // tolerance: the levels are chosen for the rest.
     let (levels, bound) = m.choose_levels(&mut lazy, tolerance * (1.0 - FLIP_SHARE));
-    charge(
+    lazy.check()?;
+    lazy.charge(
         "decode memory with subdivision to a tolerance: output (bytes)",
         super::charge::output_bytes(r.full(0), &levels, m.level_nv[n as usize]),
     )?;
@@ -613,7 +617,7 @@ impl Measure<'_> {
     /// `E(m)` of dense base triangle `k` (the module's documentation), from the limit points
     /// `limit` of the sample level `s`; stops as soon as it exceeds `stop_above`. Distances
     /// below `self.floor` are not told apart.
-    fn dense_error(&self, limit: &[DVec3], k: usize, m: u32, stop_above: f64) -> f64 {
+    fn dense_error(&self, limit: &Paged, k: usize, m: u32, stop_above: f64) -> f64 {
         let lm = self.r.full(m);
         let tri = |g: usize| {
             let c = &lm.faces[3 * g..3 * g + 3];
@@ -630,7 +634,7 @@ impl Measure<'_> {
     /// the triangles `tri` gives.
     fn dense_error_of(
         &self,
-        limit: &[DVec3],
+        limit: &Paged,
         k: usize,
         m: u32,
         stop_above: f64,
@@ -748,7 +752,7 @@ impl Measure<'_> {
         p: DVec3,
         x: u32,
         s: u32,
-        limit: &[DVec3],
+        limit: &Paged,
         within2: f64,
     ) -> f64 {
         let last = self.r.full(s - 1);
@@ -833,7 +837,7 @@ impl Measure<'_> {
             self.prepare_shown(lazy, &check, levels, errors, edges);
             let mut shown = vec![0.0f64; check.len()];
             {
-                let (lv, errs, eds, limit): (&[u8], &[Errors], &EdgeErrors, &[DVec3]) =
+                let (lv, errs, eds, limit): (&[u8], &[Errors], &EdgeErrors, &Paged) =
                     (levels, errors, edges, lazy.limit());
                 par::for_each_heavy(&mut shown, |i, out| {
                     *out = self.shown_error(check[i], lv, errs, eds, limit);
@@ -939,7 +943,7 @@ impl Measure<'_> {
         levels: &[u8],
         errors: &[Errors],
         edges: &EdgeErrors,
-        limit: &[DVec3],
+        limit: &Paged,
     ) -> f64 {
         let m = levels[k];
         let l0 = self.l0();
@@ -1054,7 +1058,7 @@ impl Measure<'_> {
         &self,
         k: usize,
         m: u32,
-        limit: &[DVec3],
+        limit: &Paged,
         moved: &[(u32, DVec3)],
         chains: &[u32],
         own: f64,
@@ -1120,7 +1124,7 @@ impl Measure<'_> {
         e: usize,
         levels: &[u8],
         errors: &[Errors],
-        limit: &[DVec3],
+        limit: &Paged,
         beyond: &mut Beyond,
     ) {
         if self.unit(o).is_some() {
@@ -1151,7 +1155,7 @@ impl Measure<'_> {
     /// coarser side (the spec's `(1 - t) x_j0 + t x_j0+s`, as the extraction computes them).
     fn gap_filled(
         &self,
-        limit: &[DVec3],
+        limit: &Paged,
         e: usize,
         fine: u32,
         coarse: u32,
@@ -1186,14 +1190,15 @@ impl Measure<'_> {
             lazy.ask(&want, opts.normals);
         }
         lazy.run();
+        lazy.check()?;
         let nv = self.level_nv[self.top as usize];
         loop {
-            let normals = opts.normals.then(|| &lazy.normals()[..nv]);
+            let normals = opts.normals.then(|| Prefix(lazy.normals(), nv));
             let (out, remap) = lod::extract_at(
                 self.r,
                 self.top,
-                &lazy.limit()[..nv],
-                normals,
+                &Prefix(lazy.limit(), nv),
+                normals.as_ref(),
                 levels,
                 opts.boundary_patches,
             )?;
@@ -1210,6 +1215,7 @@ impl Measure<'_> {
             }
             debug_assert!(false, "the output reads {} more vertices", missing.len());
             lazy.evaluate(&missing, opts.normals);
+            lazy.check()?;
         }
     }
 
@@ -1324,7 +1330,7 @@ fn faces_around(l: &Level, f: usize, keep: impl Fn(u32) -> bool, out: &mut Vec<u
 /// largest distance from a sample to the chord between the level-`m` points on either side,
 /// or to the chord before or after it when that is nearer (the samples slide along the curve
 /// as they do along a surface, see [`Measure::dense_error`]).
-fn chain_error(chain: &[u32], limit: &[DVec3], shift: u32) -> f64 {
+fn chain_error(chain: &[u32], limit: &Paged, shift: u32) -> f64 {
     let step = 1usize << shift;
     let segments = (chain.len() - 1) / step;
     let seg = |i: usize| {

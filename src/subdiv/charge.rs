@@ -18,7 +18,7 @@
 
 use crate::mesh::{edge_key, ControlMesh};
 
-use super::lazy::QUEUE_LIMIT;
+use super::lazy::{PAGE, QUEUE_LIMIT};
 use super::masks::eclass;
 use super::topology::{Level, NONE};
 
@@ -63,10 +63,13 @@ fn bytes(terms: &[(u64, u64)]) -> u64 {
 }
 
 /// Bytes of one level's connectivity per vertex, edge and triangle (`topology::Level`): a
-/// vertex's class, frame and ring offset (7); an edge's ends, faces, class and frame and its
-/// two ring entries (27), and the next level's offsets while its rings are built (4); a
-/// triangle's corners and edges (24).
-const LEVEL_BYTES: [u64; 3] = [7, 31, 24];
+/// vertex's class, frame and ring offset, and one more ring entry at a boundary vertex
+/// (11); an edge's ends, faces, class and frame and its two ring entries (27); a triangle's
+/// corners and edges (24).
+const LEVEL_BYTES: [u64; 3] = [11, 27, 24];
+/// Bytes per edge of the finest level built while the next level's rings are made (their
+/// offsets, one level at a time).
+const RING_SCRATCH_PER_EDGE: u64 = 4;
 
 /// Bytes charged per base triangle for its measurements (two errors per level, 192), its
 /// level, the lists of triangles measured and checked and their results, the sparse plan and
@@ -81,25 +84,31 @@ const MEASURE_PER_BASE_EDGE: u64 = 16;
 pub(crate) fn measurement_bytes(c: &[[u64; 3]], n: u32) -> u64 {
     let n = n as usize;
     let mut terms = Vec::new();
-    for &[nv, ne, nf] in &c[..n.max(1)] {
+    let built = &c[..n.max(1)];
+    for &[nv, ne, nf] in built {
         terms.extend([
             (nv, LEVEL_BYTES[0]),
             (ne, LEVEL_BYTES[1]),
             (nf, LEVEL_BYTES[2]),
         ]);
     }
-    // Positions of levels 1..=n with a bit each, and the queue of each level's positions
-    // to evaluate (a vertex id, in a vector grown by doubling).
-    for &[nv, _, _] in &c[1..=n.max(1)] {
-        terms.extend([(nv, 24), (nv.div_ceil(8), 1), (nv, 8)]);
+    terms.push((built[built.len() - 1][1], RING_SCRATCH_PER_EDGE));
+    // The page tables of the positions of levels 0..=n (their pages are charged as they
+    // are written) and a bit each; the queue of the positions to evaluate of each level
+    // below n (each vertex at most once, in a vector grown by doubling; level n's are the
+    // queued vertices below).
+    for (j, &[nv, _, _]) in c[..=n.max(1)].iter().enumerate() {
+        let queue = if j < n.max(1) { nv } else { 0 };
+        terms.extend([(nv.div_ceil(PAGE), 16), (nv.div_ceil(8), 1), (queue, 8)]);
     }
-    // Limit points and normals of level n with their bits; the vertices queued for them and
-    // the vertices their masks read, run once past `QUEUE_LIMIT` entries (so at most that
-    // many and one ring more, of at most a level-0 vertex's edges; grown by doubling).
+    // The page tables of the limit points and normals of level n, with their bits; the
+    // vertices queued for them and the vertices their masks read, run once past
+    // `QUEUE_LIMIT` entries (so at most that many and one ring more, of at most a level-0
+    // vertex's edges; grown by doubling).
     let [nv, _, _] = c[n.max(1)];
     let [_, ne0, nf0] = c[0];
     terms.extend([
-        (nv, 48),
+        (nv.div_ceil(PAGE), 32),
         (nv.div_ceil(4), 1),
         (QUEUE_LIMIT as u64, 8),
         (ne0, 8),
@@ -129,11 +138,13 @@ const OUTPUT_PER_SHARP_EDGE: u64 = 48;
 /// `l0`) are shown at `levels`, the finest level shown having `nv_top` vertices (the
 /// extraction marks and numbers them in arrays of that length).
 pub(crate) fn output_bytes(l0: &Level, levels: &[u8], nv_top: usize) -> u64 {
-    let (mut tris, mut verts) = (0u64, 0u64);
+    // The base vertices, the vertices inside every base triangle at its level, and along
+    // every base edge those of the finer side.
+    let (mut tris, mut verts) = (0u64, l0.nv as u64);
     for &m in levels {
         let s = 1u64 << m;
         tris += s * s;
-        verts += (s + 1) * (s + 2) / 2;
+        verts += (s - 1) * s.saturating_sub(2) / 2;
     }
     // A coarser triangle next to a finer one is fanned through the finer side's vertices,
     // round a new centroid vertex at most; along a sharp base edge the finer side's chain is
@@ -144,6 +155,7 @@ pub(crate) fn output_bytes(l0: &Level, levels: &[u8], nv_top: usize) -> u64 {
         let la = levels[a as usize];
         let lb = if b == NONE { la } else { levels[b as usize] };
         let fine = 1u64 << la.max(lb);
+        verts += fine - 1;
         if la != lb {
             fans += fine;
         }

@@ -57,9 +57,11 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
+#[cfg(any(test, feature = "internals"))]
+pub use accuracy::subdivide_to_tolerance;
 #[cfg(feature = "internals")]
 pub use accuracy::AccurateSurface;
-pub use accuracy::{subdivide_to_tolerance, subdivide_to_tolerance_within, AccuracyOptions};
+pub use accuracy::{subdivide_to_tolerance_within, AccuracyOptions};
 #[cfg(test)]
 pub use lod::lod_corner_face;
 #[cfg(feature = "internals")]
