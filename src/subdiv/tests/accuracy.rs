@@ -51,7 +51,7 @@ fn extraction_below_the_finest_level_matches_a_shallower_refinement() {
                     .collect();
                 let want = lod::extract(&shallow, &p, None, &levels, Default::default()).unwrap();
                 let (got, remap) =
-                    lod::extract_at(&deep, top, &p, None, &levels, Default::default()).unwrap();
+                    lod::extract_at(&deep, top, &p[..], None, &levels, Default::default()).unwrap();
                 assert_eq!(got, want, "{name} at top level {top}");
                 // The map covers the level's vertices, numbered in id order.
                 for (i, &v) in remap.used().iter().enumerate() {
@@ -326,7 +326,8 @@ fn limits_evaluated_on_demand_match_a_full_evaluation() {
         let p3 = r.positions(&m.positions).unwrap();
         let lim = r.limit_positions(&p3, 3).unwrap();
         let nn = r.limit_normals(&p3, 3).unwrap();
-        let mut lazy = crate::subdiv::lazy::LazyLimits::new(&r, &m.positions);
+        let mut unlimited = |_: &'static str, _: u64| Ok(());
+        let mut lazy = crate::subdiv::lazy::LazyLimits::new(&r, &m.positions, &mut unlimited);
         // A scattered third first: the second call adds the rest without redoing it.
         let some: Vec<u32> = (0..p3.len() as u32).filter(|v| v % 3 == 1).collect();
         lazy.evaluate(&some, false);
