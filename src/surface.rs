@@ -38,6 +38,9 @@ pub struct AccuracyReport {
     pub max_level: u32,
     /// Base triangles (control faces fan-triangulated) shown at each level `0..=max_level`.
     pub triangles_per_level: Vec<usize>,
+    /// Bytes charged against the memory budget at the end (its peak): what the decode held
+    /// and what the subdivision charged for its measurement and its output.
+    pub memory: u64,
 }
 
 /// How much detail a control mesh is decoded to.
@@ -339,13 +342,21 @@ fn decode_to_tolerance(
         let extra = (file_t / asked).log(4.0).ceil();
         max_level = (f64::from(max_level) + extra).min(f64::from(deepest)) as u32;
     }
-    check_subdivision(
-        &decoded.mesh,
-        max_level,
-        crate::subdiv::MEMORY_PER_ACCURATE_TRIANGLE,
-        held,
-        limits,
-    )?;
+    // The triangle count now; the memory as the subdivision allocates it (its measurement,
+    // then the output of the levels it chooses), on top of what the decode still holds.
+    check_subdivision(&decoded.mesh, max_level, 0, held, limits)?;
+    let mut live = held;
+    let mut charge = |what: &'static str, bytes: u64| {
+        live = live.saturating_add(bytes);
+        if live > limits.max_memory {
+            return Err(Error::LimitsExceeded {
+                what,
+                value: live,
+                limit: limits.max_memory,
+            });
+        }
+        Ok(())
+    };
     let aopts = crate::subdiv::AccuracyOptions {
         tolerance,
         max_tolerance: if matches!(opts.detail, Detail::Tolerance(_)) {
@@ -358,7 +369,7 @@ fn decode_to_tolerance(
         max_faces: limits.max_subdivided_faces,
         boundary_patches: opts.boundary_patches,
     };
-    let out = crate::subdiv::subdivide_to_tolerance(&decoded.mesh, &aopts)?;
+    let out = crate::subdiv::subdivide_to_tolerance_within(&decoded.mesh, &aopts, &mut charge)?;
     let mut triangles_per_level = vec![0; max_level as usize + 1];
     for &m in &out.levels {
         triangles_per_level[m as usize] += 1;
@@ -375,6 +386,7 @@ fn decode_to_tolerance(
             bound: out.bound,
             max_level,
             triangles_per_level,
+            memory: live,
         }),
     })
 }

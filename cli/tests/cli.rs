@@ -797,7 +797,7 @@ fn triangle_at_level(level: u8) -> PathBuf {
 
 #[test]
 fn decoding_is_refused_beyond_the_memory_budget() {
-    // Level 13 of one triangle is 67 M triangles: more than the command line's 4 GiB budget,
+    // Level 13 of one triangle is 67 M triangles: more than the command line's 1 GiB budget,
     // refused before subdividing; any level asked for is checked the same way, and so is a
     // decode to a tolerance (by default, and charged for the finest level it may show).
     let file = triangle_at_level(13);
@@ -814,6 +814,7 @@ fn decoding_is_refused_beyond_the_memory_budget() {
         text.contains("limit exceeded: decode memory with subdivision"),
         "{text}"
     );
+    assert!(text.contains("--max-memory raises it"), "{text}");
     assert!(!out.exists());
     let (ok, text) = scode(&[
         "decode",

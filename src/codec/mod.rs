@@ -117,19 +117,19 @@ pub struct Limits {
     /// Memory budget of one decode in bytes: the input, inflated sections and every array
     /// whose size the file decides (subdivision output included, when the caller subdivides)
     /// are charged against it before they are allocated and released when they are freed;
-    /// what is live at once must fit. Default 1 GiB: a raw triangle mesh peaks at about 150
-    /// bytes per triangle (7 million triangles fit). A subdivided surface adds 200 bytes per
-    /// triangle of the finest level, so a caller that subdivides large CAD models to their
-    /// default level needs more (840 faces at level 5: 2.2 GB); the command-line tool uses
-    /// 4 GiB.
+    /// what is live at once must fit. Default 1 GiB (the command-line tool's too): a raw
+    /// triangle mesh peaks at about 150 bytes per triangle (7 million triangles fit). A
+    /// subdivided surface adds 200 bytes per triangle of a uniform level, so a caller that
+    /// subdivides large CAD models uniformly to their default level needs more (840 faces at
+    /// level 5: 2.2 GB); a decode to a tolerance is charged for its measurement and for the
+    /// output of the levels it chooses (a fine tessellation of 100,000 faces: 1.06 GB).
     pub max_memory: u64,
     /// Work bound: steps of the decoder's walks whose length the file decides (merge labels'
     /// boundary walks, candidate searches), at most this many per vertex, face and face
     /// corner of the header: a decode takes at most `max_work_per_element x (V + F + K + 1)`
     /// steps. The memory budget bounds the counts a header may claim (at least 25 bytes are
     /// charged per element, so 42 million elements per GiB): with the defaults a file costs at
-    /// most about 256 x 42 million = 1.1e10 steps, and 4.4e10 with the command-line tool's
-    /// 4 GiB. Default 256: genuine meshes of few handles count far below 1 per element, a
+    /// most about 256 x 42 million = 1.1e10 steps (4.3e10 per 4 GiB of budget). Default 256: genuine meshes of few handles count far below 1 per element, a
     /// voxel lattice of 45^3 cells (30,000 tunnels) 127; lattices of more tunnels need more.
     pub max_work_per_element: u64,
     /// Verify section CRCs (default true; the fuzz target turns it off).

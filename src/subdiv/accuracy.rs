@@ -40,11 +40,20 @@
 //!
 //! Each base triangle is measured as if its neighbours were at its level. Gap filling
 //! (`spec/subdivision.md` §7) shows a base edge between two levels at the coarser side's
-//! chords and moves the finer side's vertices onto them: every point of a triangle with moved
-//! corners moves by at most the largest of its corners' moves, so a base triangle next to a
-//! coarser one is within its estimate plus the largest distance its moved vertices travel
-//! (from their limit points to the chords); where that exceeds the tolerance the coarser
-//! neighbour is raised a level, until nothing changes (levels only rise, so this ends).
+//! chords and moves the finer side's vertices onto them. Next to a corner or a crease the
+//! limit points along an edge are spaced unevenly, so a moved vertex can travel far along
+//! the chord (many times the tolerance on dense tessellations with a corner at most
+//! vertices) while the triangles it moves stay on the surface: what counts is where the
+//! moved triangles lie, not how far their corners travel. A point of a moved triangle is
+//! within the triangle's estimate plus its distance from the unmoved triangles, or within the
+//! coarser side's estimate plus its distance from the coarser side's triangles, of the limit
+//! surface; a point of an unmoved triangle is within its distance from the moved triangles
+//! or the coarser side's ones of the output. So a base triangle next to a coarser one is
+//! within its estimate plus the largest of these distances over the points of its triangles
+//! at the moved edges ([`Measure::moved_deviation`]), and never more than plus the largest
+//! distance a moved vertex travels; where that exceeds the tolerance (or, where not even
+//! level `top` meets it, the triangle's own estimate) the coarser neighbour is raised a
+//! level, until nothing changes (levels only rise, so this ends).
 //!
 //! Last, the edges inside plane patches are flipped toward well-shaped triangles
 //! ([`super::flips`]), which moves the surface by at most [`FLIP_SHARE`] of the tolerance,
@@ -53,7 +62,7 @@
 use glam::DVec3;
 
 use super::eval::wedge_face;
-use super::lazy::LazyLimits;
+use super::lazy::{LazyLimits, Paged, Prefix};
 use super::next_level::child_faces;
 use super::sparse::{base_edge_chain, SparsePlan, DENSE};
 use super::topology::{Level, NONE};
@@ -112,21 +121,25 @@ pub struct AccurateSurface {
     pub bound: f64,
 }
 
-/// Memory [`subdivide_to_tolerance`] takes per triangle of level `max_level`, the finest it
-/// can show: the connectivity of levels 0 to `max_level - 1` (about 68 bytes per triangle of
-/// a level, so 23 for all of them), the address space of the positions of every level and of
-/// the limit points and normals of level `max_level` (a vertex per two triangles, 24 bytes
-/// each: 60, mapped only where evaluated), and the gap-filled copy and renumbering the
-/// extraction makes (16). The output is a fraction of a uniform level's. A decoder charges
-/// this before refining, as it charges [`super::MEMORY_PER_TRIANGLE`] for a uniform level.
-pub const MEMORY_PER_TRIANGLE: u64 = 100;
-
 /// Subdivides `mesh` so that every base triangle is shown at the coarsest level (at most
 /// `opts.max_level`) whose output is within the tolerance of the limit surface (the rule is
 /// the module's documentation), crack-free, at limit positions.
+#[cfg(any(test, feature = "internals"))]
 pub fn subdivide_to_tolerance(
     mesh: &ControlMesh,
     opts: &AccuracyOptions,
+) -> Result<AccurateSurface> {
+    subdivide_to_tolerance_within(mesh, opts, &mut |_, _| Ok(()))
+}
+
+/// [`subdivide_to_tolerance`], charging the memory it allocates to `charge` (what for, bytes)
+/// before allocating it, as a decoder charges its budget ([`super::charge`]): the
+/// measurement before the refinement is built, then the output once the levels are chosen.
+/// An error from `charge` is returned at once.
+pub fn subdivide_to_tolerance_within(
+    mesh: &ControlMesh,
+    opts: &AccuracyOptions,
+    charge: &mut dyn FnMut(&'static str, u64) -> Result<()>,
 ) -> Result<AccurateSurface> {
     let n = opts.max_level;
     let tri: u64 = mesh.faces().map(|f| f.len().saturating_sub(2) as u64).sum();
@@ -158,11 +171,18 @@ pub fn subdivide_to_tolerance(
     }
     // Level n's connectivity is read through level n - 1, never built; level 0 is measured
     // against level 1.
+    let counts = super::charge::level_counts(mesh, n.max(1));
+    charge(
+        "decode memory with subdivision to a tolerance: refinement and measurement (bytes)",
+        super::charge::measurement_bytes(&counts, n.max(1)),
+    )?;
     let r = Refinement::with_max_faces(mesh, n.max(1), opts.max_faces.saturating_mul(4))?;
-    let mut lazy = LazyLimits::new(&r, &mesh.positions);
+    let mut lazy = LazyLimits::new(&r, &mesh.positions, charge);
     let nv0 = mesh.positions.len() as u32;
     lazy.evaluate(&(0..nv0).collect::<Vec<u32>>(), false);
-    let tolerance = resolve_tolerance(&lazy.limit()[..nv0 as usize], opts)?;
+    lazy.check()?;
+    let base_limits: Vec<DVec3> = (0..nv0 as usize).map(|i| lazy.limit()[i]).collect();
+    let tolerance = resolve_tolerance(&base_limits, opts)?;
     let plan = match opts.boundary_patches {
         BoundaryPatchOutput::Sparse => SparsePlan::new(r.full(0), &r.base),
         #[cfg(feature = "internals")]
@@ -180,6 +200,11 @@ pub fn subdivide_to_tolerance(
     // The flips of plane patches afterwards may move the surface by a small share of the
     // tolerance: the levels are chosen for the rest.
     let (levels, bound) = m.choose_levels(&mut lazy, tolerance * (1.0 - FLIP_SHARE));
+    lazy.check()?;
+    lazy.charge(
+        "decode memory with subdivision to a tolerance: output (bytes)",
+        super::charge::output_bytes(r.full(0), &levels, m.level_nv[n as usize]),
+    )?;
     let (out, remap) = m.extract(&mut lazy, &levels, opts)?;
     let mut mesh_out = out.to_control_mesh(&mesh.groups);
     mesh_out.sharp_edges = m.sharp_edges(&levels, n, &remap);
@@ -592,7 +617,7 @@ impl Measure<'_> {
     /// `E(m)` of dense base triangle `k` (the module's documentation), from the limit points
     /// `limit` of the sample level `s`; stops as soon as it exceeds `stop_above`. Distances
     /// below `self.floor` are not told apart.
-    fn dense_error(&self, limit: &[DVec3], k: usize, m: u32, stop_above: f64) -> f64 {
+    fn dense_error(&self, limit: &Paged, k: usize, m: u32, stop_above: f64) -> f64 {
         let lm = self.r.full(m);
         let tri = |g: usize| {
             let c = &lm.faces[3 * g..3 * g + 3];
@@ -609,7 +634,7 @@ impl Measure<'_> {
     /// the triangles `tri` gives.
     fn dense_error_of(
         &self,
-        limit: &[DVec3],
+        limit: &Paged,
         k: usize,
         m: u32,
         stop_above: f64,
@@ -727,7 +752,7 @@ impl Measure<'_> {
         p: DVec3,
         x: u32,
         s: u32,
-        limit: &[DVec3],
+        limit: &Paged,
         within2: f64,
     ) -> f64 {
         let last = self.r.full(s - 1);
@@ -812,7 +837,7 @@ impl Measure<'_> {
             self.prepare_shown(lazy, &check, levels, errors, edges);
             let mut shown = vec![0.0f64; check.len()];
             {
-                let (lv, errs, eds, limit): (&[u8], &[Errors], &EdgeErrors, &[DVec3]) =
+                let (lv, errs, eds, limit): (&[u8], &[Errors], &EdgeErrors, &Paged) =
                     (levels, errors, edges, lazy.limit());
                 par::for_each_heavy(&mut shown, |i, out| {
                     *out = self.shown_error(check[i], lv, errs, eds, limit);
@@ -918,7 +943,7 @@ impl Measure<'_> {
         levels: &[u8],
         errors: &[Errors],
         edges: &EdgeErrors,
-        limit: &[DVec3],
+        limit: &Paged,
     ) -> f64 {
         let m = levels[k];
         let l0 = self.l0();
@@ -944,10 +969,16 @@ impl Measure<'_> {
             }
             return err;
         }
-        let mut moved = Vec::new();
+        let (mut moved, mut chains) = (Vec::new(), Vec::new());
+        let mut beyond = Beyond::default();
         for &e in &l0.face_edges[3 * k..3 * k + 3] {
             let o = self.across(e as usize, k);
             if o != NONE && levels[o as usize] < m {
+                chains.extend(
+                    (0..=1usize << m)
+                        .map(|j| lod::edge_vertex(l0, &self.level_nv, m.into(), e as usize, j)),
+                );
+                self.shown_at_edge(o as usize, e as usize, levels, errors, limit, &mut beyond);
                 self.gap_filled(
                     limit,
                     e as usize,
@@ -967,14 +998,21 @@ impl Measure<'_> {
                 a.max((p - limit[v as usize]).length_squared())
             })
             .sqrt();
+        moved.sort_unstable_by_key(|&(v, _)| v);
+        // Every point of a triangle moves by at most the largest move of its corners, but a
+        // move along the coarser side's chord (the spacing of an edge's limit points is
+        // uneven next to corners and creases) slides the triangles within the surface they
+        // already show: what counts is how far the moved triangles lie from the unmoved ones.
+        chains.sort_unstable();
+        let slid = self
+            .moved_deviation(k, m.into(), limit, &moved, &chains, own, &beyond)
+            .min(far);
         if u32::from(m) == self.top && self.top > 0 {
-            // Not measured: every point of a triangle moves by at most the largest move of
-            // its corners.
-            return own + far;
+            // Not measured: the level after the finest shown is not in the refinement.
+            return own + slid;
         }
         // Measured as shown: k's triangles with the moved corners, the coarser neighbours'
         // own triangles.
-        moved.sort_unstable_by_key(|&(v, _)| v);
         let at = |v: u32| match moved.binary_search_by_key(&v, |&(x, _)| x) {
             Ok(i) => moved[i].1,
             Err(_) => limit[v as usize],
@@ -1003,7 +1041,113 @@ impl Measure<'_> {
         let raw = self.dense_error_of(limit, k, m, f64::INFINITY, &shown);
         let d = self.sample_level(m) - m;
         let rho = ratio(&errors[k].raw, m as usize).powi(d as i32);
-        (raw / (1.0 - rho)).min(own + far)
+        (raw / (1.0 - rho)).min(own + slid)
+    }
+
+    /// How far gap filling takes the level-`m` triangles of dense base triangle `k` beyond
+    /// `k`'s own estimate `own` (`moved`: the moved vertices, sorted, with their positions on
+    /// the coarser sides' chords; `chains`: the vertices of `k`'s gap-filled base edges,
+    /// sorted; `beyond`: the coarser sides' triangles at those edges). A point of a moved
+    /// triangle is within `own` plus its distance of the unmoved triangles, or within the
+    /// coarser side's estimate plus its distance of that side's triangles, of the limit
+    /// surface; a point of an unmoved triangle (within `own` of the surface) is within its
+    /// distance of the moved triangles or of the coarser side's. The largest excess over
+    /// `own`, at the points over each triangle two levels down; below `self.floor`, 0.
+    #[allow(clippy::too_many_arguments)]
+    fn moved_deviation(
+        &self,
+        k: usize,
+        m: u32,
+        limit: &Paged,
+        moved: &[(u32, DVec3)],
+        chains: &[u32],
+        own: f64,
+        beyond: &Beyond,
+    ) -> f64 {
+        let is_moved = |v: &u32| moved.binary_search_by_key(v, |&(x, _)| x).is_ok();
+        let at = |v: u32| match moved.binary_search_by_key(&v, |&(x, _)| x) {
+            Ok(i) => moved[i].1,
+            Err(_) => limit[v as usize],
+        };
+        let mut corners = Vec::new();
+        self.output_vertices(k, m, &mut corners);
+        // A moved vertex slides along its base edge between the same coarse chain vertices,
+        // so the triangles compared with are those at the gap-filled edges; only those with
+        // a moved corner differ.
+        let (mut still, mut shifted, mut differ) = (Vec::new(), Vec::new(), Vec::new());
+        for c in corners.chunks_exact(3) {
+            if !c.iter().any(|v| chains.binary_search(v).is_ok()) {
+                continue;
+            }
+            if c.iter().any(is_moved) {
+                differ.push(still.len());
+            }
+            still.push([
+                limit[c[0] as usize],
+                limit[c[1] as usize],
+                limit[c[2] as usize],
+            ]);
+            shifted.push([at(c[0]), at(c[1]), at(c[2])]);
+        }
+        // The coarser side's estimate counts where it exceeds k's own.
+        let extra = (beyond.err - own).max(0.0);
+        let mut worst = self.floor;
+        for (from, to, d_beyond) in [(&shifted, &still, extra), (&still, &shifted, 0.0)] {
+            for &i in &differ {
+                let t = &from[i];
+                for b in DEVIATION_POINTS {
+                    let p = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
+                    let first = point_triangle_distance_squared(p, &to[i]);
+                    let near = nearest(p, first, to, worst).sqrt();
+                    if near <= worst {
+                        continue;
+                    }
+                    let below = (worst - d_beyond).max(0.0);
+                    let across = nearest(p, f64::INFINITY, &beyond.tris, below).sqrt() + d_beyond;
+                    worst = worst.max(near.min(across));
+                }
+            }
+        }
+        if worst > self.floor {
+            worst
+        } else {
+            0.0
+        }
+    }
+
+    /// Appends to `beyond` the level-`lo` triangles of dense base triangle `o`, shown at its
+    /// level `lo`, that touch base edge `e` (at their limit points), and raises its error to
+    /// `o`'s estimate; a sparse `o` adds nothing.
+    fn shown_at_edge(
+        &self,
+        o: usize,
+        e: usize,
+        levels: &[u8],
+        errors: &[Errors],
+        limit: &Paged,
+        beyond: &mut Beyond,
+    ) {
+        if self.unit(o).is_some() {
+            return;
+        }
+        let lo = u32::from(levels[o]);
+        let l0 = self.l0();
+        let mut chain: Vec<u32> = (0..=1usize << lo)
+            .map(|j| lod::edge_vertex(l0, &self.level_nv, lo, e, j))
+            .collect();
+        chain.sort_unstable();
+        let mut corners = Vec::new();
+        self.output_vertices(o, lo, &mut corners);
+        for c in corners.chunks_exact(3) {
+            if c.iter().any(|v| chain.binary_search(v).is_ok()) {
+                beyond.tris.push([
+                    limit[c[0] as usize],
+                    limit[c[1] as usize],
+                    limit[c[2] as usize],
+                ]);
+            }
+        }
+        beyond.err = beyond.err.max(errors[o].est[lo as usize]);
     }
 
     /// Appends the vertices gap filling moves on base edge `e` shown at level `fine` on one
@@ -1011,7 +1155,7 @@ impl Measure<'_> {
     /// coarser side (the spec's `(1 - t) x_j0 + t x_j0+s`, as the extraction computes them).
     fn gap_filled(
         &self,
-        limit: &[DVec3],
+        limit: &Paged,
         e: usize,
         fine: u32,
         coarse: u32,
@@ -1046,14 +1190,15 @@ impl Measure<'_> {
             lazy.ask(&want, opts.normals);
         }
         lazy.run();
+        lazy.check()?;
         let nv = self.level_nv[self.top as usize];
         loop {
-            let normals = opts.normals.then(|| &lazy.normals()[..nv]);
+            let normals = opts.normals.then(|| Prefix(lazy.normals(), nv));
             let (out, remap) = lod::extract_at(
                 self.r,
                 self.top,
-                &lazy.limit()[..nv],
-                normals,
+                &Prefix(lazy.limit(), nv),
+                normals.as_ref(),
                 levels,
                 opts.boundary_patches,
             )?;
@@ -1070,6 +1215,7 @@ impl Measure<'_> {
             }
             debug_assert!(false, "the output reads {} more vertices", missing.len());
             lazy.evaluate(&missing, opts.normals);
+            lazy.check()?;
         }
     }
 
@@ -1127,6 +1273,35 @@ fn nearest(p: DVec3, first: f64, tris: &[[DVec3; 3]], below: f64) -> f64 {
     best
 }
 
+/// The coarser neighbours' triangles along a base triangle's gap-filled edges, as shown,
+/// and the largest of those neighbours' estimates ([`Measure::moved_deviation`]).
+#[derive(Default)]
+struct Beyond {
+    tris: Vec<[DVec3; 3]>,
+    err: f64,
+}
+
+/// Barycentric coordinates of the points over a triangle two levels down (its corners, the
+/// midpoints and quarter points of its edges and the three points inside), where
+/// [`Measure::moved_deviation`] compares triangles.
+const DEVIATION_POINTS: [[f64; 3]; 15] = [
+    [1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [0.5, 0.5, 0.0],
+    [0.0, 0.5, 0.5],
+    [0.5, 0.0, 0.5],
+    [0.75, 0.25, 0.0],
+    [0.25, 0.75, 0.0],
+    [0.0, 0.75, 0.25],
+    [0.0, 0.25, 0.75],
+    [0.25, 0.0, 0.75],
+    [0.75, 0.0, 0.25],
+    [0.5, 0.25, 0.25],
+    [0.25, 0.5, 0.25],
+    [0.25, 0.25, 0.5],
+];
+
 /// Buffers [`Measure::sample_vertices`] reuses from one triangle to the next.
 #[derive(Default)]
 struct SampleScratch {
@@ -1155,7 +1330,7 @@ fn faces_around(l: &Level, f: usize, keep: impl Fn(u32) -> bool, out: &mut Vec<u
 /// largest distance from a sample to the chord between the level-`m` points on either side,
 /// or to the chord before or after it when that is nearer (the samples slide along the curve
 /// as they do along a surface, see [`Measure::dense_error`]).
-fn chain_error(chain: &[u32], limit: &[DVec3], shift: u32) -> f64 {
+fn chain_error(chain: &[u32], limit: &Paged, shift: u32) -> f64 {
     let step = 1usize << shift;
     let segments = (chain.len() - 1) / step;
     let seg = |i: usize| {

@@ -107,7 +107,7 @@ pub(crate) fn eval_vertex(
     l: &impl Connectivity,
     t: &ValenceTables,
     base: &Base,
-    p: &[DVec3],
+    p: &(impl std::ops::Index<usize, Output = DVec3> + ?Sized),
     v: usize,
 ) -> DVec3 {
     let mut acc = DVec3::ZERO;
@@ -125,7 +125,12 @@ pub(crate) fn eval_vertex(
 
 /// Position of the new vertex on edge `e`.
 #[inline]
-pub(crate) fn eval_edge(l: &impl Connectivity, base: &Base, p: &[DVec3], e: usize) -> DVec3 {
+pub(crate) fn eval_edge(
+    l: &impl Connectivity,
+    base: &Base,
+    p: &(impl std::ops::Index<usize, Output = DVec3> + ?Sized),
+    e: usize,
+) -> DVec3 {
     let mut acc = DVec3::ZERO;
     if let Some(fr) = frame_of(base, l.edge_frame(e)) {
         let mut terms = Terms::new();
@@ -182,7 +187,7 @@ pub(crate) fn eval_limit(
     l: &impl Connectivity,
     t: &ValenceTables,
     base: &Base,
-    p: &[DVec3],
+    p: &(impl std::ops::Index<usize, Output = DVec3> + ?Sized),
     v: usize,
 ) -> DVec3 {
     let c = l.vertex_class(v);
@@ -233,7 +238,7 @@ pub(crate) fn eval_normal(
     t: &ValenceTables,
     base: &Base,
     j: u32,
-    p: &[DVec3],
+    p: &(impl std::ops::Index<usize, Output = DVec3> + ?Sized),
     v: usize,
     wedge: Option<usize>,
 ) -> DVec3 {
@@ -322,7 +327,7 @@ fn crease_normal(
     t: &ValenceTables,
     base: &Base,
     j: u32,
-    p: &[DVec3],
+    p: &(impl std::ops::Index<usize, Output = DVec3> + ?Sized),
     v: usize,
     wedge: Option<usize>,
     ring: &[u32],

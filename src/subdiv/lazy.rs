@@ -6,27 +6,115 @@
 //! ring, or the ends and opposite corners of its edge), and the limit point and normal of a
 //! vertex on its ring at the level it was born at (the limit masks are eigenvectors of the
 //! subdivision, so any level gives the same point). [`LazyLimits`] evaluates, level by level,
-//! exactly the positions the asked-for limit points depend on, into arrays indexed by the
-//! nested vertex ids; nothing else is touched, so the untouched pages of those arrays are
-//! never even mapped.
+//! exactly the positions the asked-for limit points depend on, into stores indexed by the
+//! nested vertex ids ([`Paged`]) whose pages are allocated when first written, each charged to
+//! the decode's budget first: only what is evaluated takes memory.
 
 use glam::DVec3;
+
+use crate::error::{Error, Result};
 
 use super::masks::ValenceTables;
 use super::next_level::{Connectivity, NextLevel};
 use super::{eval, Refinement};
 
+/// What a [`LazyLimits`] charges its pages to: bytes for a purpose, refused with an error
+/// (`Error::LimitsExceeded`) when they do not fit.
+pub(crate) type Charge<'c> = dyn FnMut(&'static str, u64) -> Result<()> + 'c;
+
+/// Points by vertex id, in pages allocated when first written: a decode to an accuracy
+/// writes a small share of a refinement's vertices, and only the pages written take memory.
+/// Unwritten entries read as zero.
+pub(crate) struct Paged {
+    pages: Vec<Option<Box<[DVec3]>>>,
+    len: usize,
+}
+
+/// Points per page of a [`Paged`] store.
+pub(crate) const PAGE: u64 = 512;
+/// Bytes charged per page.
+pub(crate) const PAGE_BYTES: u64 = 24 * PAGE;
+/// What the pages are charged for.
+const PAGE_MEMORY: &str =
+    "decode memory with subdivision to a tolerance: evaluated positions and limits (bytes)";
+
+static ZERO: DVec3 = DVec3::ZERO;
+
+impl Paged {
+    fn new(len: usize) -> Self {
+        Paged {
+            pages: (0..len.div_ceil(PAGE as usize)).map(|_| None).collect(),
+            len,
+        }
+    }
+
+    /// Entries (written or not).
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Writes `p` at `i`, allocating its page when it has none, charged first; a refused
+    /// charge leaves the entry unwritten and is kept in `failed` (nothing more is allocated
+    /// after it).
+    fn set(&mut self, i: usize, p: DVec3, charge: &mut Charge<'_>, failed: &mut Option<Error>) {
+        let page = &mut self.pages[i / PAGE as usize];
+        if page.is_none() {
+            if failed.is_some() {
+                return;
+            }
+            if let Err(e) = charge(PAGE_MEMORY, PAGE_BYTES) {
+                *failed = Some(e);
+                return;
+            }
+            *page = Some(vec![DVec3::ZERO; PAGE as usize].into_boxed_slice());
+        }
+        if let Some(page) = page {
+            page[i % PAGE as usize] = p;
+        }
+    }
+}
+
+impl std::ops::Index<usize> for Paged {
+    type Output = DVec3;
+
+    fn index(&self, i: usize) -> &DVec3 {
+        match &self.pages[i / PAGE as usize] {
+            Some(page) => &page[i % PAGE as usize],
+            None => &ZERO,
+        }
+    }
+}
+
+/// The first `.1` entries of a [`Paged`] store (the vertices of a coarser level than its
+/// own: ids are nested).
+pub(crate) struct Prefix<'p>(pub &'p Paged, pub usize);
+
+impl std::ops::Index<usize> for Prefix<'_> {
+    type Output = DVec3;
+
+    fn index(&self, i: usize) -> &DVec3 {
+        debug_assert!(i < self.1, "vertex {i} beyond the {} asked for", self.1);
+        &self.0[i]
+    }
+}
+
+impl super::lod::Points for Prefix<'_> {
+    fn count(&self) -> usize {
+        self.1.min(self.0.len())
+    }
+}
+
 /// Limit points (and normals) of chosen vertices of a refinement, evaluated on demand.
-pub(crate) struct LazyLimits<'a> {
+pub(crate) struct LazyLimits<'a, 'c> {
     r: &'a Refinement,
     /// Vertex count of every level `0..=r.max_level()`.
     nv: Vec<usize>,
     /// Positions of every level, valid where `have` is set.
-    pos: Vec<Vec<DVec3>>,
+    pos: Vec<Paged>,
     have: Vec<Vec<u64>>,
     /// Limit points and normals by vertex id (any level's ids: they are nested).
-    limit: Vec<DVec3>,
-    normal: Vec<DVec3>,
+    limit: Paged,
+    normal: Paged,
     have_limit: Vec<u64>,
     have_normal: Vec<u64>,
     /// Vertices asked for and not evaluated yet, by the level they are born at, and the
@@ -36,13 +124,18 @@ pub(crate) struct LazyLimits<'a> {
     support: Vec<Vec<u32>>,
     /// Whether the vertices in `todo` were asked for with their normals.
     todo_normals: bool,
+    /// Entries in `todo` and `support` (at most about [`QUEUE_LIMIT`]).
+    queued: usize,
+    /// Where pages are charged, and the first charge it refused (then the values read are
+    /// not all evaluated, and the caller stops: [`Self::check`]).
+    charge: &'c mut Charge<'c>,
+    failed: Option<Error>,
 }
 
-/// `n` zero vectors, allocated zeroed rather than written (`vec![DVec3::ZERO; n]` writes
-/// every element): the pages never written are never mapped.
-fn zeroed(n: usize) -> Vec<DVec3> {
-    bytemuck::allocation::zeroed_vec(n)
-}
+/// Queue entries after which [`LazyLimits::ask`] evaluates what is queued: the queues stay
+/// a few megabytes whatever a caller asks for at once, so their memory is a fixed charge
+/// (the result is the same whenever the queues are run).
+pub(crate) const QUEUE_LIMIT: usize = 1 << 20;
 
 /// Sets bit `i`; whether it was clear.
 #[inline]
@@ -75,24 +168,33 @@ fn support_into(
     }
 }
 
-impl<'a> LazyLimits<'a> {
-    /// Nothing evaluated yet but the control points (level 0). `r` must be built to level 1
-    /// at least.
-    pub fn new(r: &'a Refinement, control: &[DVec3]) -> LazyLimits<'a> {
+impl<'a, 'c> LazyLimits<'a, 'c> {
+    /// Nothing evaluated yet but the control points (level 0), whose pages are charged to
+    /// `charge` like every page after them. `r` must be built to level 1 at least.
+    pub fn new(
+        r: &'a Refinement,
+        control: &[DVec3],
+        charge: &'c mut Charge<'c>,
+    ) -> LazyLimits<'a, 'c> {
         let top = r.max_level();
         debug_assert!(top >= 1);
         let nv: Vec<usize> = (0..=top).map(|j| r.level(j).vertex_count()).collect();
-        let mut pos = vec![control.to_vec()];
+        let mut failed = None;
+        let mut level0 = Paged::new(control.len());
+        for (i, &p) in control.iter().enumerate() {
+            level0.set(i, p, charge, &mut failed);
+        }
+        let mut pos = vec![level0];
         let mut have = vec![vec![u64::MAX; nv[0].div_ceil(64)]];
         for &n in &nv[1..] {
-            pos.push(zeroed(n));
+            pos.push(Paged::new(n));
             have.push(vec![0u64; n.div_ceil(64)]);
         }
         let last = nv[top as usize];
         LazyLimits {
             r,
-            limit: zeroed(last),
-            normal: zeroed(last),
+            limit: Paged::new(last),
+            normal: Paged::new(last),
             have_limit: vec![0u64; last.div_ceil(64)],
             have_normal: vec![0u64; last.div_ceil(64)],
             nv,
@@ -101,17 +203,35 @@ impl<'a> LazyLimits<'a> {
             todo: vec![Vec::new(); top as usize + 1],
             support: vec![Vec::new(); top as usize + 1],
             todo_normals: false,
+            queued: 0,
+            charge,
+            failed,
         }
     }
 
     /// Limit points by vertex id (of the finest level; valid where asked for).
-    pub fn limit(&self) -> &[DVec3] {
+    pub fn limit(&self) -> &Paged {
         &self.limit
     }
 
     /// Limit normals by vertex id (valid where asked for).
-    pub fn normals(&self) -> &[DVec3] {
+    pub fn normals(&self) -> &Paged {
         &self.normal
+    }
+
+    /// The charge a page was refused, if any: then some of the values asked for were not
+    /// evaluated, and nothing read since is to be used.
+    pub fn check(&mut self) -> Result<()> {
+        match self.failed.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Charges `bytes` for `what` to the same budget as the pages.
+    pub fn charge(&mut self, what: &'static str, bytes: u64) -> Result<()> {
+        self.check()?;
+        (self.charge)(what, bytes)
     }
 
     /// Whether the limit point (and, with `normal`, the normal) of `v` is evaluated.
@@ -163,16 +283,22 @@ impl<'a> LazyLimits<'a> {
             let b = self.birth(v);
             self.todo[b as usize].push(v);
             let (r, ring) = (self.r, &mut self.support[b as usize]);
+            let before = ring.len();
             if b < top {
                 support_into(r.full(b), &r.tables, v, normals, ring);
             } else {
                 support_into(&Self::finest(r), &r.tables, v, normals, ring);
+            }
+            self.queued += 1 + ring.len() - before;
+            if self.queued > QUEUE_LIMIT {
+                self.run();
             }
         }
     }
 
     /// Evaluates what [`Self::ask`] queued.
     pub fn run(&mut self) {
+        self.queued = 0;
         let top = self.r.max_level();
         let normals = self.todo_normals;
         let mut support = std::mem::take(&mut self.support);
@@ -200,9 +326,9 @@ impl<'a> LazyLimits<'a> {
                         normals.then(|| eval::eval_normal(&l, t, base, b, p, i, None)),
                     )
                 };
-                self.limit[i] = lim;
+                self.limit.set(i, lim, self.charge, &mut self.failed);
                 if let Some(nn) = nor {
-                    self.normal[i] = nn;
+                    self.normal.set(i, nn, self.charge, &mut self.failed);
                 }
             }
             vs.clear();
@@ -249,11 +375,12 @@ impl<'a> LazyLimits<'a> {
             let (src, dst) = (&lower[i - 1], &mut upper[0]);
             for &v in vs {
                 let v = v as usize;
-                dst[v] = if v < nv {
+                let p = if v < nv {
                     eval::eval_vertex(l, t, base, src, v)
                 } else {
                     eval::eval_edge(l, base, src, v - nv)
                 };
+                dst.set(v, p, self.charge, &mut self.failed);
             }
         }
         *verts = std::mem::take(&mut queue[j]);

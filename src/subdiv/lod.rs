@@ -87,16 +87,29 @@ pub(crate) fn edge_vertex(
     (level_nv[lev as usize] + (e << lev) + (j >> (tz + 1))) as u32
 }
 
+/// Points by vertex id: a slice, or the prefix of a store evaluated on demand
+/// (`lazy::Prefix`), which [`extract_at`] reads.
+pub(crate) trait Points: std::ops::Index<usize, Output = DVec3> {
+    /// The number of vertices.
+    fn count(&self) -> usize;
+}
+
+impl Points for [DVec3] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+}
+
 /// [`extract`] with level `top <= r.max_level()` as the finest level shown: `pos` holds the
 /// positions of the level-`top` vertices (a prefix of every finer level's ids), so a
 /// refinement built one level deeper than its output (to measure it) shows levels up to
 /// `top` without building the connectivity of its finest level. Also returns the map from
 /// level-`top` vertex ids to output vertex ids (`u32::MAX` for vertices not used).
-pub(crate) fn extract_at(
+pub(crate) fn extract_at<P: Points + ?Sized>(
     r: &Refinement,
     top: u32,
-    pos: &[DVec3],
-    normals: Option<&[DVec3]>,
+    pos: &P,
+    normals: Option<&P>,
     levels: &[u8],
     mode: BoundaryPatchOutput,
 ) -> Result<(AdaptiveMesh, Remap)> {
@@ -120,7 +133,7 @@ pub(crate) fn extract_at(
     let mut moved = ex.gap_fill(pos);
 
     // Triangles, with fans through the finer neighbour's vertices.
-    let mut out = Emitted::new(pos.len());
+    let mut out = Emitted::new(pos.count());
     for k in 0..l0.nf() {
         if let Some(pl) = &plan {
             let u = pl.unit[k];
@@ -139,13 +152,18 @@ pub(crate) fn extract_at(
     moved.sort_unstable_by_key(|&(v, _)| v);
     let disp = Displaced { pos, moved };
     let (mesh, mut remap) = compact(&disp, normals, &out.centroids, out.tris, out.groups);
-    remap.truncate(pos.len());
+    remap.truncate(pos.count());
     Ok((mesh, remap))
 }
 
 /// Checks the arguments of [`extract_at`]: `top` within the refinement, one level per base
 /// triangle, none above `top`, and one position per level-`top` vertex.
-fn check_extract_input(r: &Refinement, top: u32, pos: &[DVec3], levels: &[u8]) -> Result<()> {
+fn check_extract_input<P: Points + ?Sized>(
+    r: &Refinement,
+    top: u32,
+    pos: &P,
+    levels: &[u8],
+) -> Result<()> {
     if top > r.max_level() {
         return Err(Error::Parameter(format!(
             "level {top} shown, refinement built to {}",
@@ -167,7 +185,7 @@ fn check_extract_input(r: &Refinement, top: u32, pos: &[DVec3], levels: &[u8]) -
             levels[k]
         )));
     }
-    if pos.len() != r.level(n).vertex_count() {
+    if pos.count() != r.level(n).vertex_count() {
         return Err(Error::Parameter(format!(
             "positions do not match level {n}"
         )));
@@ -278,7 +296,7 @@ impl Extraction<'_> {
     /// vertices with their new positions: few vertices move, so they are kept beside `pos`
     /// rather than in a copy of it (a refinement's finest level has many more vertices than
     /// an output to an accuracy uses).
-    fn gap_fill(&self, pos: &[DVec3]) -> Vec<(u32, DVec3)> {
+    fn gap_fill<P: Points + ?Sized>(&self, pos: &P) -> Vec<(u32, DVec3)> {
         let (l0, n, span) = (self.l0, self.n, self.span);
         let levels = &self.levels;
         let mut moved: Vec<(u32, DVec3)> = Vec::new();
@@ -465,14 +483,14 @@ impl<'a> LevelFaces<'a> {
 }
 
 /// Positions after gap filling: `pos`, but the vertices in `moved` (sorted by id).
-struct Displaced<'a> {
-    pos: &'a [DVec3],
+struct Displaced<'a, P: Points + ?Sized> {
+    pos: &'a P,
     moved: Vec<(u32, DVec3)>,
 }
 
-impl Displaced<'_> {
+impl<P: Points + ?Sized> Displaced<'_, P> {
     fn len(&self) -> usize {
-        self.pos.len()
+        self.pos.count()
     }
 
     #[inline]
@@ -519,9 +537,9 @@ impl Remap {
 /// positions) in index order, then the stitching centroids (vertex ids from `disp.len()` on,
 /// the mean of their three corners), and renumbers `tris`. Returns the mesh and the map from
 /// old to new vertex ids.
-fn compact(
-    disp: &Displaced<'_>,
-    normals: Option<&[DVec3]>,
+fn compact<P: Points + ?Sized>(
+    disp: &Displaced<'_, P>,
+    normals: Option<&P>,
     centroids: &[[u32; 3]],
     mut tris: Vec<[u32; 3]>,
     groups: Vec<u32>,

@@ -25,6 +25,7 @@
 //! than over base faces and needs no stitching of per-face results.
 
 mod accuracy;
+mod charge;
 mod eval;
 mod flips;
 mod frame;
@@ -56,11 +57,11 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::mesh::ControlMesh;
 
+#[cfg(any(test, feature = "internals"))]
+pub use accuracy::subdivide_to_tolerance;
 #[cfg(feature = "internals")]
 pub use accuracy::AccurateSurface;
-pub use accuracy::{
-    subdivide_to_tolerance, AccuracyOptions, MEMORY_PER_TRIANGLE as MEMORY_PER_ACCURATE_TRIANGLE,
-};
+pub use accuracy::{subdivide_to_tolerance_within, AccuracyOptions};
 #[cfg(test)]
 pub use lod::lod_corner_face;
 #[cfg(feature = "internals")]

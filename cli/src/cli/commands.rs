@@ -601,10 +601,12 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     let how = match &surface.accuracy {
         None => format!("level {}", surface.level),
         Some(a) => format!(
-            "tolerance {:.4e}, levels {}, estimated distance to the limit surface at most {:.4e}",
+            "tolerance {:.4e}, levels {}, estimated distance to the limit surface at most {:.4e}, \
+             {:.1} MB of memory charged",
             a.tolerance,
             level_histogram(&a.triangles_per_level),
-            a.bound
+            a.bound,
+            a.memory as f64 / 1e6
         ),
     };
     println!(

@@ -86,7 +86,10 @@ pub fn status(err: &anyhow::Error) -> u8 {
 pub fn message(err: &anyhow::Error) -> String {
     let mut msg = String::new();
     for cause in err.chain() {
-        let text = cause.to_string();
+        let mut text = cause.to_string();
+        if let Some(option) = cause.downcast_ref::<Error>().and_then(raising_option) {
+            text.push_str(&format!("; {option} raises it"));
+        }
         if text.is_empty() || msg.ends_with(&text) {
             continue;
         }
@@ -96,6 +99,23 @@ pub fn message(err: &anyhow::Error) -> String {
         msg.push_str(&text);
     }
     msg
+}
+
+/// The option of `scode decode` and `scode info` that raises the limit `err` exceeds, if one
+/// does: the user can decide to spend more than the defaults allow.
+fn raising_option(err: &Error) -> Option<&'static str> {
+    let Error::LimitsExceeded { what, .. } = err else {
+        return None;
+    };
+    if what.starts_with("decode memory") {
+        Some("--max-memory")
+    } else if what.starts_with("decode work") {
+        Some("--max-work-per-element")
+    } else if *what == "input bytes" || *what == "inflated section bytes" {
+        Some("--max-bytes")
+    } else {
+        None
+    }
 }
 
 #[cfg(test)]
@@ -126,6 +146,16 @@ mod tests {
                 limit: 1
             }),
             LIMITS
+        );
+        let err = anyhow::Error::from(Error::LimitsExceeded {
+            what: "decode memory with subdivision (bytes)",
+            value: 2,
+            limit: 1,
+        });
+        assert_eq!(
+            message(&err),
+            "limit exceeded: decode memory with subdivision (bytes) = 2 exceeds the limit 1; \
+             --max-memory raises it"
         );
         let c = |e: CliError| status(&anyhow::Error::from(e));
         assert_eq!(c(CliError::Usage("u".into())), USAGE);

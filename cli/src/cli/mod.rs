@@ -416,10 +416,13 @@ pub struct DecodeArgs {
     pub limits: DecodeLimits,
 }
 
-/// Memory budget of `scode decode` and `scode info`: four times the library's default,
-/// because they subdivide to a file's default level, which for CAD models of hundreds of faces
-/// takes one to two GB (the library's decode alone stays within its 1 GiB default).
-const DEFAULT_MAX_MEMORY: u64 = 4 << 30;
+/// Memory budget of `scode decode` and `scode info`: the library's default. A decode to
+/// the file's tolerance (the default) is charged for what its measurement may hold and for
+/// the output of the levels it chooses, which is far below a uniform level's: the benchmark
+/// models take at most a few hundred MB, a fine tessellation of 100,000 faces fitted at
+/// 5e-4 about 1.06 GB of it. A uniform `--level` is charged 200 bytes per triangle (5 M
+/// triangles per GiB); larger levels need `--max-memory`.
+const DEFAULT_MAX_MEMORY: u64 = 1 << 30;
 
 /// What decoding a `.scode` file may cost (a file that needs more is refused before the
 /// memory is allocated).
@@ -430,8 +433,9 @@ pub struct DecodeLimits {
     pub max_bytes: u64,
     /// Memory budget of the decode in bytes: the input, every array sized by the file's
     /// counts and the subdivided surface are charged against it before they are allocated
-    /// (and released when freed), and what is live at once must fit. The default (4 GiB)
-    /// fits large CAD models at their default level (840 faces at level 5: 2.2 GB).
+    /// (and released when freed), and what is live at once must fit. The default (1 GiB)
+    /// fits decodes to the file's tolerance of large CAD models; a uniform --level takes 200
+    /// bytes per triangle (840 faces at level 5 need 2.2 GB: --max-memory 3000000000).
     #[arg(long, value_name = "BYTES", default_value_t = DEFAULT_MAX_MEMORY)]
     pub max_memory: u64,
     /// Work bound of the decode: steps of the walks whose length the file decides, per

@@ -51,7 +51,7 @@ fn extraction_below_the_finest_level_matches_a_shallower_refinement() {
                     .collect();
                 let want = lod::extract(&shallow, &p, None, &levels, Default::default()).unwrap();
                 let (got, remap) =
-                    lod::extract_at(&deep, top, &p, None, &levels, Default::default()).unwrap();
+                    lod::extract_at(&deep, top, &p[..], None, &levels, Default::default()).unwrap();
                 assert_eq!(got, want, "{name} at top level {top}");
                 // The map covers the level's vertices, numbered in id order.
                 for (i, &v) in remap.used().iter().enumerate() {
@@ -326,7 +326,8 @@ fn limits_evaluated_on_demand_match_a_full_evaluation() {
         let p3 = r.positions(&m.positions).unwrap();
         let lim = r.limit_positions(&p3, 3).unwrap();
         let nn = r.limit_normals(&p3, 3).unwrap();
-        let mut lazy = crate::subdiv::lazy::LazyLimits::new(&r, &m.positions);
+        let mut unlimited = |_: &'static str, _: u64| Ok(());
+        let mut lazy = crate::subdiv::lazy::LazyLimits::new(&r, &m.positions, &mut unlimited);
         // A scattered third first: the second call adds the rest without redoing it.
         let some: Vec<u32> = (0..p3.len() as u32).filter(|v| v % 3 == 1).collect();
         lazy.evaluate(&some, false);
@@ -344,6 +345,55 @@ fn limits_evaluated_on_demand_match_a_full_evaluation() {
             } else {
                 assert!(n == DVec3::ZERO || n.dot(nn[v]) > 0.5, "{name} v{v}");
             }
+        }
+    }
+}
+
+#[test]
+fn gap_filling_does_not_raise_a_flat_region_whose_edge_points_slide_along_their_chords() {
+    // A flat grid of uneven triangles with every vertex a corner (as dense CAD
+    // tessellations fitted face by face come out) and one vertex lifted. Next to a corner
+    // the limit points along an edge are spaced unevenly, so gap filling slides a finer
+    // triangle's edge vertices far along the coarser side's chord, within the plane: the
+    // surface shown does not move. Only the lifted vertex's neighbourhood needs fine levels;
+    // measured by how far its corners move, every flat triangle next to a finer one was
+    // raised in turn, until the whole grid was at the finest level.
+    let n = 14;
+    let mut rng = Lcg(11);
+    let mut m = grid(
+        n,
+        n,
+        |i, j| if (i, j) == (n / 2, n / 2) { 0.6 } else { 0.0 },
+    );
+    for (idx, p) in m.positions.iter_mut().enumerate() {
+        let (i, j) = (idx % (n + 1), idx / (n + 1));
+        if i > 0 && i < n && j > 0 && j < n {
+            p.x += 0.35 * (rng.next() - 0.5);
+            p.y += 0.35 * (rng.next() - 0.5);
+        }
+    }
+    m.corners = (0..m.vertex_count() as u32).collect();
+    let opts = AccuracyOptions {
+        tolerance: Tolerance::Absolute(1e-3),
+        max_level: 3,
+        ..Default::default()
+    };
+    let out = subdivide_to_tolerance(&m, &opts).unwrap();
+    out.mesh.validate().unwrap();
+    let raised = out.levels.iter().filter(|&&l| l > 0).count();
+    // The lifted vertex's surface reaches two rings of triangles (its ring's vertices move
+    // too), about 40 of the 392.
+    assert!(
+        raised <= 80,
+        "{raised} of {} base triangles above level 0: {:?}",
+        out.levels.len(),
+        out.levels
+    );
+    // Away from the lifted vertex the output is the plane itself.
+    let c = m.positions[n / 2 * (n + 2)];
+    for p in &out.mesh.positions {
+        if (p.truncate() - c.truncate()).length() > 3.0 {
+            assert!(p.z.abs() < 1e-12, "{p}");
         }
     }
 }
