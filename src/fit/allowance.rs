@@ -1,6 +1,7 @@
 //! How far the input's own facets may be from the CAD surface (the "chord allowance" the
-//! tolerance does not charge the codec for), and against which input triangles a decoded
-//! point's excess over that allowance is measured.
+//! tolerance does not charge the codec for, or, against a B-rep, the facets' chordal
+//! tolerance it charges on top), and against which input triangles a decoded point's excess
+//! over that allowance is measured.
 //!
 //! Two simple measures overcharge coarse tessellations of curved faces (corpus trj4:
 //! cylinder bands with 50-degree facets, sagittas of 1-2 mm against a 0.3 mm tolerance):

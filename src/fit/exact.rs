@@ -2,12 +2,12 @@
 //! sphere or torus), so the error measurement can charge a decoded point for its distance to
 //! the CAD surface itself and not only to the face's facets.
 //!
-//! Why it matters: a decoded point is charged its distance to the nearest input facet minus
-//! that facet's chord allowance (the facet's own distance from the CAD surface). That is
-//! right on the convex side of a facet and too lenient on the other: a point on the
-//! concave side of a facet that sags by `a` may be `tol + 2a` from the CAD surface and still
-//! pass. With the exact surface known, the distance to it is a second lower bound of the
-//! point's distance to the face, exact inside the face, and the larger of the two is kept.
+//! Why it matters: the facets sag from the surface by up to their chord, on either side of a
+//! decoded point, so no allowance on the distance to them is right on both sides (a point on
+//! the concave side of a facet that sags by `a` is `a` farther from the surface than from the
+//! facet, one on the convex side `a` nearer). Where the point's projection onto the exact
+//! surface lies over the face, its distance to the surface is its distance to the face;
+//! elsewhere only the facets bound it ([`super::allowance::OwnFaces`]).
 
 use glam::DVec3;
 
