@@ -191,7 +191,7 @@ pub enum Reference {
     /// A B-rep (STEP input): faces on analytic surfaces against those surfaces where the
     /// decoded surface lies over the face, the others (and points beyond a face's outline)
     /// against a tessellation of the B-rep plus its chordal tolerance, an upper bound of the
-    /// distance to the B-rep ([`FitOptions::facet_chord`]).
+    /// distance to the B-rep (`FitOptions::facet_chord`).
     Brep,
 }
 
