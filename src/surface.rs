@@ -342,7 +342,7 @@ fn decode_to_tolerance(
         let extra = (file_t / asked).log(4.0).ceil();
         max_level = (f64::from(max_level) + extra).min(f64::from(deepest)) as u32;
     }
-    // The triangle count now; the memory as the subdivision allocates it (its measurement,
+    // The triangle count first; the memory as the subdivision allocates it (its measurement,
     // then the output of the levels it chooses), on top of what the decode still holds.
     check_subdivision(&decoded.mesh, max_level, 0, held, limits)?;
     let mut live = held;

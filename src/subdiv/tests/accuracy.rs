@@ -356,8 +356,8 @@ fn gap_filling_does_not_raise_a_flat_region_whose_edge_points_slide_along_their_
     // the limit points along an edge are spaced unevenly, so gap filling slides a finer
     // triangle's edge vertices far along the coarser side's chord, within the plane: the
     // surface shown does not move. Only the lifted vertex's neighbourhood needs fine levels;
-    // measured by how far its corners move, every flat triangle next to a finer one was
-    // raised in turn, until the whole grid was at the finest level.
+    // measured by how far its corners move, every flat triangle next to a finer one would be
+    // raised in turn, until the whole grid is at the finest level.
     let n = 14;
     let mut rng = Lcg(11);
     let mut m = grid(
