@@ -130,6 +130,18 @@ impl Frame {
         }
     }
 
+    /// How far apart `p` and `q` lie in the angle about the axis, in `[0, pi]` (0 when one of
+    /// them is on the axis, where the angle is undefined). A straight edge on a cylinder or
+    /// cone lies on the surface only at 0 (a ruling).
+    pub fn turn(&self, p: DVec3, q: DVec3) -> f64 {
+        let (a, b) = (self.coords(p), self.coords(q));
+        if a.defined[0] && b.defined[0] {
+            wrap(a.c[0] - b.c[0]).abs()
+        } else {
+            0.0
+        }
+    }
+
     /// The point with coordinates `c` ([`Frame::coords`]).
     #[inline]
     fn point(&self, c: [f64; 3]) -> DVec3 {

@@ -60,6 +60,7 @@ impl SparsePlan {
             })
             .collect();
         let nf = l0.nf();
+        let framed = |k: usize| base.group_frame[base.group[k] as usize] != 0;
         let mut unit: Vec<u32> = (0..nf)
             .map(|k| {
                 if base.boundary_patch[k] {
@@ -69,40 +70,9 @@ impl SparsePlan {
                 }
             })
             .collect();
-        // The single split slot of a 1-face, if it is one.
-        let one_face = |k: usize| -> Option<usize> {
-            let fe = &l0.face_edges[3 * k..3 * k + 3];
-            let mut it = (0..3).filter(|&s| split[fe[s] as usize]);
-            let s = it.next()?;
-            it.next().is_none().then_some(s)
-        };
-        let framed = |k: usize| base.group_frame[base.group[k] as usize] != 0;
-        for k in 0..nf {
-            if unit[k] != k as u32 || !framed(k) {
-                continue;
-            }
-            let Some(s) = one_face(k) else { continue };
-            let c = &l0.faces[3 * k..3 * k + 3];
-            let (a, b) = (c[s], c[(s + 1) % 3]);
-            for t in [(s + 1) % 3, (s + 2) % 3] {
-                let e = l0.face_edges[3 * k + t] as usize;
-                let [fl, fr] = l0.edge_faces[e];
-                let k2 = if fl as usize == k { fr } else { fl };
-                if k2 == NONE {
-                    continue;
-                }
-                let k2 = k2 as usize;
-                if unit[k2] != k2 as u32 || base.group[k2] != base.group[k] {
-                    continue;
-                }
-                let Some(s2) = one_face(k2) else { continue };
-                let c2 = &l0.faces[3 * k2..3 * k2 + 3];
-                let (a2, b2) = (c2[s2], c2[(s2 + 1) % 3]);
-                if a2 != a && a2 != b && b2 != a && b2 != b {
-                    unit[k] = k2 as u32;
-                    unit[k2] = k as u32;
-                    break;
-                }
+        for (k, &partner) in base.belt.iter().enumerate() {
+            if partner != NONE {
+                unit[k] = partner;
             }
         }
         // A cylinder/cone group is output sparse only if all of its faces pair into belt
@@ -141,6 +111,176 @@ impl SparsePlan {
         }
         Some(SparsePlan { split, unit })
     }
+}
+
+/// Per base triangle, the other triangle of its belt quad, or `NONE` (`spec/subdivision.md`
+/// §8, *Belt quads*); empty when `base` has no framed group.
+///
+/// A 1-face of a framed group (one split edge, two kept ones) may pair with the neighbour
+/// across either kept edge (a *rung*) when that is a 1-face of the same group whose split
+/// edge shares no vertex with its own. Each face has at most two such neighbours, so the
+/// candidates form paths and cycles. A path pairs from one end (an odd one leaves a face
+/// unpaired, and its group is output densely anyway). An even cycle has two pairings, each
+/// keeping every other rung as a side of a quad; a side is output as a straight edge, which
+/// lies on a cylinder or cone only along a ruling, so the cycle keeps the rungs whose
+/// largest turn about the axis is smaller (on a tie, those with the rung of smallest end
+/// positions). The result depends on the mesh's geometry and connectivity, never on how
+/// its faces are numbered: the encoder measures the surface of its own numbering, the
+/// decoder builds the file's.
+pub(crate) fn belt_partners(l0: &Level, base: &Base, positions: &[DVec3]) -> Vec<u32> {
+    if base.frames.is_empty() {
+        return Vec::new();
+    }
+    let nf = l0.nf();
+    let patch = |f: u32| f != NONE && base.boundary_patch[f as usize];
+    let split = |e: u32| {
+        let [fl, fr] = l0.edge_faces[e as usize];
+        l0.eclass[e as usize] & eclass::CREASE != 0 || !(patch(fl) && patch(fr))
+    };
+    let frame_id = |k: usize| base.group_frame[base.group[k] as usize];
+    // The split slot of each framed 1-face (3: not one).
+    let slot: Vec<u8> = (0..nf)
+        .map(|k| {
+            let fe = &l0.face_edges[3 * k..3 * k + 3];
+            let mut it = (0..3u8).filter(|&s| split(fe[usize::from(s)]));
+            match (
+                base.boundary_patch[k] && frame_id(k) != 0,
+                it.next(),
+                it.next(),
+            ) {
+                (true, Some(s), None) => s,
+                _ => 3,
+            }
+        })
+        .collect();
+    let split_ends = |k: usize| {
+        let s = usize::from(slot[k]);
+        [l0.faces[3 * k + s], l0.faces[3 * k + (s + 1) % 3]]
+    };
+    // Up to two (neighbour, rung edge) per candidate face; the relation is symmetric.
+    let mut rungs = vec![[(NONE, NONE); 2]; nf];
+    for k in (0..nf).filter(|&k| slot[k] < 3) {
+        let [a, b] = split_ends(k);
+        let mut n = 0;
+        for t in 1..3 {
+            let e = l0.face_edges[3 * k + (usize::from(slot[k]) + t) % 3];
+            let [fl, fr] = l0.edge_faces[e as usize];
+            let k2 = if fl as usize == k { fr } else { fl };
+            if k2 == NONE || k2 as usize == k {
+                continue;
+            }
+            let k2u = k2 as usize;
+            if slot[k2u] == 3 || base.group[k2u] != base.group[k] {
+                continue;
+            }
+            if split_ends(k2u).iter().all(|&w| w != a && w != b) {
+                rungs[k][n] = (k2, e);
+                n += 1;
+            }
+        }
+    }
+    let frames = &base.frames;
+    let turn = |k: u32, e: u32| {
+        let [v, w] = l0.edges[e as usize];
+        let frame = &frames[usize::from(frame_id(k as usize)) - 1];
+        frame.turn(positions[v as usize], positions[w as usize])
+    };
+    let ends_key = |e: u32| {
+        let key = |v: u32| positions[v as usize].to_array();
+        let [v, w] = l0.edges[e as usize].map(key);
+        let less = |p: &[f64; 3], q: &[f64; 3]| {
+            p.iter()
+                .zip(q)
+                .map(|(x, y)| x.total_cmp(y))
+                .find(|o| o.is_ne())
+                .is_some_and(|o| o.is_lt())
+        };
+        if less(&w, &v) {
+            [w, v]
+        } else {
+            [v, w]
+        }
+    };
+    let key_cmp = |a: &[[f64; 3]; 2], b: &[[f64; 3]; 2]| {
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| x.total_cmp(y))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    };
+
+    let mut partner = vec![NONE; nf];
+    let mut seen = vec![false; nf];
+    let (mut nodes, mut between) = (Vec::new(), Vec::new());
+    // Walks the component of `start` (a path from its end, or a cycle): its faces in order
+    // and the rung after each (a cycle's last rung closes it).
+    let walk = |start: usize, seen: &mut [bool], nodes: &mut Vec<u32>, between: &mut Vec<u32>| {
+        nodes.clear();
+        between.clear();
+        let (mut k, mut came) = (start, NONE);
+        loop {
+            seen[k] = true;
+            nodes.push(k as u32);
+            match rungs[k].iter().find(|&&(k2, e)| k2 != NONE && e != came) {
+                Some(&(k2, e)) if !seen[k2 as usize] => {
+                    between.push(e);
+                    (k, came) = (k2 as usize, e);
+                }
+                Some(&(k2, e)) if k2 as usize == start && nodes.len() > 1 => {
+                    between.push(e);
+                    break;
+                }
+                _ => break,
+            }
+        }
+    };
+    let degree = |k: usize| rungs[k].iter().filter(|r| r.0 != NONE).count();
+    for k in 0..nf {
+        if slot[k] < 3 && !seen[k] && degree(k) < 2 {
+            walk(k, &mut seen, &mut nodes, &mut between);
+            for pair in nodes.chunks_exact(2) {
+                (partner[pair[0] as usize], partner[pair[1] as usize]) = (pair[1], pair[0]);
+            }
+        }
+    }
+    for k in 0..nf {
+        if slot[k] == 3 || seen[k] {
+            continue;
+        }
+        walk(k, &mut seen, &mut nodes, &mut between);
+        let len = nodes.len();
+        if len % 2 == 1 || between.len() != len {
+            continue;
+        }
+        // The rungs of one parity are kept by the pairing that starts at the other: their
+        // largest turn and their least end positions.
+        let kept = |parity: usize| {
+            (parity..len)
+                .step_by(2)
+                .fold((0.0f64, None), |(most, least), i| {
+                    let key = ends_key(between[i]);
+                    let least = match least {
+                        Some(l) if key_cmp(&l, &key).is_le() => Some(l),
+                        _ => Some(key),
+                    };
+                    (most.max(turn(nodes[i], between[i])), least)
+                })
+        };
+        let ((odd_turn, odd_key), (even_turn, even_key)) = (kept(1), kept(0));
+        let order = odd_turn
+            .total_cmp(&even_turn)
+            .then_with(|| match (odd_key, even_key) {
+                (Some(a), Some(b)) => key_cmp(&a, &b),
+                _ => std::cmp::Ordering::Equal,
+            });
+        let offset = usize::from(order.is_gt());
+        for i in (offset..len).step_by(2) {
+            let (p, q) = (nodes[i], nodes[(i + 1) % len]);
+            (partner[p as usize], partner[q as usize]) = (q, p);
+        }
+    }
+    partner
 }
 
 /// Reusable buffers of [`emit_unit`].

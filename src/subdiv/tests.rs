@@ -1560,6 +1560,107 @@ fn belt_output_follows_rulings_and_stays_on_the_surface() {
     }
 }
 
+/// `m` with its faces in the order `order` (a permutation of its face ids).
+fn with_face_order(m: &ControlMesh, order: &[usize]) -> ControlMesh {
+    let mut out = ControlMesh::new();
+    out.positions = m.positions.clone();
+    out.groups = m.groups.clone();
+    for &f in order {
+        out.push_face(m.face(f), m.face_groups[f]);
+    }
+    out.sharp_edges = m.sharp_edges.clone();
+    out.corners = m.corners.clone();
+    out
+}
+
+/// Group `g`'s output triangles as corner positions rounded to 1e-9 (a mask sums its
+/// points in ring order, so the last bits follow the numbering), each rotated to start at its
+/// smallest corner, sorted: equal for equal surfaces whatever the numbering.
+fn group_triangle_positions(out: &ControlMesh, g: u32) -> Vec<[[i64; 3]; 3]> {
+    let mut tris: Vec<[[i64; 3]; 3]> = out
+        .faces()
+        .zip(&out.face_groups)
+        .filter(|&(_, &fg)| fg == g)
+        .map(|(t, _)| {
+            let mut c = [0, 1, 2].map(|k| {
+                out.positions[t[k] as usize]
+                    .to_array()
+                    .map(|x| (x * 1e9).round() as i64)
+            });
+            let first = (0..3).min_by_key(|&k| c[k]).unwrap();
+            c.rotate_left(first);
+            c
+        })
+        .collect();
+    tris.sort_unstable();
+    tris
+}
+
+/// [`belt_mesh`]'s closed belt with each quad split into two triangles along a random
+/// diagonal, each triangle starting at a random corner: faces that prefer different partners.
+fn randomly_split_belt(n: usize, cone: bool) -> ControlMesh {
+    let m = belt_mesh(n, cone, true).0;
+    let mut out = ControlMesh::new();
+    out.positions = m.positions.clone();
+    out.groups = m.groups.clone();
+    let mut rng = Lcg(17);
+    for f in 0..m.face_count() {
+        let q = m.face(f);
+        if m.face_groups[f] != 1 {
+            out.push_face(q, m.face_groups[f]);
+            continue;
+        }
+        let d = usize::from(rng.next() < 0.5);
+        for mut t in [
+            [q[d], q[d + 1], q[(d + 2) % 4]],
+            [q[d], q[(d + 2) % 4], q[(d + 3) % 4]],
+        ] {
+            t.rotate_left((rng.next() * 3.0) as usize % 3);
+            out.push_face(&t, 1);
+        }
+    }
+    out.sharp_edges = m.sharp_edges.clone();
+    out
+}
+
+/// The belt quads a cylinder or cone group is output with do not depend on the order of
+/// its faces (the decoder sees the file's order, the encoder measured its own): a closed
+/// belt pairs completely and keeps the same quad sides (its rulings, when it has them) in
+/// every order.
+#[test]
+fn belt_quads_do_not_depend_on_the_face_order() {
+    for cone in [false, true] {
+        let n = 8;
+        for m in [ruled_belt(n, cone).0, randomly_split_belt(n, cone)] {
+            let level = 2;
+            let (reference, _) = subdivide(&m, level, &SubdivOptions::default()).unwrap();
+            let want = group_triangle_positions(&reference, 1);
+            assert_eq!(want.len(), (2 * n) << level, "cone {cone}: sparse belt");
+            let count = m.face_count();
+            let mut rng = Lcg(31);
+            for trial in 0..40 {
+                let mut order: Vec<usize> = (0..count).collect();
+                if trial == 0 {
+                    order.rotate_left(1);
+                } else if trial == 1 {
+                    order.reverse();
+                } else {
+                    for i in (1..count).rev() {
+                        order.swap(i, (rng.next() * (i + 1) as f64) as usize % (i + 1));
+                    }
+                }
+                let permuted = with_face_order(&m, &order);
+                let (out, _) = subdivide(&permuted, level, &SubdivOptions::default()).unwrap();
+                assert_eq!(
+                    group_triangle_positions(&out, 1),
+                    want,
+                    "cone {cone}, order {order:?}"
+                );
+            }
+        }
+    }
+}
+
 /// Boundary patches next to closed patches, with and without sharp edges between them:
 /// uniform levels 1-4 and random mixed LOD are watertight, plane triangles use only points
 /// on their control triangle's edges.

@@ -115,6 +115,11 @@ pub(crate) struct Base {
     /// Frame id of each group (0 = none).
     pub group_frame: Vec<u16>,
     pub frames: Vec<Frame>,
+    /// Per base triangle, the other triangle of its belt quad (`NONE` if it has none); empty
+    /// when the mesh has no framed group. Decided here, where the control positions are
+    /// known, because the choice between a closed belt's two pairings reads them
+    /// ([`super::sparse::belt_partners`]).
+    pub belt: Vec<u32>,
 }
 
 /// Fan-triangulates the control mesh and builds level 0.
@@ -162,6 +167,7 @@ pub(crate) fn build_level0(mesh: &ControlMesh) -> Result<(Level, Base)> {
     lvl.eclass = ecls;
     lvl.vframe = vframe;
     lvl.eframe = eframe;
+    base.belt = super::sparse::belt_partners(&lvl, &base, &mesh.positions);
     Ok((lvl, base))
 }
 
