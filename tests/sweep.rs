@@ -26,11 +26,7 @@ fn step_corpus_encodes_within_tolerance_of_fine_tessellation() {
     // Files whose fit does not meet the tolerance (an encoder limit, also on their mesh
     // twins) are in the `step_sweep` example's table only: bug27693 encodes all 110 faces
     // but its fine tessellation's vertices are 0.34 tol rms from the decoded surface.
-    for file in [
-        "block_fillet3.step",
-        "trj2_as1-ec-214.stp",
-        "linkrods.step",
-    ] {
+    for file in ["block_fillet3.step", "trj2_as1-ec-214.stp", "linkrods.step"] {
         check_encodes_within_tolerance(&corpus, file);
     }
 }

@@ -73,6 +73,26 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo / 10f64.powf(pad), hi * 10f64.powf(pad))
 }
 
+/// Tick values of a log axis over `lo..hi`: labelled ones at 1, 2 and 5 times a power of
+/// ten (denser when that gives fewer than four), and grid lines at every integer multiple
+/// of each power of ten. Chosen here rather than by plotters, whose log-axis ticks leave a
+/// range within one decade with one label or none and repeat a decade's grid lines.
+fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    let within = |mantissas: &[f64]| -> Vec<f64> {
+        let (first, last) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+        (first..=last)
+            .flat_map(|k| mantissas.iter().map(move |m| m * 10f64.powi(k)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect()
+    };
+    let mut labelled = within(&[1.0, 2.0, 5.0]);
+    if labelled.len() < 4 {
+        labelled = within(&[1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0]);
+    }
+    let grid = within(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+    (labelled, grid)
+}
+
 fn draw<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     chart: &Chart,
@@ -91,7 +111,16 @@ fn draw<DB: DrawingBackend>(
         .margin(16)
         .x_label_area_size(55)
         .y_label_area_size(80)
-        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        .build_cartesian_2d(
+            (x0..x1)
+                .log_scale()
+                .with_key_points(log_ticks(x0, x1).0)
+                .with_light_points(log_ticks(x0, x1).1),
+            (y0..y1)
+                .log_scale()
+                .with_key_points(log_ticks(y0, y1).0)
+                .with_light_points(log_ticks(y0, y1).1),
+        )
         .map_err(err)?;
     c.configure_mesh()
         .x_desc(&chart.x_label)
@@ -100,7 +129,7 @@ fn draw<DB: DrawingBackend>(
         .y_labels(12)
         .label_style(("sans-serif", 15))
         .axis_desc_style(("sans-serif", 17))
-        .x_label_formatter(&|x| format!("{x:.0e}"))
+        .x_label_formatter(&|x| format!("{x:.1e}").replace(".0e", "e"))
         .y_label_formatter(&|y| {
             if *y >= 1e5 || *y < 0.1 {
                 format!("{y:.0e}")
@@ -295,6 +324,31 @@ pub fn corpus_chart(report: &Report) -> Chart {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_axes_label_at_least_four_values_once_each() {
+        for (lo, hi) in [
+            (3e-4, 2.2e-3),
+            (300.0, 30_000.0),
+            (0.9, 1.1e6),
+            (4.5e-5, 5.5e-5),
+        ] {
+            let (labelled, grid) = log_ticks(lo, hi);
+            for ticks in [&labelled, &grid] {
+                assert!(ticks.iter().all(|v| (lo..=hi).contains(v)), "{lo} {hi}");
+                assert!(ticks.windows(2).all(|w| w[0] < w[1]), "{ticks:?}");
+            }
+            assert!(
+                labelled.len() >= 4 || hi / lo < 1.5,
+                "{lo} {hi}: {labelled:?}"
+            );
+            assert!(labelled.len() <= 20, "{lo} {hi}: {labelled:?}");
+        }
+        assert_eq!(
+            log_ticks(300.0, 30_000.0).0,
+            [500.0, 1e3, 2e3, 5e3, 1e4, 2e4]
+        );
+    }
 
     #[test]
     fn lower_envelope_keeps_the_smallest_file_at_each_accuracy() {
