@@ -72,9 +72,10 @@ const LEVEL_BYTES: [u64; 3] = [11, 27, 24];
 const RING_SCRATCH_PER_EDGE: u64 = 4;
 
 /// Bytes charged per base triangle for its measurements (two errors per level, 192), its
-/// level, the lists of triangles measured and checked and their results, the sparse plan and
-/// level 0's construction (its corners by vertex, 24); and per base edge for its chains' two
-/// errors per level (16 per level) and plan.
+/// level, the lists of triangles measured and checked and their results, the sparse plan,
+/// the belt pairing (its partner and, while it is made, rungs and marks: 26) and level 0's
+/// construction (its corners by vertex, 24); and per base edge for its chains' two errors
+/// per level (16 per level) and plan.
 const MEASURE_PER_BASE_TRIANGLE: u64 = 400;
 const MEASURE_PER_BASE_EDGE_LEVEL: u64 = 16;
 const MEASURE_PER_BASE_EDGE: u64 = 16;
