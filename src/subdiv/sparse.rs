@@ -52,13 +52,7 @@ impl SparsePlan {
         if !base.boundary_patch.iter().any(|&b| b) {
             return None;
         }
-        let bp = |f: u32| f != NONE && base.boundary_patch[f as usize];
-        let split: Vec<bool> = (0..l0.ne())
-            .map(|e| {
-                let [fl, fr] = l0.edge_faces[e];
-                l0.eclass[e] & eclass::CREASE != 0 || !(bp(fl) && bp(fr))
-            })
-            .collect();
+        let split: Vec<bool> = (0..l0.ne()).map(|e| first_split(l0, base, e)).collect();
         let nf = l0.nf();
         let framed = |k: usize| base.group_frame[base.group[k] as usize] != 0;
         let mut unit: Vec<u32> = (0..nf)
@@ -113,6 +107,24 @@ impl SparsePlan {
     }
 }
 
+/// Whether base edge `e` is split before any cylinder or cone group is made dense: a crease,
+/// or an edge not between two boundary-patch faces.
+fn first_split(l0: &Level, base: &Base, e: usize) -> bool {
+    let patch = |f: u32| f != NONE && base.boundary_patch[f as usize];
+    let [fl, fr] = l0.edge_faces[e];
+    l0.eclass[e] & eclass::CREASE != 0 || !(patch(fl) && patch(fr))
+}
+
+/// Lexicographic order of two points (total: any bits compare).
+fn point_order(p: DVec3, q: DVec3) -> std::cmp::Ordering {
+    p.to_array()
+        .iter()
+        .zip(q.to_array())
+        .map(|(x, y)| x.total_cmp(&y))
+        .find(|o| o.is_ne())
+        .unwrap_or(std::cmp::Ordering::Equal)
+}
+
 /// Per base triangle, the other triangle of its belt quad, or `NONE` (`spec/subdivision.md`
 /// §8, *Belt quads*); empty when `base` has no framed group.
 ///
@@ -132,11 +144,7 @@ pub(crate) fn belt_partners(l0: &Level, base: &Base, positions: &[DVec3]) -> Vec
         return Vec::new();
     }
     let nf = l0.nf();
-    let patch = |f: u32| f != NONE && base.boundary_patch[f as usize];
-    let split = |e: u32| {
-        let [fl, fr] = l0.edge_faces[e as usize];
-        l0.eclass[e as usize] & eclass::CREASE != 0 || !(patch(fl) && patch(fr))
-    };
+    let split = |e: u32| first_split(l0, base, e as usize);
     let frame_id = |k: usize| base.group_frame[base.group[k] as usize];
     // The split slot of each framed 1-face (3: not one).
     let slot: Vec<u8> = (0..nf)
@@ -185,29 +193,17 @@ pub(crate) fn belt_partners(l0: &Level, base: &Base, positions: &[DVec3]) -> Vec
         let frame = &frames[usize::from(frame_id(k as usize)) - 1];
         frame.turn(positions[v as usize], positions[w as usize])
     };
-    let ends_key = |e: u32| {
-        let key = |v: u32| positions[v as usize].to_array();
-        let [v, w] = l0.edges[e as usize].map(key);
-        let less = |p: &[f64; 3], q: &[f64; 3]| {
-            p.iter()
-                .zip(q)
-                .map(|(x, y)| x.total_cmp(y))
-                .find(|o| o.is_ne())
-                .is_some_and(|o| o.is_lt())
-        };
-        if less(&w, &v) {
+    // A rung's ends, the lesser first; rungs compare by those, lesser end first.
+    let ends = |e: u32| {
+        let [v, w] = l0.edges[e as usize].map(|v| positions[v as usize]);
+        if point_order(w, v).is_lt() {
             [w, v]
         } else {
             [v, w]
         }
     };
-    let key_cmp = |a: &[[f64; 3]; 2], b: &[[f64; 3]; 2]| {
-        a.iter()
-            .flatten()
-            .zip(b.iter().flatten())
-            .map(|(x, y)| x.total_cmp(y))
-            .find(|o| o.is_ne())
-            .unwrap_or(std::cmp::Ordering::Equal)
+    let rung_order = |a: [DVec3; 2], b: [DVec3; 2]| {
+        point_order(a[0], b[0]).then_with(|| point_order(a[1], b[1]))
     };
 
     let mut partner = vec![NONE; nf];
@@ -253,27 +249,21 @@ pub(crate) fn belt_partners(l0: &Level, base: &Base, positions: &[DVec3]) -> Vec
         if len % 2 == 1 || between.len() != len {
             continue;
         }
-        // The rungs of one parity are kept by the pairing that starts at the other: their
-        // largest turn and their least end positions.
-        let kept = |parity: usize| {
-            (parity..len)
-                .step_by(2)
-                .fold((0.0f64, None), |(most, least), i| {
-                    let key = ends_key(between[i]);
-                    let least = match least {
-                        Some(l) if key_cmp(&l, &key).is_le() => Some(l),
-                        _ => Some(key),
-                    };
-                    (most.max(turn(nodes[i], between[i])), least)
-                })
+        // The rungs of one parity are kept by the pairing that starts at the other.
+        let kept = |parity: usize| (parity..len).step_by(2).map(|i| (nodes[i], between[i]));
+        let largest_turn =
+            |parity: usize| kept(parity).map(|(k, e)| turn(k, e)).fold(0.0f64, f64::max);
+        let least_rung = |parity: usize| {
+            kept(parity)
+                .map(|(_, e)| ends(e))
+                .min_by(|a, b| rung_order(*a, *b))
         };
-        let ((odd_turn, odd_key), (even_turn, even_key)) = (kept(1), kept(0));
-        let order = odd_turn
-            .total_cmp(&even_turn)
-            .then_with(|| match (odd_key, even_key) {
-                (Some(a), Some(b)) => key_cmp(&a, &b),
+        let order = largest_turn(1).total_cmp(&largest_turn(0)).then_with(|| {
+            match (least_rung(1), least_rung(0)) {
+                (Some(a), Some(b)) => rung_order(a, b),
                 _ => std::cmp::Ordering::Equal,
-            });
+            }
+        });
         let offset = usize::from(order.is_gt());
         for i in (offset..len).step_by(2) {
             let (p, q) = (nodes[i], nodes[(i + 1) % len]);

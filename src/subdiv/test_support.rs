@@ -14,6 +14,19 @@ pub(crate) fn load_corpus(rel: &str) -> Option<ControlMesh> {
     Some(m)
 }
 
+/// `m` with its faces in the order `order` (a permutation of its face ids).
+pub(crate) fn with_face_order(m: &ControlMesh, order: &[usize]) -> ControlMesh {
+    let mut out = ControlMesh::new();
+    out.positions = m.positions.clone();
+    out.groups = m.groups.clone();
+    for &f in order {
+        out.push_face(m.face(f), m.face_groups[f]);
+    }
+    out.sharp_edges = m.sharp_edges.clone();
+    out.corners = m.corners.clone();
+    out
+}
+
 /// The same control mesh numbered the other way round: vertices reversed, faces reversed,
 /// each face's corners rotated by one.
 pub(crate) fn renumbered(mesh: &ControlMesh) -> ControlMesh {

@@ -1560,19 +1560,6 @@ fn belt_output_follows_rulings_and_stays_on_the_surface() {
     }
 }
 
-/// `m` with its faces in the order `order` (a permutation of its face ids).
-fn with_face_order(m: &ControlMesh, order: &[usize]) -> ControlMesh {
-    let mut out = ControlMesh::new();
-    out.positions = m.positions.clone();
-    out.groups = m.groups.clone();
-    for &f in order {
-        out.push_face(m.face(f), m.face_groups[f]);
-    }
-    out.sharp_edges = m.sharp_edges.clone();
-    out.corners = m.corners.clone();
-    out
-}
-
 /// Group `g`'s output triangles as corner positions rounded to 1e-9 (a mask sums its
 /// points in ring order, so the last bits follow the numbering), each rotated to start at its
 /// smallest corner, sorted: equal for equal surfaces whatever the numbering.
@@ -1623,7 +1610,7 @@ fn randomly_split_belt(n: usize, cone: bool) -> ControlMesh {
     out
 }
 
-/// The belt quads a cylinder or cone group is output with do not depend on the order of
+/// The belt quads a cylinder or cone group is output with do not depend on the numbering of
 /// its faces (the decoder sees the file's order, the encoder measured its own): a closed
 /// belt pairs completely and keeps the same quad sides (its rulings, when it has them) in
 /// every order.
@@ -1649,7 +1636,7 @@ fn belt_quads_do_not_depend_on_the_face_order() {
                         order.swap(i, (rng.next() * (i + 1) as f64) as usize % (i + 1));
                     }
                 }
-                let permuted = with_face_order(&m, &order);
+                let permuted = test_support::with_face_order(&m, &order);
                 let (out, _) = subdivide(&permuted, level, &SubdivOptions::default()).unwrap();
                 assert_eq!(
                     group_triangle_positions(&out, 1),
@@ -1657,6 +1644,14 @@ fn belt_quads_do_not_depend_on_the_face_order() {
                     "cone {cone}, order {order:?}"
                 );
             }
+            // Vertices renumbered and corners rotated too.
+            let renumbered = test_support::renumbered(&m);
+            let (out, _) = subdivide(&renumbered, level, &SubdivOptions::default()).unwrap();
+            assert_eq!(
+                group_triangle_positions(&out, 1),
+                want,
+                "cone {cone}, renumbered"
+            );
         }
     }
 }

@@ -106,6 +106,7 @@ fn draw<DB: DrawingBackend>(
         .collect();
     let (x0, x1) = log_range(all.iter().map(|p| p.0));
     let (y0, y1) = log_range(all.iter().map(|p| p.1));
+    let ((x_labels, x_grid), (y_labels, y_grid)) = (log_ticks(x0, x1), log_ticks(y0, y1));
     let mut c = ChartBuilder::on(&root)
         .caption(&chart.title, ("sans-serif", 24))
         .margin(16)
@@ -114,12 +115,12 @@ fn draw<DB: DrawingBackend>(
         .build_cartesian_2d(
             (x0..x1)
                 .log_scale()
-                .with_key_points(log_ticks(x0, x1).0)
-                .with_light_points(log_ticks(x0, x1).1),
+                .with_key_points(x_labels)
+                .with_light_points(x_grid),
             (y0..y1)
                 .log_scale()
-                .with_key_points(log_ticks(y0, y1).0)
-                .with_light_points(log_ticks(y0, y1).1),
+                .with_key_points(y_labels)
+                .with_light_points(y_grid),
         )
         .map_err(err)?;
     c.configure_mesh()
