@@ -337,7 +337,7 @@ fn decode_to_tolerance(
     let asked = tolerance.resolve(diagonal);
     // `subdivide_to_tolerance` shows at most level MAX_LEVEL - 1.
     let deepest = crate::subdiv::MAX_LEVEL - 1;
-    let mut max_level = (default_level + 1).min(deepest);
+    let mut max_level = crate::subdiv::default_top_level(default_level);
     if asked > 0.0 && asked < file_t {
         let extra = (file_t / asked).log(4.0).ceil();
         max_level = (f64::from(max_level) + extra).min(f64::from(deepest)) as u32;

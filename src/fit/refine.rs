@@ -108,6 +108,15 @@ pub(super) enum ChainReach {
 /// failure's becomes a closed patch.
 const BOUNDARY_STALL_RATIO: f64 = 0.9;
 
+/// Whether boundary patch `group`, failing again by `excess`, is given up for a closed
+/// patch: at its fourth failure, or at a later one whose excess did not shrink below
+/// [`BOUNDARY_STALL_RATIO`] of the previous (its surface, not its outline, is off: finer
+/// chains gain nothing).
+fn boundary_given_up(group: &GroupPlan, excess: f64) -> bool {
+    let failures = group.failures + 1;
+    failures >= 4 || (failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess)
+}
+
 /// A closed patch whose excess did not shrink this many times in a row is faceted (see
 /// [`GroupPlan::faceted`]): refining it further has stopped paying.
 const FACETED_AFTER_STALLS: u32 = 2;
@@ -146,7 +155,8 @@ pub(super) fn facet_failing(
 /// Refines the plan of every group out of tolerance in `measured` (the measurement of
 /// `control`): a closed patch gets a lower decimation threshold (near its failures only with
 /// `local_refinement`), a boundary patch that failed four times, or twice without its
-/// excess shrinking, becomes a closed patch, a closed patch that failed
+/// excess shrinking, becomes a closed patch (an axial one not in a round whose decode level
+/// was raised, `level_raised`: it is measured at that level first), a closed patch that failed
 /// [`FACETED_AFTER_STALLS`] times in a row without its excess shrinking, measured at the
 /// last decode level the fit will try (`at_last_level`), is faceted, and the chains `reach`
 /// selects get finer.
@@ -159,6 +169,7 @@ pub(super) fn refine_failing(
     reach: ChainReach,
     local_refinement: bool,
     at_last_level: bool,
+    level_raised: bool,
     tol: f64,
     plan: &mut Plan,
     report: &mut FitReport,
@@ -202,11 +213,10 @@ pub(super) fn refine_failing(
         if !bad {
             continue;
         }
+        let excess = measured.group_excess[g].0;
+        let given_up = boundary_given_up(&plan.groups[g], excess);
         let group = &mut plan.groups[g];
         group.failures += 1;
-        let excess = measured.group_excess[g].0;
-        // A boundary patch whose excess did not shrink since its last failure gains nothing
-        // from finer chains (its surface, not its outline, is off): closed at once.
         let stalled = group.failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess;
         group.last_excess = excess;
         if matches!(group.kind, PatchKind::Closed) {
@@ -244,7 +254,11 @@ pub(super) fn refine_failing(
             if lowered == 0 {
                 group.cost_factor *= CLOSED_COST_STEP;
             }
-        } else if group.failures >= 4 || stalled {
+        } else if given_up
+            && !(level_raised && matches!(group.kind, PatchKind::Boundary(s) if s.axis().is_some()))
+        {
+            // A curved analytic patch is measured at the finer level it asked for first
+            // (see `Rounds::run`) before it is given up for a closed one.
             report.notes.push(format!(
                 "group {g} ({}) refitted as a closed patch",
                 kind_name(&group.kind)

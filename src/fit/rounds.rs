@@ -18,8 +18,10 @@ use super::refine::{
     facet_failing, note_failures, refine_failing, relax_refined_groups, ChainReach, Relaxation,
 };
 use super::solve::{fit_geometry, SolveCache};
+use crate::codec::Limits;
 use crate::error::{Error, Result};
 use crate::mesh::{ControlMesh, PatchKind};
+use crate::subdiv::default_decode_bytes;
 
 /// The decode level the fit starts at, and the finest it goes to. A model is stored for the
 /// coarsest level that meets its tolerance: each level has four times the triangles of the
@@ -30,10 +32,11 @@ const FIRST_LEVEL: u8 = 3;
 const LAST_LEVEL: u8 = 5;
 
 /// When a round's worst excess on closed patches stays above this fraction of the previous
-/// round's, adding control points has stopped paying, and the fit moves one decode level
-/// finer if that face's failure is the chord error of its level (see
-/// `Rounds::finer_level_meets`). A lower ratio moves models to finer levels that the coarser
-/// one fits as well, at four times the triangles to measure.
+/// round's, or an axial patch's above this fraction of its excess when it last failed,
+/// adding control points has stopped paying, and the fit moves to a finer decode level if
+/// that face's failure is the chord error of its level (see `Rounds::finer_level_meeting`).
+/// A lower ratio moves models to finer levels that the coarser one fits as well, at four
+/// times the triangles to measure.
 const STALL_RATIO: f64 = 0.85;
 
 /// The share of a level's chord error that the next level keeps on a smooth surface
@@ -51,6 +54,26 @@ const NO_GAIN_RATIO: f64 = 0.98;
 /// end of the rounds (each such round facets the groups still failing, so they end when none
 /// is left to facet).
 const FACETING_ROUNDS: usize = 3;
+
+/// The finest decode level from [`FIRST_LEVEL`] up to `level` at which a decoder's default
+/// memory budget holds the decode of `control` to its tolerance ([`default_decode_bytes`]);
+/// `FIRST_LEVEL` if none does.
+fn decodable_level(control: &ControlMesh, level: u8) -> u8 {
+    let budget = Limits::default().max_memory;
+    (FIRST_LEVEL..=level)
+        .rev()
+        .find(|&l| default_decode_bytes(control, l.into()) <= budget)
+        .unwrap_or(FIRST_LEVEL)
+}
+
+/// The largest excess on a closed patch of `plan` in `measured`, and its group (0.0 when
+/// none is closed).
+fn worst_closed_excess(plan: &Plan, measured: &Measurement) -> (f64, usize) {
+    (0..plan.groups.len())
+        .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
+        .map(|g| (measured.group_excess[g].0, g))
+        .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+}
 
 /// How many groups of `plan` are closed patches.
 fn closed_count(plan: &Plan) -> usize {
@@ -91,6 +114,9 @@ pub(super) struct Rounds<'a> {
 /// One round's model and its measurement.
 struct Round {
     built: Built,
+    /// The decode level it was measured at: the one asked, or a coarser one when a decoder
+    /// could not make the model at that level within its default memory budget.
+    level: u8,
     measured: Measurement,
     /// Size of the model's file at the default quantisation.
     bytes: usize,
@@ -118,10 +144,13 @@ impl Rounds<'_> {
         let (opts, tol) = (self.opts, self.tol);
         let mut best: Option<Candidate> = None;
         let mut relaxed_best: Option<Candidate> = None;
+        let mut prev_worst: Option<f64> = None;
         // The decode level of the next round, and whether it can still get finer.
         let mut level = opts.default_level.unwrap_or(FIRST_LEVEL);
         let fixed_level = opts.default_level.is_some();
-        let mut prev_worst: Option<f64> = None;
+        // The finest level the fit may move to: coarser than `LAST_LEVEL` once a model was
+        // too large to decode at a finer one (see `Rounds::round`).
+        let mut ceiling = LAST_LEVEL;
         // Set once the model is within tolerance and refined patches are being coarsened again.
         let mut relaxing: Option<Relaxation> = None;
         let mut decimator = FaceDecimator::default();
@@ -139,6 +168,7 @@ impl Rounds<'_> {
             report.rounds = round + 1;
             let Round {
                 built,
+                level: measured_level,
                 measured,
                 bytes,
             } = self.round(
@@ -149,6 +179,9 @@ impl Rounds<'_> {
                 reconstruct,
                 report,
             )?;
+            if measured_level < level {
+                (level, ceiling) = (measured_level, measured_level);
+            }
             let err = measured.error;
             let worst = err.max_excess;
             let ok = worst <= tol;
@@ -205,24 +238,12 @@ impl Rounds<'_> {
                 Next::Refine => {}
             }
             note_failures(&self.faces.mesh, &plan.groups, &measured, tol, report);
-            // When adding control points to closed patches stops paying and what the worst
-            // of them misses by is the piecewise-linear chord error of the level, go a level
-            // finer (4x the triangles). Boundary patches are left out: a failing one refines
-            // its chains, then becomes closed, and a finer level does not help it.
-            let (worst_closed, worst_group) = (0..plan.groups.len())
-                .filter(|&g| matches!(plan.groups[g].kind, PatchKind::Closed))
-                .map(|g| (measured.group_excess[g].0, g))
-                .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a });
             let level_before = level;
-            if !fixed_level
-                && level < LAST_LEVEL
-                && worst_closed > tol
-                && prev_worst.is_some_and(|p| worst_closed > STALL_RATIO * p)
-                && self.finer_level_meets(worst_closed, worst_group)
-            {
-                level += 1;
+            if !fixed_level {
+                ceiling = decodable_level(&built.control, ceiling);
+                level = self.finer_level(plan, &measured, level, ceiling, prev_worst);
+                prev_worst = Some(worst_closed_excess(plan, &measured).0);
             }
-            prev_worst = Some(worst_closed);
             // Chains are refined only near where their groups fail (a plane with a hundred
             // holes failing at one of them keeps the other holes coarse); the last rounds,
             // and every round once the worst excess is within 1.5 tol, refine every chain of
@@ -241,7 +262,8 @@ impl Rounds<'_> {
                 &measured,
                 reach,
                 opts.local_refinement,
-                fixed_level || level_before == LAST_LEVEL,
+                fixed_level || level_before == ceiling,
+                level != level_before,
                 tol,
                 plan,
                 report,
@@ -259,22 +281,80 @@ impl Rounds<'_> {
         Ok(candidates)
     }
 
-    /// Whether the next decode level is expected to bring the last measured group `g`,
-    /// whose excess is `excess`, within the tolerance. The next level halves the triangles'
-    /// size, so on a smooth surface it leaves a quarter of this level's chord error
-    /// ([`ErrorMeter::chord_errors`]); what is not chord error it does not change, so it
-    /// pays only where the chord error is most of the excess over the tolerance. Refining
-    /// the control mesh, which also shortens the triangles, does the rest.
-    fn finer_level_meets(&self, excess: f64, g: usize) -> bool {
-        let chord = self.meter.chord_errors(&[g])[0];
-        excess - (1.0 - FINER_CHORD_SHARE) * chord <= self.tol
+    /// The decode level of the round after one measured at `level` (`measured`), up to
+    /// `ceiling`; `prev_worst` is the worst excess on closed patches of the round before.
+    ///
+    /// When adding control points to closed patches stops paying (their worst excess stayed
+    /// above [`STALL_RATIO`] of the round before) and what the worst of them misses by is the
+    /// chord error of the level, one level finer (4x the triangles). When an analytic patch
+    /// about an axis (cylinder, cone, sphere, torus) stops gaining (its excess shrank by less
+    /// than `STALL_RATIO` since it last failed), its chord error is most of its excess (at
+    /// least half) and a finer level's chord error would meet it, as many levels finer as it
+    /// needs: its decoded points lie on its surface, so what fails it is its chord error, and
+    /// the alternative, giving it up for a closed patch, costs far more control points. A
+    /// patch whose excess is mostly not chord error is off for another reason (its outline,
+    /// a neighbour), which no level removes, so it does not move the whole model to a level
+    /// with four times the triangles. Planes have no chord error.
+    fn finer_level(
+        &self,
+        plan: &Plan,
+        measured: &Measurement,
+        level: u8,
+        ceiling: u8,
+        prev_worst: Option<f64>,
+    ) -> u8 {
+        let tol = self.tol;
+        let mut next = level;
+        let (worst_closed, worst_group) = worst_closed_excess(plan, measured);
+        if level < ceiling
+            && worst_closed > tol
+            && prev_worst.is_some_and(|p| worst_closed > STALL_RATIO * p)
+            && self.finer_level_meeting(worst_closed, worst_group, level, ceiling)
+                == Some(level + 1)
+        {
+            next = level + 1;
+        }
+        for (g, group) in plan.groups.iter().enumerate() {
+            let excess = measured.group_excess[g].0;
+            let stalled_axial = matches!(group.kind, PatchKind::Boundary(s) if s.axis().is_some())
+                && excess > tol
+                && group.failures > 0
+                && excess > STALL_RATIO * group.last_excess;
+            if stalled_axial && 2.0 * self.meter.chord_errors(&[g])[0] >= excess {
+                if let Some(finer) = self.finer_level_meeting(excess, g, level, ceiling) {
+                    next = next.max(finer);
+                }
+            }
+        }
+        next
     }
 
-    /// Builds, fits and measures the plan's model at decode level `level`.
+    /// The coarsest decode level finer than `level` (up to `ceiling`) expected to bring
+    /// the last measured group `g`, whose excess is `excess`, within the tolerance, if any.
+    /// Each level halves the triangles' size, so on a smooth surface it leaves a quarter of
+    /// the previous level's chord error ([`ErrorMeter::chord_errors`]); what is not chord
+    /// error no level changes, so a finer level pays only where the chord error is most of
+    /// the excess over the tolerance. Refining the control mesh, which also shortens the
+    /// triangles, does the rest.
+    fn finer_level_meeting(&self, excess: f64, g: usize, level: u8, ceiling: u8) -> Option<u8> {
+        let chord = self.meter.chord_errors(&[g])[0];
+        let mut kept = 1.0;
+        (level + 1..=ceiling).find(|_| {
+            kept *= FINER_CHORD_SHARE;
+            excess - (1.0 - kept) * chord <= self.tol
+        })
+    }
+
+    /// Builds, fits and measures the plan's model at decode level `level`; or, unless the
+    /// level is the caller's (`FitOptions::default_level`) and when a decoder's default
+    /// memory budget cannot hold the model's decode at that level ([`default_decode_bytes`]),
+    /// at the finest coarser one that it can, down to [`FIRST_LEVEL`]. A level finer than the
+    /// file's readers can afford is no use, and the control mesh grows over the rounds after
+    /// a level is chosen, so this is checked on every round's model.
     fn round(
         &self,
         plan: &Plan,
-        level: u8,
+        mut level: u8,
         decimator: &mut FaceDecimator,
         solved: &mut SolveCache,
         reconstruct: &mut Reconstruct<'_>,
@@ -302,6 +382,15 @@ impl Rounds<'_> {
         )
         .map_err(|e| with_faces_involved(e, &built.control))?;
         let t_fit = t.elapsed().as_secs_f64();
+        if self.opts.default_level.is_none() {
+            let asked = level;
+            level = decodable_level(&built.control, level);
+            if level < asked {
+                report.notes.push(format!(
+                    "  level {asked} would need more than a decoder's default memory: measured at level {level}, the finest from now on"
+                ));
+            }
+        }
         t = Instant::now();
         let (decoded, bytes) = reconstruct(&built.control, level, 0)
             .map_err(|e| with_faces_involved(e, &built.control))?;
@@ -339,6 +428,7 @@ impl Rounds<'_> {
         ));
         Ok(Round {
             built,
+            level,
             measured,
             bytes,
         })
@@ -410,5 +500,35 @@ impl Rounds<'_> {
                 Next::Measure
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::test_support::grid_cube;
+
+    /// The finest level a fit may use is the finest whose decode a decoder's default memory
+    /// holds: a small control mesh keeps the finest level, larger ones get coarser levels,
+    /// and one too large for any gets the first.
+    #[test]
+    fn decodable_level_is_the_finest_the_decode_memory_holds() {
+        let budget = Limits::default().max_memory;
+        let fits = |m: &ControlMesh, l: u8| default_decode_bytes(m, l.into()) <= budget;
+        let mut levels = Vec::new();
+        for n in [4, 16, 32, 64, 128] {
+            let mesh = grid_cube(n);
+            let l = decodable_level(&mesh, LAST_LEVEL);
+            assert!(fits(&mesh, l) || l == FIRST_LEVEL, "n {n}: level {l}");
+            assert!(l == LAST_LEVEL || !fits(&mesh, l + 1), "n {n}: level {l}");
+            // A level asked below the finest that fits is kept.
+            assert_eq!(decodable_level(&mesh, FIRST_LEVEL.max(l - 1)), FIRST_LEVEL.max(l - 1));
+            levels.push(l);
+        }
+        assert!(levels.windows(2).all(|w| w[1] <= w[0]), "{levels:?}");
+        assert_eq!(levels.first(), Some(&LAST_LEVEL), "{levels:?}");
+        assert_eq!(levels.last(), Some(&FIRST_LEVEL), "{levels:?}");
+        assert!(!fits(&grid_cube(128), FIRST_LEVEL));
+        assert!(levels.contains(&(LAST_LEVEL - 1)), "{levels:?}");
     }
 }

@@ -135,6 +135,28 @@ const OUTPUT_PER_VERTEX: u64 = 144;
 /// Bytes per output sharp edge (a key in an ordered set, with its share of a tree node).
 const OUTPUT_PER_SHARP_EDGE: u64 = 48;
 
+/// The memory of a decode to the file's own tolerance of a control mesh whose default level
+/// is `level`, as an encoder estimates it before choosing that level: the measurement to
+/// level `level + 1` ([`default_top_level`]) and the output of every base triangle at
+/// `level`. The output is the estimate's assumption: the encoder measured the model within
+/// its tolerance at `level`, so the decode shows few triangles finer than that and most
+/// coarser.
+#[cfg(feature = "encoder")]
+pub(crate) fn default_decode_bytes(mesh: &ControlMesh, level: u32) -> u64 {
+    let n = default_top_level(level);
+    let c = level_counts(mesh, n.max(1));
+    let [nv, _, nf] = c[level as usize];
+    measurement_bytes(&c, n.max(1))
+        .saturating_add(bytes(&[(nf, OUTPUT_PER_TRIANGLE), (nv, OUTPUT_PER_VERTEX)]))
+}
+
+/// The finest level a decode to the file's own tolerance refines to, for a file whose
+/// default level is `default_level`: one more, whose triangles leave a quarter of the chord
+/// error that the default level's triangles stand off the limit surface by.
+pub(crate) fn default_top_level(default_level: u32) -> u32 {
+    (default_level + 1).min(super::MAX_LEVEL - 1)
+}
+
 /// The memory of the output of a subdivision whose base triangles (level-0 triangles of
 /// `l0`) are shown at `levels`, the finest level shown having `nv_top` vertices (the
 /// extraction marks and numbers them in arrays of that length).

@@ -62,6 +62,9 @@ pub use accuracy::subdivide_to_tolerance;
 #[cfg(feature = "internals")]
 pub use accuracy::AccurateSurface;
 pub use accuracy::{subdivide_to_tolerance_within, AccuracyOptions};
+#[cfg(feature = "encoder")]
+pub(crate) use charge::default_decode_bytes;
+pub(crate) use charge::default_top_level;
 #[cfg(test)]
 pub use lod::lod_corner_face;
 #[cfg(feature = "internals")]
