@@ -108,15 +108,6 @@ pub(super) enum ChainReach {
 /// failure's becomes a closed patch.
 const BOUNDARY_STALL_RATIO: f64 = 0.9;
 
-/// Whether boundary patch `group`, failing again by `excess`, is given up for a closed
-/// patch: at its fourth failure, or at a later one whose excess did not shrink below
-/// [`BOUNDARY_STALL_RATIO`] of the previous (its surface, not its outline, is off: finer
-/// chains gain nothing).
-fn boundary_given_up(group: &GroupPlan, excess: f64) -> bool {
-    let failures = group.failures + 1;
-    failures >= 4 || (failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess)
-}
-
 /// A closed patch whose excess did not shrink this many times in a row is faceted (see
 /// [`GroupPlan::faceted`]): refining it further has stopped paying.
 const FACETED_AFTER_STALLS: u32 = 2;
@@ -213,11 +204,13 @@ pub(super) fn refine_failing(
         if !bad {
             continue;
         }
-        let excess = measured.group_excess[g].0;
-        let given_up = boundary_given_up(&plan.groups[g], excess);
         let group = &mut plan.groups[g];
         group.failures += 1;
+        let excess = measured.group_excess[g].0;
+        // A boundary patch whose excess did not shrink since its last failure gains nothing
+        // from finer chains (its surface, not its outline, is off): closed at once.
         let stalled = group.failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess;
+        let given_up = group.failures >= 4 || stalled;
         group.last_excess = excess;
         if matches!(group.kind, PatchKind::Closed) {
             // Stalls count at the last decode level only: a finer level is the remedy for

@@ -522,7 +522,10 @@ mod tests {
             assert!(fits(&mesh, l) || l == FIRST_LEVEL, "n {n}: level {l}");
             assert!(l == LAST_LEVEL || !fits(&mesh, l + 1), "n {n}: level {l}");
             // A level asked below the finest that fits is kept.
-            assert_eq!(decodable_level(&mesh, FIRST_LEVEL.max(l - 1)), FIRST_LEVEL.max(l - 1));
+            assert_eq!(
+                decodable_level(&mesh, FIRST_LEVEL.max(l - 1)),
+                FIRST_LEVEL.max(l - 1)
+            );
             levels.push(l);
         }
         assert!(levels.windows(2).all(|w| w[1] <= w[0]), "{levels:?}");
