@@ -12,7 +12,7 @@ use super::curves::CurveNetwork;
 use super::encoder::FitReport;
 use super::measure::Measurement;
 use super::plan::{chain_frame_owner, kind_name, GroupPlan, Plan, INITIAL_CLOSED_COST};
-use crate::mesh::{ControlMesh, PatchKind};
+use crate::mesh::{BoundarySurface, ControlMesh, PatchKind};
 
 /// How much a failing closed patch's decimation threshold shrinks per round.
 const CLOSED_COST_STEP: f64 = 0.35;
@@ -145,8 +145,8 @@ pub(super) fn facet_failing(
 
 /// Refines the plan of every group out of tolerance in `measured` (the measurement of
 /// `control`): a closed patch gets a lower decimation threshold (near its failures only with
-/// `local_refinement`), a boundary patch that failed four times, or twice without its
-/// excess shrinking, becomes a closed patch (an axial one not in a round whose decode level
+/// `local_refinement`), a boundary patch that failed four times, or (not a plane) twice
+/// without its excess shrinking, becomes a closed patch (an axial one not in a round whose decode level
 /// was raised, `level_raised`: it is measured at that level first), a closed patch that failed
 /// [`FACETED_AFTER_STALLS`] times in a row without its excess shrinking, measured at the
 /// last decode level the fit will try (`at_last_level`), is faceted, and the chains `reach`
@@ -208,9 +208,13 @@ pub(super) fn refine_failing(
         group.failures += 1;
         let excess = measured.group_excess[g].0;
         // A boundary patch whose excess did not shrink since its last failure gains nothing
-        // from finer chains (its surface, not its outline, is off): closed at once.
+        // from finer chains (its surface, not its outline, is off): closed at once. Not a
+        // plane: its decoded points lie in its plane, so only its outline can be off, which
+        // finer chains mend, if more slowly than one round's 10% where its outline is a
+        // tight curve.
         let stalled = group.failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess;
-        let given_up = group.failures >= 4 || stalled;
+        let plane = matches!(group.kind, PatchKind::Boundary(BoundarySurface::Plane));
+        let given_up = group.failures >= 4 || (stalled && !plane);
         group.last_excess = excess;
         if matches!(group.kind, PatchKind::Closed) {
             // Stalls count at the last decode level only: a finer level is the remedy for
