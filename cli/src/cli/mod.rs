@@ -523,9 +523,10 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = 600, value_name = "SECS")]
     pub timeout_secs: u64,
     /// Time limit of all steps of one model (seconds): the step running at the limit is
-    /// stopped and later steps become error rows. Steps run from the loosest tolerance to
-    /// the tightest, so the limit cuts the slowest points; raise it for the full curve of
-    /// large models.
+    /// stopped and later steps become error rows. Reading a STEP part (its reference and the
+    /// baselines' tessellations) may take half of it; finer tessellations than fit in that
+    /// half are left out and said so. Steps run from the loosest tolerance to the tightest,
+    /// so the limit cuts the slowest points; raise it for the full curve of large models.
     #[arg(long, default_value_t = scode_cli::report::DEFAULT_MODEL_TIMEOUT_SECS, value_name = "SECS")]
     pub model_timeout_secs: u64,
     /// What errors are measured against: `brep` (the exact B-rep surfaces of a STEP file;

@@ -38,6 +38,12 @@ pub const REFERENCE_CHORD_DIVISOR: f64 = 20.0;
 /// tori and cones.
 const REFERENCE_ANALYTIC_FACTOR: f64 = 5.0;
 
+/// The share of a model's time budget its reading may take (the nominal tessellation, the
+/// reference and the baselines' tessellations); the rest is for the encodes and their
+/// measurements. Without it the finest tessellations of a part with many B-spline faces
+/// take the whole budget and no codec is measured at all.
+const PREPARE_SHARE: f64 = 0.5;
+
 /// A model read and ready to measure.
 struct Prepared {
     /// The mesh rates are per (vertex count, raw size): the input, or a STEP part's
@@ -152,20 +158,28 @@ fn prepare(model: &ModelInput, opts: &ReportOptions) -> Result<Prepared, String>
     }
 }
 
-/// A STEP part: its default tessellation, the B-rep reference (unless the input is the
-/// reference) and the baselines' tessellations.
+/// A STEP part: its default tessellation, the baselines' tessellations and the B-rep
+/// reference (unless the input is the reference), read in that order.
 ///
-/// Each tessellation is read on its own with the time left of the model's budget, so one
-/// that is too fine for the time (B-spline faces at a tiny chordal tolerance) costs only
-/// itself: the reference falls back to a coarser chordal tolerance and says so, and the
-/// baselines' series stops at the finest tessellation that could be made.
+/// Each tessellation is read on its own with the time left of the model's share for reading
+/// ([`PREPARE_SHARE`]), so one that is too fine for the time (B-spline faces at a tiny
+/// chordal tolerance) costs only itself and the encodes keep their share: the baselines'
+/// series stops at the finest tessellation that could be made, and the reference falls back
+/// to the default tessellation and says so.
 fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
     let t0 = Instant::now();
-    let left = || opts.model_timeout.saturating_sub(t0.elapsed());
+    let left = || {
+        opts.model_timeout
+            .mul_f64(PREPARE_SHARE)
+            .saturating_sub(t0.elapsed())
+    };
     let read = |o: StepOptions| -> Result<StepModel, String> {
         let budget = left();
         if budget.is_zero() {
-            return Err("the model's time budget is used up".into());
+            return Err(format!(
+                "the share of the model's time budget for reading it ({:.0} s) is used up",
+                opts.model_timeout.mul_f64(PREPARE_SHARE).as_secs_f64()
+            ));
         }
         let o = StepOptions {
             total_timeout: o.total_timeout.min(budget),
@@ -188,23 +202,6 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
     // not at another): left out of the reference and of every baseline's mesh, so that
     // every codec and the ruler cover the same faces.
     let mut skipped_faces: BTreeSet<u64> = nominal.skipped.iter().map(|f| f.face_id).collect();
-    let reference_read = if opts.reference.unwrap_or(Reference::Brep) == Reference::Brep {
-        let (r, chord, failures) = match read_reference(opts, &read) {
-            Ok(found) => found,
-            // The default tessellation is the last resort: its chordal tolerance is in
-            // the description, so accuracies near it are read for what they are.
-            Err(failures) => (
-                nominal.clone(),
-                scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * scode::pipeline::STEP_CHORD_FRACTION,
-                failures,
-            ),
-        };
-        skipped.extend(r.skipped.iter().map(|f| f.to_string()));
-        skipped_faces.extend(r.skipped.iter().map(|f| f.face_id));
-        Some((r, chord, failures))
-    } else {
-        None
-    };
     let mut chords = opts.tessellation_chords.clone();
     chords.sort_by(|a, b| b.total_cmp(a));
     let mut tessellations: Vec<(f64, StepModel)> = Vec::new();
@@ -225,6 +222,28 @@ fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
             }
         }
     }
+    // The reference is read last: the baselines need their tessellations to be measured at
+    // all.
+    let reference_read = if opts.reference.unwrap_or(Reference::Brep) == Reference::Brep {
+        let (r, chord, failures) = match read_reference(opts, &read) {
+            Ok(found) => found,
+            // The default tessellation is the last resort: its chordal tolerance is in the
+            // description, so accuracies near it are read for what they are. (Not the
+            // finest baseline tessellation: a tessellator that fails a face at a fine chord
+            // falls back to one that does not follow the face's edges, which would be
+            // every codec's error.)
+            Err(failures) => (
+                nominal.clone(),
+                scode::pipeline::DEFAULT_RELATIVE_TOLERANCE * scode::pipeline::STEP_CHORD_FRACTION,
+                failures,
+            ),
+        };
+        skipped.extend(r.skipped.iter().map(|f| f.to_string()));
+        skipped_faces.extend(r.skipped.iter().map(|f| f.face_id));
+        Some((r, chord, failures))
+    } else {
+        None
+    };
     let (reference, faces, mut description) = match reference_read {
         Some((r, chord, failures)) => {
             let (mut reference, faces, mut description) =
@@ -334,8 +353,9 @@ fn without_faces(model: &StepModel, dropped: &BTreeSet<u64>) -> StepModel {
 }
 
 /// The reference tessellation: at the tightest accuracy / [`REFERENCE_CHORD_DIVISOR`],
-/// else (out of time) at a fifth of it, each given a share of the budget. Returns the model, its chordal tolerance (fraction of the diagonal) and why the
-/// finer ones failed; or, when none could be made, why.
+/// else (out of time) at a fifth of it, each given a share of the budget (within what
+/// `read` allows). Returns the model, its chordal tolerance (fraction of the diagonal) and
+/// why the finer ones failed; or, when none could be made, why.
 fn read_reference(
     opts: &ReportOptions,
     read: &dyn Fn(StepOptions) -> Result<StepModel, String>,
