@@ -461,26 +461,37 @@ fn decoded_analytic_faces_stay_on_their_exact_surfaces() {
     check_decoded_analytic_faces_on_exact_surfaces(&corpus, "bm2_ec_lever-A.stp");
 }
 
+/// Encodes corpus STEP `file` at 1e-4 of the diagonal, checks the tolerance is met, and
+/// returns the file's size and how many of its patches are spheres, cylinders and planes.
+fn patches_at_a_tight_tolerance(corpus: &Path, file: &str) -> (usize, [usize; 3]) {
+    use scode::mesh::{BoundarySurface, PatchKind};
+    let path = corpus.join("step").join(file);
+    let mut opts = ModelEncodeOptions::default();
+    opts.fit.tolerance = Tolerance::Relative(1e-4);
+    let (_, bytes, report) = scode::pipeline::encode_step(&path, &opts).unwrap();
+    assert!(report.within_tolerance, "{file}: {:?}", report.error);
+    let decoded = codec::decode(&bytes, &Limits::default()).unwrap();
+    let count =
+        |f: fn(&PatchKind) -> bool| decoded.mesh.groups.iter().filter(|g| f(&g.patch)).count();
+    let counts = [
+        count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Sphere { .. }))),
+        count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Cylinder { .. }))),
+        count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Plane))),
+    ];
+    (bytes.len(), counts)
+}
+
 /// At a tight tolerance a fillet corner's sphere and cylinders stay analytic patches: their
 /// decoded points lie on the exact surfaces, so what fails them is the chord error of the
 /// decode level, which a finer level removes; given up for closed patches they would need
 /// thousands of control points.
 #[test]
 fn fillets_stay_analytic_patches_at_a_tight_tolerance() {
-    use scode::mesh::{BoundarySurface, PatchKind};
     let Some(corpus) = corpus_dir() else { return };
-    let path = corpus.join("step").join("block_fillet3.step");
-    let mut opts = ModelEncodeOptions::default();
-    opts.fit.tolerance = Tolerance::Relative(1e-4);
-    let (_, bytes, report) = scode::pipeline::encode_step(&path, &opts).unwrap();
-    assert!(report.within_tolerance, "{:?}", report.error);
-    let decoded = codec::decode(&bytes, &Limits::default()).unwrap();
-    let count =
-        |f: fn(&PatchKind) -> bool| decoded.mesh.groups.iter().filter(|g| f(&g.patch)).count();
-    let spheres = count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Sphere { .. })));
-    let cylinders = count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Cylinder { .. })));
+    let (bytes, [spheres, cylinders, _]) =
+        patches_at_a_tight_tolerance(&corpus, "block_fillet3.step");
     assert_eq!((spheres, cylinders), (1, 3));
-    assert!(bytes.len() < 1000, "{} bytes", bytes.len());
+    assert!(bytes < 1000, "{bytes} bytes");
 }
 
 /// At a tight tolerance the plane faces of a plate with holes stay plane patches: their
@@ -488,20 +499,11 @@ fn fillets_stay_analytic_patches_at_a_tight_tolerance() {
 /// mend; given up for closed patches they would need control points over their whole area.
 #[test]
 fn planes_stay_plane_patches_at_a_tight_tolerance() {
-    use scode::mesh::{BoundarySurface, PatchKind};
     let Some(corpus) = corpus_dir() else { return };
-    let path = corpus.join("step").join("bug3883_xr2-ct-214_plate.stp");
-    let mut opts = ModelEncodeOptions::default();
-    opts.fit.tolerance = Tolerance::Relative(1e-4);
-    let (_, bytes, report) = scode::pipeline::encode_step(&path, &opts).unwrap();
-    assert!(report.within_tolerance, "{:?}", report.error);
-    let decoded = codec::decode(&bytes, &Limits::default()).unwrap();
-    let count =
-        |f: fn(&PatchKind) -> bool| decoded.mesh.groups.iter().filter(|g| f(&g.patch)).count();
-    let planes = count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Plane)));
-    let cylinders = count(|p| matches!(p, PatchKind::Boundary(BoundarySurface::Cylinder { .. })));
+    let (bytes, [_, cylinders, planes]) =
+        patches_at_a_tight_tolerance(&corpus, "bug3883_xr2-ct-214_plate.stp");
     assert_eq!((planes, cylinders), (6, 12));
-    assert!(bytes.len() < 800, "{} bytes", bytes.len());
+    assert!(bytes < 800, "{bytes} bytes");
 }
 
 /// Sphere and torus faces of the B-rep become sphere and torus patches (a corner blend, hub
