@@ -145,8 +145,8 @@ pub(super) fn facet_failing(
 
 /// Refines the plan of every group out of tolerance in `measured` (the measurement of
 /// `control`): a closed patch gets a lower decimation threshold (near its failures only with
-/// `local_refinement`), a boundary patch that failed four times, or (not a plane) twice
-/// without its excess shrinking, becomes a closed patch (an axial one not in a round whose decode level
+/// `local_refinement`), a boundary patch that failed four times, or twice without its
+/// excess shrinking (a plane: without its decoded surface changing), becomes a closed patch (an axial one not in a round whose decode level
 /// was raised, `level_raised`: it is measured at that level first), a closed patch that failed
 /// [`FACETED_AFTER_STALLS`] times in a row without its excess shrinking, measured at the
 /// last decode level the fit will try (`at_last_level`), is faceted, and the chains `reach`
@@ -208,13 +208,15 @@ pub(super) fn refine_failing(
         group.failures += 1;
         let excess = measured.group_excess[g].0;
         // A boundary patch whose excess did not shrink since its last failure gains nothing
-        // from finer chains (its surface, not its outline, is off): closed at once. Not a
-        // plane: its decoded points lie in its plane, so only its outline can be off, which
-        // finer chains mend, if more slowly than one round's 10% where its outline is a
-        // tight curve.
+        // from finer chains (its surface, not its outline, is off): closed at once. A plane
+        // only once its decoded surface no longer changes (its measured excess, a function
+        // of its triangles alone, is the same): its decoded points lie in its plane, so
+        // while its chains still get finer they mend its outline, if more slowly than one
+        // round's tenth around a tight curve or after a neighbour's finer chains moved it.
         let stalled = group.failures >= 2 && excess > BOUNDARY_STALL_RATIO * group.last_excess;
         let plane = matches!(group.kind, PatchKind::Boundary(BoundarySurface::Plane));
-        let given_up = group.failures >= 4 || (stalled && !plane);
+        let unchanged = excess == group.last_excess;
+        let given_up = group.failures >= 4 || (stalled && (!plane || unchanged));
         group.last_excess = excess;
         if matches!(group.kind, PatchKind::Closed) {
             // Stalls count at the last decode level only: a finer level is the remedy for
