@@ -146,8 +146,9 @@ pub(super) fn facet_failing(
 /// Refines the plan of every group out of tolerance in `measured` (the measurement of
 /// `control`): a closed patch gets a lower decimation threshold (near its failures only with
 /// `local_refinement`), a boundary patch that failed four times, or twice without its
-/// excess shrinking (a plane: without its decoded surface changing), becomes a closed patch (an axial one not in a round whose decode level
-/// was raised, `level_raised`: it is measured at that level first), a closed patch that failed
+/// excess shrinking (a plane: without its decoded surface changing), becomes a closed patch
+/// (an axial one not in a round whose decode level was raised, `level_raised`: it is
+/// measured at that level first), a closed patch that failed
 /// [`FACETED_AFTER_STALLS`] times in a row without its excess shrinking, measured at the
 /// last decode level the fit will try (`at_last_level`), is faceted, and the chains `reach`
 /// selects get finer.
@@ -257,7 +258,7 @@ pub(super) fn refine_failing(
             && !(level_raised && matches!(group.kind, PatchKind::Boundary(s) if s.axis().is_some()))
         {
             // A curved analytic patch is measured at the finer level it asked for first
-            // (see `Rounds::run`) before it is given up for a closed one.
+            // (see `Rounds::finer_level`) before it is given up for a closed one.
             report.notes.push(format!(
                 "group {g} ({}) refitted as a closed patch",
                 kind_name(&group.kind)

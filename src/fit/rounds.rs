@@ -309,8 +309,12 @@ impl Rounds<'_> {
         if level < ceiling
             && worst_closed > tol
             && prev_worst.is_some_and(|p| worst_closed > STALL_RATIO * p)
-            && self.finer_level_meeting(worst_closed, worst_group, level, ceiling)
-                == Some(level + 1)
+            && self.finer_level_meeting(
+                worst_closed,
+                self.meter.chord_errors(&[worst_group])[0],
+                level,
+                ceiling,
+            ) == Some(level + 1)
         {
             next = level + 1;
         }
@@ -320,8 +324,12 @@ impl Rounds<'_> {
                 && excess > tol
                 && group.failures > 0
                 && excess > STALL_RATIO * group.last_excess;
-            if stalled_axial && 2.0 * self.meter.chord_errors(&[g])[0] >= excess {
-                if let Some(finer) = self.finer_level_meeting(excess, g, level, ceiling) {
+            if !stalled_axial {
+                continue;
+            }
+            let chord = self.meter.chord_errors(&[g])[0];
+            if 2.0 * chord >= excess {
+                if let Some(finer) = self.finer_level_meeting(excess, chord, level, ceiling) {
                     next = next.max(finer);
                 }
             }
@@ -329,15 +337,15 @@ impl Rounds<'_> {
         next
     }
 
-    /// The coarsest decode level finer than `level` (up to `ceiling`) expected to bring
-    /// the last measured group `g`, whose excess is `excess`, within the tolerance, if any.
+    /// The coarsest decode level finer than `level` (up to `ceiling`) expected to bring a
+    /// last measured group whose excess is `excess` and whose chord error is `chord` within
+    /// the tolerance, if any.
     /// Each level halves the triangles' size, so on a smooth surface it leaves a quarter of
     /// the previous level's chord error ([`ErrorMeter::chord_errors`]); what is not chord
     /// error no level changes, so a finer level pays only where the chord error is most of
     /// the excess over the tolerance. Refining the control mesh, which also shortens the
     /// triangles, does the rest.
-    fn finer_level_meeting(&self, excess: f64, g: usize, level: u8, ceiling: u8) -> Option<u8> {
-        let chord = self.meter.chord_errors(&[g])[0];
+    fn finer_level_meeting(&self, excess: f64, chord: f64, level: u8, ceiling: u8) -> Option<u8> {
         let mut kept = 1.0;
         (level + 1..=ceiling).find(|_| {
             kept *= FINER_CHORD_SHARE;

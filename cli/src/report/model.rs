@@ -168,17 +168,13 @@ fn prepare(model: &ModelInput, opts: &ReportOptions) -> Result<Prepared, String>
 /// to the default tessellation and says so.
 fn prepare_step(path: &Path, opts: &ReportOptions) -> Result<Prepared, String> {
     let t0 = Instant::now();
-    let left = || {
-        opts.model_timeout
-            .mul_f64(PREPARE_SHARE)
-            .saturating_sub(t0.elapsed())
-    };
+    let share = opts.model_timeout.mul_f64(PREPARE_SHARE);
     let read = |o: StepOptions| -> Result<StepModel, String> {
-        let budget = left();
+        let budget = share.saturating_sub(t0.elapsed());
         if budget.is_zero() {
             return Err(format!(
                 "the share of the model's time budget for reading it ({:.0} s) is used up",
-                opts.model_timeout.mul_f64(PREPARE_SHARE).as_secs_f64()
+                share.as_secs_f64()
             ));
         }
         let o = StepOptions {
